@@ -1,0 +1,281 @@
+#include "io/point_generators.hpp"
+
+#include "core/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace tetstream::io {
+
+namespace {
+
+// splitmix64's finaliser: a bijection on 64-bit words with full avalanche.
+inline std::uint64_t mix64(std::uint64_t z) {
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+constexpr std::uint64_t kGolden = 0x9e3779b97f4a7c15ULL;
+
+// The random numbers of one point: draw j of point i under key k is
+// mix64(mix64(k ^ mix64(i)) + j * golden), splitmix64's sequence started at a
+// per-point state.
+class PointRng {
+ public:
+  PointRng(std::uint64_t key, std::uint64_t index) : state_(mix64(key ^ mix64(index + kGolden))) {}
+  std::uint64_t next() { return mix64(state_ += kGolden); }
+  // Uniform in [0, 1) on the 2^-53 grid.
+  double uniform() { return double(next() >> 11) * 0x1p-53; }
+  // Uniform in [-1, 1), exactly: 2u - 1 loses no bits.
+  double symmetric() { return 2.0 * uniform() - 1.0; }
+  // Standard normal (Box-Muller; u1 in (0, 1] so the log is finite).
+  double normal() {
+    if (have_spare_) {
+      have_spare_ = false;
+      return spare_;
+    }
+    const double u1 = 1.0 - uniform();
+    const double u2 = uniform();
+    const double r = std::sqrt(-2.0 * std::log(u1));
+    spare_ = r * std::sin(2.0 * std::numbers::pi * u2);
+    have_spare_ = true;
+    return r * std::cos(2.0 * std::numbers::pi * u2);
+  }
+  // Uniform direction: a normalised Gaussian vector.
+  void direction(double* d) {
+    for (;;) {
+      d[0] = normal(), d[1] = normal(), d[2] = normal();
+      const double r = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      if (r > 1e-150) {
+        d[0] /= r, d[1] /= r, d[2] /= r;
+        return;
+      }
+    }
+  }
+  // Uniform in the ball of radius 1 by rejection from [-1, 1)^3: x^2 + y^2 + z^2 <= 1
+  // holds exactly as computed here (acceptance 52%; 200 misses in a row has
+  // probability 1e-64, after which the centre is returned).
+  void in_ball(double* p) {
+    for (int attempt = 0; attempt < 200; ++attempt) {
+      p[0] = symmetric(), p[1] = symmetric(), p[2] = symmetric();
+      if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2] <= 1.0) return;
+    }
+    p[0] = p[1] = p[2] = 0.0;
+  }
+
+ private:
+  std::uint64_t state_;
+  double spare_ = 0;
+  bool have_spare_ = false;
+};
+
+// Distinct keys for the independent uses of one seed.
+constexpr std::uint64_t kPurposePoint = 0x706f696e74ULL;     // "point"
+constexpr std::uint64_t kPurposeDup = 0x6475706cULL;         // "dupl"
+constexpr std::uint64_t kPurposeClusters = 0x636c7573ULL;    // "clus"
+
+std::uint64_t key_for(std::uint64_t seed, std::uint64_t purpose) { return mix64(mix64(seed) ^ purpose); }
+
+}  // namespace
+
+const char* to_string(Distribution d) {
+  switch (d) {
+    case Distribution::kUniform: return "uniform";
+    case Distribution::kBall: return "ball";
+    case Distribution::kEllipsoidShell: return "ellipsoid-shell";
+    case Distribution::kMixed: return "mixed";
+    case Distribution::kClusters: return "clusters";
+    case Distribution::kGrid: return "grid";
+    case Distribution::kSphere: return "sphere";
+  }
+  return "?";
+}
+
+Distribution parse_distribution(std::string_view name) {
+  for (Distribution d : {Distribution::kUniform, Distribution::kBall, Distribution::kEllipsoidShell,
+                         Distribution::kMixed, Distribution::kClusters, Distribution::kGrid,
+                         Distribution::kSphere}) {
+    if (name == to_string(d)) return d;
+  }
+  if (name == "shell" || name == "ellipsoid") return Distribution::kEllipsoidShell;
+  throw UsageError("unknown distribution '" + std::string(name) +
+                   "' (expected uniform, ball, ellipsoid-shell, mixed, clusters, grid or sphere)");
+}
+
+const char* distribution_help() {
+  return
+      "Distributions (point i depends only on --seed and i; any chunking or thread count\n"
+      "gives the same file):\n"
+      "  uniform          x, y, z uniform in [0, 1) (multiples of 2^-53).\n"
+      "  ball             uniform in the unit ball centred at 0: x^2+y^2+z^2 <= 1 exactly\n"
+      "                   (rejection sampling from [-1, 1)^3).\n"
+      "  ellipsoid-shell  area-uniform on the ellipsoid centred at 0 with semi-axes --axes a,b,c\n"
+      "                   (default 1,0.6,0.3), each point scaled radially by a factor uniform in\n"
+      "                   [1 - s, 1 + s], s = --spread (default 0.01): (x/a)^2+(y/b)^2+(z/c)^2\n"
+      "                   lies in [(1-s)^2, (1+s)^2].\n"
+      "  mixed            the paper's mixed patterns in the unit cube, one third each (by a\n"
+      "                   random draw): a line from (0.05,0.05,0.05) to (0.95,0.95,0.95); the\n"
+      "                   ellipsoid surface centred at (0.5,0.5,0.5) with semi-axes\n"
+      "                   (0.45,0.3,0.2); a helix of radius 0.4 around the vertical line through\n"
+      "                   (0.5,0.5), z from 0.05 to 0.95, 5 turns. Each point is moved by a\n"
+      "                   uniform offset in a ball of radius --spread (default 0.01, 1% of the\n"
+      "                   box).\n"
+      "  clusters         --clusters K (default 32) Gaussian clusters: centres uniform in\n"
+      "                   [0.1, 0.9]^3, standard deviations log-uniform in [0.001, 0.05],\n"
+      "                   weights uniform in [0.1, 1.1] (normalised); all drawn from the seed.\n"
+      "  grid             the regular lattice (ix, iy, iz) * h, 0 <= i < k, h = 2^-ceil(log2 k),\n"
+      "                   coordinates exact in [0, 1); --n is rounded to the nearest cube k^3;\n"
+      "                   x varies fastest. Degenerate: many cospherical and coplanar points.\n"
+      "  sphere           on the sphere of radius --radius (default 1) centred at 0: normalised\n"
+      "                   Gaussian vectors, so |p| = r up to rounding (within 1e-15 r).\n"
+      "--duplicates F: each point i > 0 is, with probability F, an exact copy of point\n"
+      "floor(v * i) for a uniform v (resolved to an original point), so about F * n points\n"
+      "repeat an earlier one.\n";
+}
+
+void GeneratorOptions::validate() const {
+  if (n == 0) throw UsageError("--n must be at least 1");
+  if (!(duplicates >= 0.0 && duplicates < 1.0)) throw UsageError("--duplicates must be in [0, 1)");
+  for (double a : axes) {
+    if (!(a > 0.0 && std::isfinite(a))) throw UsageError("--axes must be three positive numbers");
+  }
+  if (!(spread >= 0.0 && spread < 0.5)) throw UsageError("--spread must be in [0, 0.5)");
+  if (clusters == 0) throw UsageError("--clusters must be at least 1");
+  if (!(radius > 0.0 && std::isfinite(radius))) throw UsageError("--radius must be positive");
+}
+
+PointGenerator::PointGenerator(const GeneratorOptions& options) : opt_(options) {
+  opt_.validate();
+  key_point_ = key_for(opt_.seed, kPurposePoint);
+  key_dup_ = key_for(opt_.seed, kPurposeDup);
+  count_ = opt_.n;
+  switch (opt_.dist) {
+    case Distribution::kGrid: {
+      auto k = static_cast<std::uint64_t>(std::llround(std::cbrt(double(opt_.n))));
+      // cbrt of a huge n may be off by one: take the k whose cube is nearest n.
+      auto dist = [&](std::uint64_t c) {
+        const double cube = double(c) * double(c) * double(c);
+        return std::fabs(cube - double(opt_.n));
+      };
+      while (k > 1 && dist(k - 1) < dist(k)) --k;
+      while (dist(k + 1) < dist(k)) ++k;
+      k_ = std::max<std::uint64_t>(k, 1);
+      if (k_ > 2097151) throw UsageError("--n too large for a grid (k^3 must fit in 64 bits)");
+      count_ = k_ * k_ * k_;
+      int e = 0;
+      while ((std::uint64_t(1) << e) < k_) ++e;
+      h_ = std::ldexp(1.0, -e);
+      break;
+    }
+    case Distribution::kEllipsoidShell: {
+      const double a = opt_.axes[0], b = opt_.axes[1], c = opt_.axes[2];
+      shell_gmax_ = std::max({b * c, a * c, a * b});
+      break;
+    }
+    case Distribution::kClusters: {
+      PointRng rng(key_for(opt_.seed, kPurposeClusters), 0);
+      double total = 0;
+      for (std::uint32_t i = 0; i < opt_.clusters; ++i) {
+        Cluster cl;
+        for (double& x : cl.centre) x = 0.1 + 0.8 * rng.uniform();
+        cl.sigma = 0.001 * std::pow(50.0, rng.uniform());
+        clusters_.push_back(cl);
+        total += 0.1 + rng.uniform();
+        cluster_cdf_.push_back(total);
+      }
+      for (double& w : cluster_cdf_) w /= total;
+      cluster_cdf_.back() = 1.0;
+      break;
+    }
+    default: break;
+  }
+}
+
+void PointGenerator::base_point(std::uint64_t i, double* p) const {
+  PointRng rng(key_point_, i);
+  switch (opt_.dist) {
+    case Distribution::kUniform:
+      p[0] = rng.uniform(), p[1] = rng.uniform(), p[2] = rng.uniform();
+      return;
+    case Distribution::kBall:
+      rng.in_ball(p);
+      return;
+    case Distribution::kSphere: {
+      rng.direction(p);
+      if (opt_.radius != 1.0) p[0] *= opt_.radius, p[1] *= opt_.radius, p[2] *= opt_.radius;
+      return;
+    }
+    case Distribution::kEllipsoidShell: {
+      const double a = opt_.axes[0], b = opt_.axes[1], c = opt_.axes[2];
+      double d[3];
+      // Area-uniform: accept direction d with probability (area element at d) / max.
+      for (int attempt = 0; attempt < 1000; ++attempt) {
+        rng.direction(d);
+        const double g = std::sqrt((b * c * d[0]) * (b * c * d[0]) + (a * c * d[1]) * (a * c * d[1]) +
+                                   (a * b * d[2]) * (a * b * d[2]));
+        if (rng.uniform() * shell_gmax_ <= g) break;
+      }
+      const double s = 1.0 + opt_.spread * rng.symmetric();
+      p[0] = s * a * d[0], p[1] = s * b * d[1], p[2] = s * c * d[2];
+      return;
+    }
+    case Distribution::kMixed: {
+      const double pattern = rng.uniform();
+      const double t = rng.uniform();
+      if (pattern < 1.0 / 3.0) {  // line
+        p[0] = p[1] = p[2] = 0.05 + 0.9 * t;
+      } else if (pattern < 2.0 / 3.0) {  // ellipsoid surface (direction-uniform)
+        double d[3];
+        rng.direction(d);
+        p[0] = 0.5 + 0.45 * d[0], p[1] = 0.5 + 0.3 * d[1], p[2] = 0.5 + 0.2 * d[2];
+      } else {  // helix
+        const double angle = 2.0 * std::numbers::pi * 5.0 * t;
+        p[0] = 0.5 + 0.4 * std::cos(angle), p[1] = 0.5 + 0.4 * std::sin(angle), p[2] = 0.05 + 0.9 * t;
+      }
+      double noise[3];
+      rng.in_ball(noise);
+      for (int c = 0; c < 3; ++c) p[c] += opt_.spread * noise[c];
+      return;
+    }
+    case Distribution::kClusters: {
+      const double u = rng.uniform();
+      const auto it = std::upper_bound(cluster_cdf_.begin(), cluster_cdf_.end(), u);
+      const Cluster& cl = clusters_[std::min<std::size_t>(it - cluster_cdf_.begin(), clusters_.size() - 1)];
+      for (int c = 0; c < 3; ++c) p[c] = cl.centre[c] + cl.sigma * rng.normal();
+      return;
+    }
+    case Distribution::kGrid: {
+      const std::uint64_t ix = i % k_, iy = (i / k_) % k_, iz = i / (k_ * k_);
+      p[0] = double(ix) * h_, p[1] = double(iy) * h_, p[2] = double(iz) * h_;
+      return;
+    }
+  }
+}
+
+bool PointGenerator::is_duplicate(std::uint64_t i, std::uint64_t* source) const {
+  if (opt_.duplicates <= 0.0 || i == 0) return false;
+  std::uint64_t j = i;
+  bool dup = false;
+  // Follow copies of copies back to an original; each step goes to a smaller index.
+  for (;;) {
+    if (j == 0) break;
+    PointRng rng(key_dup_, j);
+    if (!(rng.uniform() < opt_.duplicates)) break;
+    dup = true;
+    j = std::min<std::uint64_t>(static_cast<std::uint64_t>(rng.uniform() * double(j)), j - 1);
+  }
+  if (source) *source = j;
+  return dup;
+}
+
+void PointGenerator::generate(std::uint64_t first, std::size_t n, double* xyz) const {
+  for (std::size_t k = 0; k < n; ++k) {
+    std::uint64_t i = first + k, src = i;
+    if (opt_.duplicates > 0.0) is_duplicate(i, &src);
+    base_point(src, xyz + 3 * k);
+  }
+}
+
+}  // namespace tetstream::io

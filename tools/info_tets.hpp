@@ -1,0 +1,10 @@
+#pragma once
+// `tetstream info` takes point files and .tets containers; cmd_info.cpp dispatches
+// on the extension and hands containers to this function (tools/cmd_info_tets.cpp).
+#include "tools/command.hpp"
+
+#include <string>
+
+namespace tetstream::cli {
+void info_tets(const std::string& path, Context& ctx);
+}
