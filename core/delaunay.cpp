@@ -26,15 +26,18 @@ TS_FORCE_INLINE int infinite_position(const VertexId* v) {
   return -1;
 }
 
-TS_FORCE_INLINE std::uint64_t edge_key(VertexId a, VertexId b) {
-  return a < b ? (std::uint64_t(a) << 32 | b) : (std::uint64_t(b) << 32 | a);
-}
+// kOtherPositions[f][g]: the two positions of a tet other than f and g (f != g).
+constexpr int kOtherPositions[4][4][2] = {
+    {{-1, -1}, {2, 3}, {1, 3}, {1, 2}},
+    {{2, 3}, {-1, -1}, {0, 3}, {0, 2}},
+    {{1, 3}, {0, 3}, {-1, -1}, {0, 1}},
+    {{1, 2}, {0, 2}, {0, 1}, {-1, -1}},
+};
 
 TS_FORCE_INLINE bool same_point(const double* a, const double* b) {
   return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
 }
 
-constexpr std::uint64_t kEmptyEdge = ~std::uint64_t(0);
 
 }  // namespace
 
@@ -52,6 +55,8 @@ void Delaunay::set_points(const double* xyz, const std::uint64_t* labels, std::s
 }
 
 void Delaunay::reserve(std::size_t points) {
+  // Tet ids stay below 2^31: link_new_tets() borrows the top bit of vertex_tet_.
+  assert(double(points) * kTetsPerPointEstimate < double(1u << 31));
   const std::size_t tets = std::size_t(double(points) * kTetsPerPointEstimate) + 64;
   tet_vertex_.reserve(4 * tets);
   tet_neighbor_.reserve(4 * tets);
@@ -76,8 +81,7 @@ void Delaunay::reset(std::size_t n) {
   rejected_.reserve(256);
   new_tets_.reserve(256);
   new_slots_.reserve(256);
-  edge_table_.assign(1024, EdgeSlot{kEmptyEdge, 0});
-  edge_used_.reserve(1024);
+  edge_table_.assign(64 * 64, kNoTet);
   (void)n;
 }
 
@@ -324,12 +328,7 @@ InsertOutcome Delaunay::insert(VertexId v, TetId hint) {
     const FacetHandle self = 4 * t + nt.facet;
     tet_neighbor_[self] = nt.outer;
     tet_neighbor_[nt.outer] = self;
-    bool infinite = false;
-    for (int i = 0; i < 4; ++i) {
-      if (tv[i] == kInfiniteVertex) infinite = true;
-      else vertex_tet_[tv[i]] = t;
-    }
-    num_infinite_ += infinite;
+    num_infinite_ += has_infinite_vertex(tv);
   }
   num_alive_ += new_tets_.size();
   link_new_tets(new_tets_.size());
@@ -342,44 +341,53 @@ InsertOutcome Delaunay::insert(VertexId v, TetId hint) {
 
 // The new tets meet each other across the facets that hold the new point. Such a
 // facet is the new point plus one edge of the cavity boundary, and each boundary
-// edge belongs to exactly two boundary facets: match the two through a small hash
-// table keyed by the edge, cleared entry by entry afterwards.
+// edge belongs to exactly two boundary facets. The boundary's vertices get small
+// local numbers (kept for the moment in vertex_tet_, tagged by the top bit, which
+// no tet id uses), so an edge indexes a small square table directly: the first
+// facet to see an edge parks its handle there, the second links the two and clears
+// the entry, which leaves the table empty for the next insertion.
 void Delaunay::link_new_tets(std::size_t count) {
-  std::size_t need = 1;
-  while (need < 4 * 3 * count) need <<= 1;
-  if (edge_table_.size() < need) edge_table_.assign(need, EdgeSlot{kEmptyEdge, 0});
-  const std::size_t mask = edge_table_.size() - 1;
-  edge_used_.clear();
+  constexpr TetId kLocalTag = 0x80000000u;
+  std::uint32_t num_local = 0;
+  auto local_id = [&](VertexId x) -> std::uint32_t {
+    if (x == kInfiniteVertex) return 0;  // local 0 is the infinite vertex
+    TetId& slot = vertex_tet_[x];
+    if (!(slot & kLocalTag)) slot = kLocalTag | ++num_local;
+    return slot & ~kLocalTag;
+  };
+  // The boundary is a triangulated sphere: count = 2 V - 4 triangles on V vertices,
+  // so V = count / 2 + 2 bounds the local ids (plus 0 for the infinite vertex).
+  const std::size_t side = count / 2 + 3;
+  if (edge_table_.size() < side * side) edge_table_.assign(side * side, kNoTet);
   for (std::size_t k = 0; k < count; ++k) {
     const TetId t = new_slots_[k];
     const int f = int(new_tets_[k].facet);
     const VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
+    std::uint32_t id[4];
+    for (int m = 0; m < 4; ++m) id[m] = m == f ? 0 : local_id(tv[m]);
     for (int g = 0; g < 4; ++g) {
       if (g == f) continue;
-      // The edge is the two positions other than f and g.
-      int a = -1, b = -1;
-      for (int m = 0; m < 4; ++m)
-        if (m != f && m != g) (a < 0 ? a : b) = m;
-      const std::uint64_t key = edge_key(tv[a], tv[b]);
-      std::size_t slot = std::size_t((key * 0x9E3779B97F4A7C15ULL) >> 40) & mask;
-      for (;;) {
-        EdgeSlot& e = edge_table_[slot];
-        if (e.key == kEmptyEdge) {
-          e.key = key;
-          e.handle = 4 * t + std::uint32_t(g);
-          edge_used_.push_back(std::uint32_t(slot));
-          break;
-        }
-        if (e.key == key) {
-          tet_neighbor_[4 * std::size_t(t) + g] = e.handle;
-          tet_neighbor_[e.handle] = 4 * t + std::uint32_t(g);
-          break;
-        }
-        slot = (slot + 1) & mask;
+      // The edge is made of the two positions other than f and g.
+      const int a = kOtherPositions[f][g][0], b = kOtherPositions[f][g][1];
+      const std::uint32_t lo = std::min(id[a], id[b]), hi = std::max(id[a], id[b]);
+      FacetHandle& entry = edge_table_[lo * side + hi];
+      const FacetHandle self = 4 * t + std::uint32_t(g);
+      if (entry == kNoTet) {
+        entry = self;
+      } else {
+        tet_neighbor_[self] = entry;
+        tet_neighbor_[entry] = self;
+        entry = kNoTet;
       }
     }
   }
-  for (std::uint32_t slot : edge_used_) edge_table_[slot].key = kEmptyEdge;
+  // Give vertex_tet_ back its meaning: one incident tet per vertex.
+  for (std::size_t k = 0; k < count; ++k) {
+    const TetId t = new_slots_[k];
+    const VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
+    for (int m = 0; m < 4; ++m)
+      if (tv[m] != kInfiniteVertex) vertex_tet_[tv[m]] = t;
+  }
 }
 
 void Delaunay::insert_range(VertexId first, VertexId last) {
@@ -420,8 +428,7 @@ std::size_t Delaunay::memory_bytes() const {
          tet_flags_.capacity() + vertex_tet_.capacity() * sizeof(TetId) +
          duplicate_of_.capacity() * sizeof(VertexId) + cavity_.capacity() * sizeof(TetId) +
          rejected_.capacity() * sizeof(TetId) + new_tets_.capacity() * sizeof(NewTet) +
-         new_slots_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(EdgeSlot) +
-         edge_used_.capacity() * sizeof(std::uint32_t);
+         new_slots_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(FacetHandle);
 }
 
 }  // namespace tetstream::core

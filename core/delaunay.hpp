@@ -142,10 +142,6 @@ class Delaunay {
     FacetHandle outer;  // the facet handle across the boundary, outside the cavity
     std::uint32_t facet;  // position of the new point in v
   };
-  struct EdgeSlot {  // scratch hash table entry: boundary edge -> open facet handle
-    std::uint64_t key;
-    FacetHandle handle;
-  };
 
   void reset(std::size_t n);
   bool make_initial_tet(const std::vector<std::uint32_t>& order, std::uint32_t used[4]);
@@ -179,8 +175,7 @@ class Delaunay {
   std::vector<TetId> rejected_;
   std::vector<NewTet> new_tets_;
   std::vector<TetId> new_slots_;
-  std::vector<EdgeSlot> edge_table_;
-  std::vector<std::uint32_t> edge_used_;
+  std::vector<FacetHandle> edge_table_;  // boundary edge (local ids) -> open facet
 
   DelaunayStats stats_;
 };

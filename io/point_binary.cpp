@@ -184,14 +184,16 @@ class BinaryPointReader final : public PointReader {
   // The input ended inside a record, or before the records a header promised.
   [[noreturn]] void truncated(std::size_t whole_in_this_chunk, std::size_t partial_bytes) {
     const std::uint64_t index = points_read_ + whole_in_this_chunk;
-    const std::uint64_t end = layout_.data_start + index * layout_.stride + partial_bytes;
+    // The offset names the first missing byte: the start of the partial record, or
+    // the end of the input after whole records.
+    const std::uint64_t at = layout_.data_start + index * layout_.stride;
     std::string problem = "truncated: input ends ";
     problem += partial_bytes ? "inside " + layout_.record + " " + std::to_string(index) + " (" +
                                    std::to_string(partial_bytes) + " of " +
-                                   std::to_string(layout_.stride) + " bytes)"
+                                   std::to_string(layout_.stride) + " bytes present)"
                              : "after " + std::to_string(index) + " " + layout_.records;
     if (promised_) problem += ", but the header promises " + std::to_string(*count_);
-    throw InputError::at_byte(source_name_, end, problem);
+    throw InputError::at_byte(source_name_, at, problem);
   }
 
   std::unique_ptr<ByteSource> src_;

@@ -8,6 +8,7 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 #include <limits>
@@ -64,12 +65,37 @@ class Context {
     Slot& s = slots_[m & mask_];
     const unsigned n = s.e[0];
     std::memset(off, 0, sizeof off);
-    for (unsigned i = 0; i < n; ++i) {  // insertion sort: n is about 6
+#if defined(__SSE2__)
+    // Rank sort: the rank of an offset is the number of offsets below it (they are
+    // distinct). Lanes other than 1..n are set to 0xFFFF, which is below nothing;
+    // comparisons are signed, hence the bias.
+    const __m128i bias = _mm_set1_epi16(static_cast<short>(0x8000));
+    const __m128i lane = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7), eight = _mm_set1_epi16(8);
+    const __m128i first = _mm_set1_epi16(1), last = _mm_set1_epi16(static_cast<short>(n));
+    auto valid = [&](__m128i l) {  // 1 <= l <= n
+      return _mm_andnot_si128(_mm_or_si128(_mm_cmplt_epi16(l, first), _mm_cmpgt_epi16(l, last)), _mm_set1_epi16(-1));
+    };
+    const __m128i v0 = valid(lane), v1 = valid(_mm_add_epi16(lane, eight));
+    const __m128i e0 = _mm_load_si128(reinterpret_cast<const __m128i*>(s.e));
+    const __m128i e1 = _mm_load_si128(reinterpret_cast<const __m128i*>(s.e + 8));
+    const __m128i ones = _mm_set1_epi16(-1);
+    const __m128i b0 = _mm_xor_si128(_mm_or_si128(_mm_and_si128(v0, e0), _mm_andnot_si128(v0, ones)), bias);
+    const __m128i b1 = _mm_xor_si128(_mm_or_si128(_mm_and_si128(v1, e1), _mm_andnot_si128(v1, ones)), bias);
+    for (unsigned i = 0; i < n; ++i) {
+      const std::uint16_t x = s.e[1 + i];
+      const __m128i key = _mm_set1_epi16(static_cast<short>(x ^ 0x8000));
+      const unsigned below = unsigned(_mm_movemask_epi8(_mm_cmplt_epi16(b0, key))) |
+                             unsigned(_mm_movemask_epi8(_mm_cmplt_epi16(b1, key))) << 16;
+      off[std::popcount(below) / 2] = x;
+    }
+#else
+    for (unsigned i = 0; i < n; ++i) {
       const std::uint16_t x = s.e[1 + i];
       unsigned j = i;
       while (j > 0 && off[j - 1] > x) off[j] = off[j - 1], --j;
       off[j] = x;
     }
+#endif
     clear(s);
     return n;
   }
@@ -146,16 +172,9 @@ TS_FORCE_INLINE int find_offset(const std::uint16_t (&off)[16], std::uint16_t d)
 }
 
 constexpr std::uint8_t kNewLabel = 0xFF;
-
-void sort_small(std::vector<std::uint64_t>& v) {
-  if (v.size() > 32) return std::sort(v.begin(), v.end());
-  for (std::size_t k = 1; k < v.size(); ++k) {
-    const std::uint64_t x = v[k];
-    std::size_t q = k;
-    while (q > 0 && v[q - 1] > x) v[q] = v[q - 1], --q;
-    v[q] = x;
-  }
-}
+// A tet of a group packs into one sortable u64 as ia << 43 | il << 22 | ih << 1 | p
+// when every position fits 21 bits.
+constexpr std::uint64_t kMaxPackedPosition = (std::uint64_t(1) << 21) - 1;
 
 int context_log2(std::uint64_t base, std::uint64_t max_label) {
   return std::min(kMaxCtxLog2, int(std::bit_width(max_label - base)));
@@ -186,31 +205,35 @@ struct Canon {
   std::uint32_t p;
 };
 
+// §4.1: the labels sorted, m < a < lo < hi (if distinct), and the parity of the
+// permutation that sorts them: 0 when (m, a, lo, hi) is an even rotation of t, so
+// the canonical form is (m, a, lo, hi), else (m, a, hi, lo). A sorting network whose
+// swaps are counted, without branches.
 template <class L>
-inline bool canon_less(const Canon<L>& x, const Canon<L>& y) {
-  if (x.a != y.a) return x.a < y.a;
-  if (x.lo != y.lo) return x.lo < y.lo;
-  if (x.hi != y.hi) return x.hi < y.hi;
-  return x.p < y.p;
+TS_FORCE_INLINE Canon<L> canonical(const L* t) {
+  L v0 = t[0], v1 = t[1], v2 = t[2], v3 = t[3];
+  std::uint32_t p = 0;
+  auto cx = [&p](L& x, L& y) {
+    const bool s = y < x;
+    const L lo = s ? y : x, hi = s ? x : y;
+    x = lo, y = hi, p ^= s;
+  };
+  cx(v0, v1), cx(v2, v3), cx(v0, v2), cx(v1, v3), cx(v1, v2);
+  return {v0, v1, v2, v3, p};
 }
 
-// §4.1: the even permutation with the smallest label first and the next smallest second.
-template <class L>
-inline Canon<L> canonical(const L* t) {
-  // The even permutations that bring position i to the front.
-  static constexpr int kFront[4][4] = {{0, 1, 2, 3}, {1, 0, 3, 2}, {2, 3, 0, 1}, {3, 2, 1, 0}};
-  int i = 0;
-  for (int k = 1; k < 4; ++k) i = t[k] < t[i] ? k : i;
-  const L m = t[kFront[i][0]];
-  L a = t[kFront[i][1]], b = t[kFront[i][2]], c = t[kFront[i][3]];
-  if (b < a && b < c) {  // rotate (a b c) -> (b c a)
-    const L x = a;
-    a = b, b = c, c = x;
-  } else if (c < a && c < b) {  // rotate (a b c) -> (c a b)
-    const L x = c;
-    c = b, b = a, a = x;
+// Sorts a few u64 by rank counting (no data-dependent branches for small sizes).
+void sort_small(std::vector<std::uint64_t>& v) {
+  const std::size_t n = v.size();
+  if (n > 16) return std::sort(v.begin(), v.end());
+  std::uint64_t in[16], out[16];
+  std::copy(v.begin(), v.end(), in);
+  for (std::size_t i = 0; i < n; ++i) {
+    std::size_t rank = 0;
+    for (std::size_t j = 0; j < n; ++j) rank += (in[j] < in[i]) | ((in[j] == in[i]) & (j < i));
+    out[rank] = in[i];
   }
-  return {m, a, std::min(b, c), std::max(b, c), std::uint32_t(b > c)};
+  std::copy(out, out + n, v.begin());
 }
 
 }  // namespace
@@ -263,8 +286,8 @@ struct FrameEncoder::Impl {
   template <class L>
   void encode(std::span<const L> labels, EncodedFrame& out);
   template <class L>
-  void sort_canonical(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp, std::uint64_t base,
-                      std::uint64_t max_m);
+  void sort_by_smallest(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp, std::uint64_t base,
+                        std::uint64_t max_m);
 
   ZSTD_CCtx* cctx;
   Context ctx;
@@ -275,14 +298,18 @@ struct FrameEncoder::Impl {
   std::vector<std::uint8_t> codes;       // per label of a group: its position in K(m), or kNewLabel
   std::vector<std::uint64_t> fresh;      // the new labels of a group, sorted
   std::vector<std::uint32_t> fresh_pos;  // their positions in U(m)
+  std::vector<std::uint64_t> ulabels;    // U(m)
+  std::vector<std::uint64_t> keys;       // a group's tets as packed positions in U(m), see kMaxPackedPosition
+  std::vector<std::array<std::uint64_t, 4>> wide;  // the same, for groups too big to pack
 };
 
 template <class L>
-void FrameEncoder::Impl::sort_canonical(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp,
-                                        std::uint64_t base, std::uint64_t max_m) {
+void FrameEncoder::Impl::sort_by_smallest(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp,
+                                          std::uint64_t base, std::uint64_t max_m) {
+  // A counting sort when the labels are dense (the pipeline's batches are), else a
+  // comparison sort. The order within a group does not matter: it is sorted later, by
+  // positions in U(m).
   const std::size_t n = c.size();
-  // By smallest label: a counting sort when the labels are dense (the pipeline's
-  // batches are), else a comparison sort.
   const std::uint64_t range = max_m - base + 1;
   if (range <= 4 * std::uint64_t(n) + 1024) {
     counts.assign(range + 1, 0);
@@ -293,22 +320,6 @@ void FrameEncoder::Impl::sort_canonical(std::vector<Canon<L>>& c, std::vector<Ca
     c.swap(tmp);
   } else {
     std::stable_sort(c.begin(), c.end(), [](const auto& x, const auto& y) { return x.m < y.m; });
-  }
-  // Then each group by (a, lo, hi, p).
-  for (std::size_t i = 0; i < n;) {
-    std::size_t j = i + 1;
-    while (j < n && c[j].m == c[i].m) ++j;
-    if (j - i <= 24) {
-      for (std::size_t k = i + 1; k < j; ++k) {
-        const Canon<L> x = c[k];
-        std::size_t q = k;
-        while (q > i && canon_less(x, c[q - 1])) c[q] = c[q - 1], --q;
-        c[q] = x;
-      }
-    } else {
-      std::sort(c.begin() + i, c.begin() + j, canon_less<L>);
-    }
-    i = j;
   }
 }
 
@@ -330,17 +341,19 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
   auto& c = *cp;
   c.resize(n);
   std::uint64_t base = std::numeric_limits<std::uint64_t>::max(), max_m = 0, max_label = 0;
+  bool sorted = true;
   for (std::size_t i = 0; i < n; ++i) {
     const Canon<L> x = canonical(labels.data() + 4 * i);
     if (TS_UNLIKELY(!(x.m < x.a && x.a < x.lo && x.lo < x.hi))) {
       throw std::invalid_argument("tet " + std::to_string(i) + " repeats a label");
     }
     c[i] = x;
+    sorted &= x.m >= max_m;
     base = std::min<std::uint64_t>(base, x.m);
     max_m = std::max<std::uint64_t>(max_m, x.m);
     max_label = std::max<std::uint64_t>(max_label, x.hi);
   }
-  sort_canonical(c, *tp, base, max_m);
+  if (!sorted) sort_by_smallest(c, *tp, base, max_m);
 
   const int log2 = context_log2(base, max_label);
   ctx.reset(log2);
@@ -406,21 +419,22 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
       put_varint(ghi, g >> 8);
       ctx.prefetch(m, v);
     }
-    // U(m) = the known labels still present merged with the new ones: the position in
-    // U(m) of each known label (by its position in K) and of each new label.
+    // U(m) = the known labels still present merged with the new ones: U(m) itself, the
+    // position in it of each known label (by its position in K) and of each new label.
     std::uint32_t known_pos[16];
     fresh_pos.resize(fresh.size());
+    ulabels.resize(nk + fresh.size());
+    std::uint32_t nu = 0;
     {
-      std::uint32_t at = 0;
       std::size_t f = 0;
       for (unsigned q = 0; q < nk; ++q) {
         if (absent_mask >> q & 1) continue;
         const std::uint64_t v = m + koff[q];
-        while (f < fresh.size() && fresh[f] < v) fresh_pos[f++] = at++;
-        known_pos[q] = at++;
+        while (f < fresh.size() && fresh[f] < v) ulabels[nu] = fresh[f], fresh_pos[f++] = nu++;
+        ulabels[nu] = v, known_pos[q] = nu++;
         ctx.prefetch(m, v);
       }
-      while (f < fresh.size()) fresh_pos[f++] = at++;
+      while (f < fresh.size()) ulabels[nu] = fresh[f], fresh_pos[f++] = nu++;
     }
     auto pos = [&](std::size_t k, int r, std::uint64_t v) -> std::uint64_t {
       const std::uint8_t q = codes[3 * k + r];
@@ -428,17 +442,41 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
       return fresh_pos[std::lower_bound(fresh.begin(), fresh.end(), v) - fresh.begin()];
     };
 
-    std::uint64_t ia_prev = 0;
+    // Stored order within the group: by (a, lo, hi, p), i.e. by positions in U(m).
+    keys.resize(t);
+    const bool packed = nu <= kMaxPackedPosition;
+    if (!packed) wide.resize(t);
     for (std::size_t k = 0; k < t; ++k) {
       const Canon<L>& x = c[i + k];
       const std::uint64_t ia = pos(k, 0, x.a), il = pos(k, 1, x.lo), ih = pos(k, 2, x.hi);
+      if (packed) {
+        keys[k] = ia << 43 | il << 22 | ih << 1 | x.p;
+      } else {
+        wide[k] = {ia, il, ih, x.p};
+      }
+    }
+    if (packed) {
+      sort_small(keys);
+    } else {
+      std::sort(wide.begin(), wide.end());
+    }
+
+    std::uint64_t ia_prev = 0;
+    for (std::size_t k = 0; k < t; ++k) {
+      std::uint64_t ia, il, ih, p;
+      if (packed) {
+        const std::uint64_t key = keys[k];
+        ia = key >> 43, il = (key >> 22) & kMaxPackedPosition, ih = (key >> 1) & kMaxPackedPosition, p = key & 1;
+      } else {
+        ia = wide[k][0], il = wide[k][1], ih = wide[k][2], p = wide[k][3];
+      }
       put_escaped(idx, ia - ia_prev);
       put_escaped(idx, il - ia - 1);
       put_escaped(idx, ih - il - 1);
       ia_prev = ia;
-      bits |= std::uint8_t(x.p << nbits);
+      bits |= std::uint8_t(p << nbits);
       if (++nbits == 8) par.push_back(bits), bits = 0, nbits = 0;
-      ctx.insert_tet(m, x.a, x.lo, x.hi);
+      ctx.insert_tet(m, ulabels[ia], ulabels[il], ulabels[ih]);
     }
     i = j;
   }

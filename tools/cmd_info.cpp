@@ -33,6 +33,29 @@ std::string shortest(double v) {
   return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
 }
 
+// Bounding box of n points, folded into lo/hi. Four points (12 doubles) per step in
+// independent lanes, so GCC vectorises it to minpd/maxpd without -ffast-math (the
+// reader has already rejected NaN, so the ternary's NaN behaviour does not matter).
+void bbox_update(const double* p, std::size_t n, double* lo, double* hi) {
+  double l[12], h[12];
+  for (int k = 0; k < 12; ++k) l[k] = lo[k % 3], h[k] = hi[k % 3];
+  std::size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    const double* q = p + 3 * i;
+    for (int k = 0; k < 12; ++k) {
+      l[k] = q[k] < l[k] ? q[k] : l[k];
+      h[k] = q[k] > h[k] ? q[k] : h[k];
+    }
+  }
+  for (; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      l[c] = std::min(l[c], p[3 * i + c]);
+      h[c] = std::max(h[c], p[3 * i + c]);
+    }
+  }
+  for (int k = 0; k < 12; ++k) lo[k % 3] = std::min(lo[k % 3], l[k]), hi[k % 3] = std::max(hi[k % 3], h[k]);
+}
+
 void info_points(const InfoArgs& args, Context& ctx) {
   auto reader = io::open_points(args.path, args.read);
   // Progress in points when the count is known, else in bytes of a file of known size.
@@ -47,14 +70,7 @@ void info_points(const InfoArgs& args, Context& ctx) {
   std::fill(hi, hi + 3, -std::numeric_limits<double>::infinity());
   std::uint64_t last_bytes = 0;
   while (const std::size_t n = reader->read(xyz.data(), kChunk)) {
-    double l0 = lo[0], l1 = lo[1], l2 = lo[2], h0 = hi[0], h1 = hi[1], h2 = hi[2];
-    const double* p = xyz.data();
-    for (std::size_t i = 0; i < n; ++i) {
-      l0 = std::min(l0, p[3 * i]), h0 = std::max(h0, p[3 * i]);
-      l1 = std::min(l1, p[3 * i + 1]), h1 = std::max(h1, p[3 * i + 1]);
-      l2 = std::min(l2, p[3 * i + 2]), h2 = std::max(h2, p[3 * i + 2]);
-    }
-    lo[0] = l0, lo[1] = l1, lo[2] = l2, hi[0] = h0, hi[1] = h1, hi[2] = h2;
+    bbox_update(xyz.data(), n, lo, hi);
     if (by_bytes) {
       progress.add(reader->bytes_read() - last_bytes);
       last_bytes = reader->bytes_read();

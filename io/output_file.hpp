@@ -1,0 +1,55 @@
+#pragma once
+// A buffered output file that never leaves a partial result looking complete: bytes go
+// to "PATH.partial", commit() flushes, syncs and renames it to PATH, and an OutputFile
+// destroyed without commit() removes the partial file. Used by the container writer
+// and the mesh converters. Not thread-safe: one writer thread.
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+
+namespace tetstream::io {
+
+class OutputFile {
+ public:
+  // Creates (truncates) PATH.partial. Throws IoError.
+  explicit OutputFile(std::string path, std::size_t buffer_bytes = std::size_t(8) << 20);
+  // Reopens an existing PATH.partial for a resumed job: keeps its first `keep` bytes
+  // (it must have at least that many) and appends after them. Throws IoError.
+  static std::unique_ptr<OutputFile> reopen(std::string path, std::uint64_t keep,
+                                            std::size_t buffer_bytes = std::size_t(8) << 20);
+  ~OutputFile();
+  OutputFile(const OutputFile&) = delete;
+  OutputFile& operator=(const OutputFile&) = delete;
+
+  void write(const void* data, std::size_t n);
+  void write(std::string_view s) { write(s.data(), s.size()); }
+  // Room for n bytes in the buffer (n <= buffer size), to fill and then advance(n).
+  char* reserve(std::size_t n);
+  void advance(std::size_t n) { used_ += n; }
+
+  // Bytes written so far (buffered ones included): the offset of the next byte.
+  std::uint64_t offset() const { return flushed_ + used_; }
+  void flush();
+  void sync();  // flush + fsync
+  // Reads back `n` bytes at `offset` (< the flushed size), for a resumed writer's checks.
+  void read_at(std::uint64_t offset, void* data, std::size_t n) const;
+  // Flushes, syncs (if asked), closes and renames PATH.partial to PATH.
+  void commit(bool sync = true);
+
+  const std::string& path() const { return path_; }
+  const std::string& partial_path() const { return partial_; }
+
+ private:
+  OutputFile(std::string path, std::size_t buffer_bytes, int fd, std::uint64_t flushed);
+
+  std::string path_, partial_;
+  int fd_ = -1;
+  bool committed_ = false;
+  std::unique_ptr<char[]> buf_;
+  std::size_t cap_ = 0, used_ = 0;
+  std::uint64_t flushed_ = 0;
+};
+
+}  // namespace tetstream::io

@@ -1,0 +1,262 @@
+#include "io/tet_writer.hpp"
+
+#include "core/error.hpp"
+#include "io/output_file.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <exception>
+#include <stdexcept>
+
+namespace tetstream::io {
+
+namespace {
+
+std::array<std::uint8_t, kPreambleSize> preamble() {
+  std::array<std::uint8_t, kPreambleSize> b{};
+  std::copy(kFileMagic.begin(), kFileMagic.end(), b.begin());
+  put_u16(b.data() + 8, kVersionMajor);
+  put_u16(b.data() + 10, kVersionMinor);
+  put_u32(b.data() + 12, 0);
+  return b;
+}
+
+// The bytes every writer of `header` starts with: preamble, HEAD, PNTS's section header.
+std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
+  std::vector<std::uint8_t> b;
+  const auto pre = preamble();
+  b.insert(b.end(), pre.begin(), pre.end());
+  const std::vector<std::uint8_t> head = serialize_head(h);
+  const auto hh = section_header(kTagHead, kSectionCritical, head.size());
+  b.insert(b.end(), hh.begin(), hh.end());
+  b.insert(b.end(), head.begin(), head.end());
+  append_u32(b, crc32c(head.data(), head.size()));
+  const auto ph = section_header(kTagPoints, kSectionCritical, h.point_count * h.point_record_bytes());
+  b.insert(b.end(), ph.begin(), ph.end());
+  return b;
+}
+
+void validate_options(const TetWriterOptions& o) {
+  if (o.frame_tets == 0 || o.frame_tets > kMaxFrameTets) {
+    throw std::invalid_argument("frame size must be 1.." + std::to_string(kMaxFrameTets) + " tets");
+  }
+}
+
+}  // namespace
+
+TetWriter::TetWriter(std::string path, TetFileHeader header, TetWriterOptions options)
+    : path_(std::move(path)), header_(std::move(header)), options_(options) {
+  header_.resolve_and_validate();
+  validate_options(options_);
+  out_ = std::make_unique<OutputFile>(path_, options_.buffer_bytes);
+  const std::vector<std::uint8_t> lead = leading_bytes(header_);
+  out_->write(lead.data(), lead.size());
+  const std::uint64_t head_len = lead.size() - kPreambleSize - 2 * kSectionHeaderSize - kSectionTrailerSize;
+  sections_.push_back({kTagHead, kSectionCritical, kPreambleSize, head_len});
+  const std::uint64_t pnts_at = lead.size() - kSectionHeaderSize;
+  const std::uint64_t pnts_len = header_.point_count * header_.point_record_bytes();
+  sections_.push_back({kTagPoints, kSectionCritical, pnts_at, pnts_len});
+  points_end_ = pnts_at + kSectionHeaderSize + pnts_len + kSectionTrailerSize;
+}
+
+TetWriter::TetWriter(Resume, std::string path, TetFileHeader header, TetWriterOptions options)
+    : path_(std::move(path)), header_(std::move(header)), options_(options) {}
+
+std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader header, std::uint64_t committed,
+                                             TetWriterOptions options) {
+  header.resolve_and_validate();
+  validate_options(options);
+  std::unique_ptr<TetWriter> w(new TetWriter(Resume{}, std::move(path), std::move(header), options));
+  const std::vector<std::uint8_t> lead = leading_bytes(w->header_);
+  const std::uint64_t pnts_at = lead.size() - kSectionHeaderSize;
+  const std::uint64_t pnts_len = w->header_.point_count * w->header_.point_record_bytes();
+  w->sections_.push_back({kTagHead, kSectionCritical, kPreambleSize, pnts_at - kPreambleSize - kSectionHeaderSize - kSectionTrailerSize});
+  w->sections_.push_back({kTagPoints, kSectionCritical, pnts_at, pnts_len});
+  w->points_end_ = pnts_at + kSectionHeaderSize + pnts_len + kSectionTrailerSize;
+  const std::string partial = w->path_ + ".partial";
+  if (committed < w->points_end_) {
+    throw InputError::at_byte(partial, committed, "cannot resume before the points are complete");
+  }
+  w->out_ = OutputFile::reopen(w->path_, committed, options.buffer_bytes);
+  OutputFile& f = *w->out_;
+
+  std::vector<std::uint8_t> have(lead.size());
+  f.read_at(0, have.data(), have.size());
+  if (have != lead) throw InputError::at_byte(partial, 0, "header differs from the resumed job's");
+  w->points_ = w->header_.point_count;
+
+  // Rebuild the frame index from the frames after the points.
+  std::uint64_t at = w->points_end_;
+  std::vector<std::uint8_t> payload;
+  while (at < committed) {
+    std::uint8_t sh[kSectionHeaderSize];
+    if (committed - at < kSectionHeaderSize + kSectionTrailerSize) {
+      throw InputError::at_byte(partial, at, "checkpoint ends inside a section");
+    }
+    f.read_at(at, sh, sizeof sh);
+    const std::uint64_t len = get_u64(sh + 8);
+    if (get_u32(sh) != kTagFrame || len > committed - at - kSectionHeaderSize - kSectionTrailerSize) {
+      throw InputError::at_byte(partial, at, "not a complete frame before the checkpoint");
+    }
+    payload.resize(len + kSectionTrailerSize);
+    f.read_at(at + kSectionHeaderSize, payload.data(), payload.size());
+    if (crc32c(payload.data(), len) != get_u32(payload.data() + len)) {
+      throw InputError::at_byte(partial, at, "frame " + std::to_string(w->frames_.size()) + ": checksum mismatch");
+    }
+    FrameHeader fh;
+    if (const std::string problem = parse_frame_header({payload.data(), len}, fh); !problem.empty()) {
+      throw InputError::at_byte(partial, at + kSectionHeaderSize, problem);
+    }
+    w->frames_.push_back({at, w->tets_, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
+    w->tets_ += fh.tet_count;
+    at += kSectionHeaderSize + len + kSectionTrailerSize;
+  }
+  return w;
+}
+
+TetWriter::~TetWriter() = default;  // out_'s destructor removes the partial file unless finished
+
+std::uint64_t TetWriter::bytes_written() const { return out_ ? out_->offset() : 0; }
+
+void TetWriter::write_section_start(std::uint32_t tag, std::uint64_t length) {
+  const auto h = section_header(tag, kSectionCritical, length);
+  out_->write(h.data(), h.size());
+}
+
+template <class F>
+void TetWriter::add_points_impl(const F* xyz, const std::uint64_t* ids, std::size_t n) {
+  if (finished_) throw std::logic_error("TetWriter: add_points after finish");
+  if (n > header_.point_count - points_) {
+    throw std::logic_error("TetWriter: more points than the header's " + std::to_string(header_.point_count));
+  }
+  const std::size_t cb = coord_bytes(header_.coord_type), ib = header_.id_width / 8;
+  const std::size_t rec = 3 * cb + ib;
+  const std::size_t chunk = std::max<std::size_t>(1, (std::size_t(1) << 20) / rec);
+  const std::uint64_t id_limit = std::max(header_.input_count, header_.point_count);
+  for (std::size_t first = 0; first < n; first += chunk) {
+    const std::size_t k = std::min(chunk, n - first);
+    char* p = out_->reserve(k * rec);
+    char* const start = p;
+    for (std::size_t i = first; i < first + k; ++i) {
+      const std::uint64_t id = ids ? ids[i] : points_ + i;
+      for (int c = 0; c < 3; ++c) {
+        const double v = double(xyz[3 * i + c]);
+        if (!(v >= header_.bbox_min[c] && v <= header_.bbox_max[c])) {
+          throw std::invalid_argument("TetWriter: point " + std::to_string(points_ + i) +
+                                      " lies outside the header's bounding box");
+        }
+        if (header_.coord_type == CoordType::kFloat32) {
+          const float f = float(v);
+          std::memcpy(p, &f, 4);
+        } else {
+          std::memcpy(p, &v, 8);
+        }
+        p += cb;
+      }
+      if (id >= id_limit) {
+        throw std::invalid_argument("TetWriter: original index " + std::to_string(id) + " of point " +
+                                    std::to_string(points_ + i) + " out of range");
+      }
+      if (ib == 4) {
+        const std::uint32_t v = std::uint32_t(id);
+        std::memcpy(p, &v, 4);
+      } else {
+        std::memcpy(p, &id, 8);
+      }
+      p += ib;
+    }
+    points_crc_ = crc32c(start, k * rec, points_crc_);
+    out_->advance(k * rec);
+  }
+  points_ += n;
+  if (points_ == header_.point_count) {
+    std::uint8_t crc[4];
+    put_u32(crc, points_crc_);
+    out_->write(crc, 4);
+  }
+}
+
+void TetWriter::add_points(const double* xyz, const std::uint64_t* ids, std::size_t n) {
+  add_points_impl(xyz, ids, n);
+}
+void TetWriter::add_points(const float* xyz, const std::uint64_t* ids, std::size_t n) {
+  add_points_impl(xyz, ids, n);
+}
+
+void TetWriter::add_frame(const EncodedFrame& frame) {
+  if (finished_) throw std::logic_error("TetWriter: add_frame after finish");
+  if (points_ != header_.point_count) {
+    throw std::logic_error("TetWriter: tets before all " + std::to_string(header_.point_count) + " points");
+  }
+  if (frame.max_label >= header_.point_count) {
+    throw std::invalid_argument("TetWriter: label " + std::to_string(frame.max_label) + " is not below the point count " +
+                                std::to_string(header_.point_count));
+  }
+  const std::uint64_t at = out_->offset();
+  write_section_start(kTagFrame, frame.payload.size());
+  out_->write(frame.payload.data(), frame.payload.size());
+  std::uint8_t crc[4];
+  put_u32(crc, frame.crc);
+  out_->write(crc, 4);
+  frames_.push_back({at, tets_, frame.tet_count, std::uint32_t(frame.payload.size()), frame.base_label, frame.max_label});
+  tets_ += frame.tet_count;
+}
+
+template <class L>
+void TetWriter::add_tets_impl(std::span<const L> labels) {
+  if (labels.size() % 4 != 0) throw std::invalid_argument("TetWriter: tet labels must come 4 per tet");
+  const std::vector<std::size_t> bounds = frame_boundaries(labels.size() / 4, options_.frame_tets);
+  const std::size_t frames = bounds.size() - 1;
+  if (frames == 0) return;
+  const int threads = int(std::min<std::size_t>(frames, options_.threads > 0 ? options_.threads : omp_get_max_threads()));
+  while (encoders_.size() < std::size_t(threads)) encoders_.push_back(std::make_unique<FrameEncoder>(options_.zstd_level));
+  if (batch_.size() < frames) batch_.resize(frames);
+  std::exception_ptr error;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (threads > 1)
+  for (std::size_t f = 0; f < frames; ++f) {
+    try {
+      encoders_[omp_get_thread_num()]->encode(labels.subspan(4 * bounds[f], 4 * (bounds[f + 1] - bounds[f])), batch_[f]);
+    } catch (...) {
+#pragma omp critical(tetstream_writer_error)
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+  for (std::size_t f = 0; f < frames; ++f) add_frame(batch_[f]);
+  if (frames > 1) batch_.resize(1);  // don't hold a big batch's frames between calls
+}
+
+void TetWriter::add_tets(std::span<const std::uint32_t> labels) { add_tets_impl(labels); }
+void TetWriter::add_tets(std::span<const std::uint64_t> labels) { add_tets_impl(labels); }
+
+std::uint64_t TetWriter::checkpoint() {
+  if (finished_) throw std::logic_error("TetWriter: checkpoint after finish");
+  if (options_.sync) {
+    out_->sync();
+  } else {
+    out_->flush();
+  }
+  return out_->offset();
+}
+
+void TetWriter::finish() {
+  if (finished_) throw std::logic_error("TetWriter: finish twice");
+  if (points_ != header_.point_count) {
+    throw std::logic_error("TetWriter: finish with " + std::to_string(points_) + " of " +
+                           std::to_string(header_.point_count) + " points");
+  }
+  const std::uint64_t index_at = out_->offset();
+  const std::vector<std::uint8_t> index = serialize_index(sections_, frames_);
+  write_section_start(kTagIndex, index.size());
+  out_->write(index.data(), index.size());
+  std::uint8_t crc[4];
+  put_u32(crc, crc32c(index.data(), index.size()));
+  out_->write(crc, 4);
+  const auto footer = serialize_footer({index_at, tets_, frames_.size(), header_.point_count});
+  out_->write(footer.data(), footer.size());
+  out_->commit(options_.sync);
+  finished_ = true;
+}
+
+}  // namespace tetstream::io

@@ -1,0 +1,111 @@
+#pragma once
+// Writes a .tets container (docs/format.md), streaming, in bounded memory.
+//
+//   io::TetFileHeader h;  h.point_count = n;  h.bbox_min = ...;  h.options = json;
+//   io::TetWriter w("out.tets", h);
+//   w.add_points(xyz, ids, k);   ...     // all points, in label (sorted) order, in chunks
+//   w.add_tets(labels);          ...     // batches of tets, 4 labels each
+//   w.finish();                          // index + footer, fsync, rename into place
+//
+// Lifecycle: the file is "out.tets.partial" until finish() renames it; a writer
+// destroyed without finish() (an exception, a cancelled job) removes it, so a file
+// named out.tets is always complete. For a resumable job, checkpoint() returns a byte
+// count to persist, and TetWriter::resume() reopens the partial file at it.
+//
+// Frames: add_tets() splits a batch into frames of at most options.frame_tets and
+// encodes them on up to options.threads OpenMP threads; the bytes do not depend on the
+// thread count. A pipeline that encodes elsewhere uses io::FrameEncoder (one per thread)
+// and hands the frames to add_frame() in sequence order.
+//
+// Memory: one write buffer, the frame index (40 bytes per frame), and, inside
+// add_tets(), the encoded frames of one batch (~1.5 bytes per tet).
+// Thread-safety: none; one thread drives a writer.
+#include "io/tet_codec.hpp"
+#include "io/tet_container.hpp"
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace tetstream::io {
+
+class OutputFile;
+
+struct TetWriterOptions {
+  int zstd_level = kDefaultZstdLevel;
+  std::uint32_t frame_tets = kDefaultFrameTets;  // most tets per frame, 1..kMaxFrameTets
+  int threads = 0;                               // add_tets() encoders; 0: omp_get_max_threads()
+  bool sync = true;                              // fsync before the rename (and in checkpoint())
+  std::size_t buffer_bytes = std::size_t(8) << 20;
+};
+
+class TetWriter {
+ public:
+  // Creates PATH.partial and writes the preamble and HEAD. The header's widths are
+  // resolved (label width 32 when point_count <= 2^32) and it is validated:
+  // std::invalid_argument for a header no container can hold, IoError for I/O.
+  TetWriter(std::string path, TetFileHeader header, TetWriterOptions options = {});
+  // Continues PATH.partial, left by a writer with the same header and options, after
+  // its first `committed` bytes (a value its checkpoint() returned): checks the header
+  // bytes, rebuilds the frame index from the frames there (checking their CRCs) and
+  // drops anything after them. Throws InputError when the partial file does not match.
+  static std::unique_ptr<TetWriter> resume(std::string path, TetFileHeader header, std::uint64_t committed,
+                                           TetWriterOptions options = {});
+  ~TetWriter();
+  TetWriter(const TetWriter&) = delete;
+  TetWriter& operator=(const TetWriter&) = delete;
+
+  const TetFileHeader& header() const { return header_; }
+
+  // The next n points in label order: xyz holds 3n coordinates, ids n original
+  // indices (nullptr: each point's original index is its label). Every point must lie
+  // in the header's bounding box, and all point_count points must come before the
+  // first tet (std::logic_error / std::invalid_argument otherwise).
+  void add_points(const double* xyz, const std::uint64_t* ids, std::size_t n);
+  void add_points(const float* xyz, const std::uint64_t* ids, std::size_t n);
+
+  // A batch of tets, 4 labels each (< point_count, distinct, positively oriented).
+  void add_tets(std::span<const std::uint32_t> labels);
+  void add_tets(std::span<const std::uint64_t> labels);
+  // One frame from FrameEncoder, appended as the next frame.
+  void add_frame(const EncodedFrame& frame);
+
+  // Flushes (and syncs, if options.sync) everything written so far and returns the
+  // size of the partial file: the `committed` argument of resume(). Call it between
+  // batches, after the points.
+  std::uint64_t checkpoint();
+  // Writes INDX and the footer, syncs, renames PATH.partial to PATH.
+  void finish();
+
+  std::uint64_t points_written() const { return points_; }
+  std::uint64_t tets_written() const { return tets_; }
+  std::uint64_t frames_written() const { return frames_.size(); }
+  std::uint64_t bytes_written() const;
+
+ private:
+  struct Resume {};
+  TetWriter(Resume, std::string path, TetFileHeader header, TetWriterOptions options);
+  template <class F>
+  void add_points_impl(const F* xyz, const std::uint64_t* ids, std::size_t n);
+  template <class L>
+  void add_tets_impl(std::span<const L> labels);
+  void write_section_start(std::uint32_t tag, std::uint64_t length);
+
+  std::string path_;
+  TetFileHeader header_;
+  TetWriterOptions options_;
+  std::unique_ptr<OutputFile> out_;
+  std::vector<SectionEntry> sections_;
+  std::vector<FrameEntry> frames_;
+  std::uint64_t points_ = 0, tets_ = 0;
+  std::uint32_t points_crc_ = 0;
+  std::uint64_t points_end_ = 0;  // offset just after the PNTS section
+  bool finished_ = false;
+  std::vector<std::unique_ptr<FrameEncoder>> encoders_;
+  std::vector<EncodedFrame> batch_;
+};
+
+}  // namespace tetstream::io

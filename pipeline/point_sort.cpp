@@ -1,0 +1,208 @@
+#include "pipeline/point_sort.hpp"
+
+#include "core/error.hpp"
+#include "pipeline/hull.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <queue>
+#include <unordered_set>
+
+namespace tetstream::pipeline {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+constexpr std::size_t kReadChunk = 1 << 16;  // points per read() call
+constexpr std::size_t kMergeBlockBytes = std::size_t(1) << 20;
+
+// Sequential reader of SortedPoint records from one run file, one block at a time.
+class RunCursor {
+ public:
+  RunCursor(const std::string& path, std::size_t block_records)
+      : file_(path, "rb"), block_(block_records) {
+    refill();
+  }
+  bool done() const { return pos_ == end_; }
+  const SortedPoint& head() const { return block_[pos_]; }
+  void pop() {
+    if (++pos_ == end_) refill();
+  }
+
+ private:
+  void refill() {
+    end_ = file_.read(block_.data(), sizeof(SortedPoint), block_.size());
+    pos_ = 0;
+  }
+  BinaryFile file_;
+  std::vector<SortedPoint> block_;
+  std::size_t pos_ = 0, end_ = 0;
+};
+
+}  // namespace
+
+SortedPoints sort_points(const std::string& input, const io::PointReadOptions& read_options,
+                         const PointSortOptions& options, TempDir& tmp) {
+  SortedPoints result;
+  std::vector<double> chunk(3 * kReadChunk);
+
+  // ---- pass 1: bounding box and count (stdin is spooled so it can be read again) ----
+  auto t0 = Clock::now();
+  std::string source = input;
+  io::PointReadOptions source_options = read_options;
+  {
+    auto reader = io::open_points(input, read_options);
+    const bool spool = io::is_std_stream(input);
+    std::unique_ptr<BinaryFile> spool_file;
+    if (spool) {
+      source = tmp.path("stdin.f64");
+      spool_file = std::make_unique<BinaryFile>(source, "wb");
+      source_options = io::PointReadOptions{};
+      source_options.format = io::PointFormat::kRaw;
+      source_options.type = io::ScalarType::kFloat64;
+    }
+    Progress progress("reading", "points", reader->count().value_or(0), options.progress);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
+      for (std::size_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = std::min(lo[k], chunk[3 * i + k]);
+          hi[k] = std::max(hi[k], chunk[3 * i + k]);
+        }
+      if (spool_file) spool_file->write(chunk.data(), 3 * sizeof(double), n);
+      result.input_count += n;
+      progress.add(n);
+    }
+    if (spool_file) spool_file->close();
+    progress.finish();
+    if (result.input_count == 0) throw InputError(reader->source_name() + ": no points");
+    for (int k = 0; k < 3; ++k) result.bbox_min[k] = lo[k], result.bbox_max[k] = hi[k];
+  }
+  double extent[3];
+  for (int k = 0; k < 3; ++k) extent[k] = result.bbox_max[k] - result.bbox_min[k];
+  result.axis = int(std::max_element(extent, extent + 3) - extent);
+  result.seconds_scan = since(t0);
+
+  // ---- pass 2: sorted runs, each with its hull vertex candidates ----
+  t0 = Clock::now();
+  const int axis = result.axis;
+  const auto before = [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); };
+  // The run buffer takes half the budget: sorting in place needs nothing more, and
+  // the hull candidates of a run need about as much again in the worst case (a shell).
+  const std::size_t run_points =
+      std::max<std::size_t>(kReadChunk, options.memory_bytes / 3 / (sizeof(SortedPoint) + 3 * sizeof(double)));
+  const std::size_t hull_piece = std::max<std::size_t>(4096, options.memory_bytes / 4 / 320);
+  std::vector<std::string> run_paths;
+  std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
+  std::vector<SortedPoint> run;
+  run.reserve(std::min<std::uint64_t>(run_points, result.input_count));
+  {
+    auto reader = io::open_points(source, source_options);
+    Progress progress("sorting", "points", result.input_count, options.progress);
+    std::uint64_t next_original = 0;
+    std::vector<double> run_xyz;
+    auto flush_run = [&] {
+      if (run.empty()) return;
+      std::sort(run.begin(), run.end(), before);
+      run_xyz.resize(3 * run.size());
+      for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
+      // Hull candidates piece by piece, so the kernel's memory stays a fraction of
+      // the budget even when most points are on the hull (a thin shell).
+      for (std::size_t first = 0; first < run.size(); first += hull_piece) {
+        const std::size_t n = std::min(hull_piece, run.size() - first);
+        for (std::uint32_t i : hull_vertex_candidates(&run_xyz[3 * first], n))
+          hull_originals.insert(run[first + i].original);
+      }
+      const std::string path = tmp.path("run-" + std::to_string(run_paths.size()));
+      BinaryFile out(path, "wb");
+      out.write(run.data(), sizeof(SortedPoint), run.size());
+      out.close();
+      run_paths.push_back(path);
+      run.clear();
+    };
+    while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
+      for (std::size_t i = 0; i < n; ++i) {
+        SortedPoint p;
+        std::memcpy(p.xyz, &chunk[3 * i], sizeof p.xyz);
+        p.original = next_original++;
+        run.push_back(p);
+        if (run.size() == run_points) flush_run();
+      }
+      progress.add(n);
+    }
+    flush_run();
+    progress.finish();
+    if (next_original != result.input_count)
+      throw InputError(reader->source_name() + ": changed while being read (" + std::to_string(result.input_count) +
+                       " points, then " + std::to_string(next_original) + ")");
+  }
+  std::vector<SortedPoint>().swap(run);
+  result.runs = run_paths.size();
+  result.seconds_runs = since(t0);
+
+  // ---- merge, dropping exact duplicates ----
+  t0 = Clock::now();
+  result.path = tmp.path("sorted.points");
+  {
+    const std::size_t block_records =
+        std::max<std::size_t>(256, std::min(kMergeBlockBytes, options.memory_bytes / 4 / std::max<std::size_t>(1, run_paths.size())) /
+                                       sizeof(SortedPoint));
+    std::vector<std::unique_ptr<RunCursor>> cursors;
+    for (const auto& p : run_paths) cursors.push_back(std::make_unique<RunCursor>(p, block_records));
+    auto later = [&](std::size_t a, std::size_t b) { return before(cursors[b]->head(), cursors[a]->head()); };
+    std::priority_queue<std::size_t, std::vector<std::size_t>, decltype(later)> heap(later);
+    for (std::size_t i = 0; i < cursors.size(); ++i)
+      if (!cursors[i]->done()) heap.push(i);
+
+    BinaryFile out(result.path, "wb");
+    std::vector<SortedPoint> block;
+    block.reserve(block_records);
+    SortedPoint last{};
+    bool have_last = false;
+    std::vector<std::uint64_t> hull_labels;
+    Progress progress("merging", "points", result.input_count, options.progress);
+    while (!heap.empty()) {
+      const std::size_t i = heap.top();
+      heap.pop();
+      const SortedPoint p = cursors[i]->head();
+      cursors[i]->pop();
+      if (!cursors[i]->done()) heap.push(i);
+      const bool candidate = hull_originals.count(p.original) != 0;
+      // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
+      if (have_last && p.xyz[0] == last.xyz[0] && p.xyz[1] == last.xyz[1] && p.xyz[2] == last.xyz[2]) {
+        ++result.duplicates;  // the first occurrence (smallest original index) stays
+        if (candidate) hull_labels.push_back(result.count - 1);
+        continue;
+      }
+      if (candidate) hull_labels.push_back(result.count);
+      block.push_back(p);
+      last = p;
+      have_last = true;
+      ++result.count;
+      if (block.size() == block_records) {
+        out.write(block.data(), sizeof(SortedPoint), block.size());
+        progress.add(block.size());
+        block.clear();
+      }
+    }
+    out.write(block.data(), sizeof(SortedPoint), block.size());
+    out.close();
+    progress.finish();
+    for (const auto& p : run_paths) remove_file(p);
+    std::sort(hull_labels.begin(), hull_labels.end());
+    hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
+    result.hull_labels = std::move(hull_labels);
+  }
+  result.seconds_merge = since(t0);
+  return result;
+}
+
+}  // namespace tetstream::pipeline

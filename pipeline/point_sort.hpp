@@ -1,0 +1,63 @@
+#pragma once
+// Stage 1 of `run`: the external sort of the input points along the longest axis of
+// their bounding box, within a memory budget.
+//
+//   pass 1  read the input once for its bounding box and count (stdin is spooled to
+//           a raw file in tmpdir so that it can be read twice);
+//   pass 2  read it again into runs of at most `run_points` records, sort each run
+//           by (axis coordinate, the other two coordinates, original index), write it
+//           to tmpdir; on the way keep each run's convex-hull vertex candidates;
+//   merge   k-way merge of the runs into one sorted file, dropping exact duplicates
+//           (they are adjacent in this order; the first in input order is kept).
+//
+// A point's label is its position in the sorted, duplicate-free file. The order is a
+// total order on distinct points, so the labels do not depend on the budget.
+#include "io/point_reader.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// One record of the sorted file: coordinates and the index of the point in the input.
+struct SortedPoint {
+  double xyz[3];
+  std::uint64_t original;
+};
+static_assert(sizeof(SortedPoint) == 32);
+
+struct PointSortOptions {
+  std::size_t memory_bytes = std::size_t(1) << 30;  // for run buffers and merge blocks
+  bool progress = true;
+};
+
+struct SortedPoints {
+  std::string path;  // the sorted file: `count` SortedPoint records
+  std::uint64_t count = 0;        // distinct points
+  std::uint64_t input_count = 0;  // points read
+  std::uint64_t duplicates = 0;   // input_count - count
+  int axis = 0;                   // the longest axis of the bounding box
+  double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
+  std::vector<std::uint64_t> hull_labels;  // labels of the global convex hull's vertices (sorted)
+  std::size_t runs = 0;
+  double seconds_scan = 0, seconds_runs = 0, seconds_merge = 0;
+};
+
+// Sorts the points of `input` into a new file in `tmp`. Throws InputError for bad
+// input (from the reader) and IoError for I/O failures; `tmp` removes the temporary
+// files when it goes out of scope, on success or failure.
+SortedPoints sort_points(const std::string& input, const io::PointReadOptions& read_options,
+                         const PointSortOptions& options, TempDir& tmp);
+
+// Strict weak order of the sorted file along `axis`.
+inline bool sorted_before(const SortedPoint& a, const SortedPoint& b, int axis) {
+  for (int k = 0; k < 3; ++k) {
+    const int c = (axis + k) % 3;
+    if (a.xyz[c] != b.xyz[c]) return a.xyz[c] < b.xyz[c];
+  }
+  return a.original < b.original;
+}
+
+}  // namespace tetstream::pipeline

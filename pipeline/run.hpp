@@ -1,0 +1,48 @@
+#pragma once
+// `tetstream run`: the whole out-of-core job, from a point file to a .tets container.
+//
+//   sort_points        (point_sort.hpp)  external sort along the long axis, duplicates
+//                                        merged, global hull vertices found
+//   plan_segments      (segment.hpp)     zones sized from the memory budget
+//   triangulate_segment                  window, kernel, exactness check, repair,
+//                                        minimum vertex filter
+//   io::TetWriter                        the compressed container
+#include "io/point_reader.hpp"
+
+#include <cstdint>
+#include <string>
+
+namespace tetstream::pipeline {
+
+struct RunOptions {
+  std::string input;   // a point file, or "-" for stdin
+  std::string output;  // the .tets container
+  io::PointReadOptions read;
+  std::uint64_t memory_bytes = std::uint64_t(1) << 30;
+  std::string tmpdir;       // empty: the output's directory
+  int threads = 0;          // 0: all cores
+  double buffer_spacings = 3.0;  // buffer thickness in mean point spacings
+  std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
+  bool progress = true;
+
+  void validate() const;  // throws UsageError
+};
+
+struct RunSummary {
+  std::uint64_t input_points = 0, points = 0, duplicates = 0;
+  std::uint64_t segments = 0, zone_points = 0, window_points = 0, repair_points = 0;
+  std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
+  std::uint64_t tets = 0, output_bytes = 0;
+  int axis = 0;
+  double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;
+  double redundant_ratio() const {  // points inserted beyond one per point, per point
+    return points ? double(window_points + repair_points) / double(points) - 1.0 : 0.0;
+  }
+};
+
+RunSummary run_job(const RunOptions& options);
+
+// Parses "4G", "512M", "1.5G", "100000" (bytes). Throws UsageError.
+std::uint64_t parse_memory_size(const std::string& text);
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,320 @@
+#include "pipeline/segment.hpp"
+
+#include "core/error.hpp"
+#include "core/predicates.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+namespace tetstream::pipeline {
+
+namespace {
+
+using core::TetId;
+using core::VertexId;
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// A closed ball that contains the region in which a point would conflict with a tet:
+// the circumball for a finite tet; for an infinite tet (a hull facet of the window,
+// which is a facet of the global hull because the window holds the hull's vertices)
+// only points in the facet's plane, inside its circumcircle, can conflict, and a ball
+// through a, b, c and a point just outside the facet contains that disc.
+struct ConflictBall {
+  double center[3];
+  double radius;  // rigorous upper bound of the true radius plus the centre error
+  bool valid;
+};
+
+ConflictBall conflict_ball(const core::Delaunay& dt, TetId t) {
+  ConflictBall b{};
+  int inf = -1;
+  for (int i = 0; i < 4; ++i)
+    if (dt.vertex(t, i) == core::kInfiniteVertex) inf = i;
+  core::Circumsphere s;
+  if (inf < 0) {
+    s = dt.tet_circumsphere(t);
+  } else {
+    const double* p[3];
+    for (int m = 0; m < 3; ++m) p[m] = dt.point(dt.vertex(t, core::kFacetVertex[inf][m]));
+    // o: the centroid moved off the plane along the approximate outward normal by
+    // about the facet's size; (a, b, c, o) is then positively oriented (the outside
+    // is the positive side) unless the facet is too flat to tell, which the exact
+    // orient3d below catches.
+    double u[3], v[3], n[3], o[3];
+    for (int k = 0; k < 3; ++k) u[k] = p[1][k] - p[0][k], v[k] = p[2][k] - p[0][k];
+    n[0] = u[1] * v[2] - u[2] * v[1];
+    n[1] = u[2] * v[0] - u[0] * v[2];
+    n[2] = u[0] * v[1] - u[1] * v[0];
+    const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    const double size = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    if (!(nn > 0)) return b;
+    for (int k = 0; k < 3; ++k) o[k] = (p[0][k] + p[1][k] + p[2][k]) / 3 + n[k] / nn * size;
+    if (core::orient3d(p[0], p[1], p[2], o) <= 0) return b;
+    s = core::circumsphere(p[0], p[1], p[2], o);
+  }
+  if (!s.valid) return b;
+  for (int k = 0; k < 3; ++k) b.center[k] = s.center[k];
+  // Every point of the true ball lies within radius + radius_error of the true
+  // centre, hence within that plus sqrt(3) * center_error of the computed one.
+  b.radius = (s.radius + s.radius_error + 1.7320508075688772 * s.center_error) * (1 + 1e-12);
+  b.valid = std::isfinite(b.radius);
+  return b;
+}
+
+// The extent along `axis` of the ball clipped to the global bounding box in the two
+// other axes (points outside the box do not exist): [lo, hi], or lo > hi when the
+// clipped ball is empty. Conservative: rounding only widens it.
+void clipped_extent(const ConflictBall& b, const SortedView& view, double& lo, double& hi) {
+  double d2 = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (k == view.axis) continue;
+    double d = 0;
+    if (b.center[k] < view.bbox_min[k]) d = view.bbox_min[k] - b.center[k];
+    else if (b.center[k] > view.bbox_max[k]) d = b.center[k] - view.bbox_max[k];
+    d *= 1 - 1e-12;  // shrink the distance: a larger extent is always safe
+    d2 += d * d;
+  }
+  const double r2 = b.radius * b.radius * (1 + 1e-12);
+  if (d2 > r2) {
+    lo = 1, hi = 0;
+    return;
+  }
+  const double h = std::sqrt(r2 - d2) * (1 + 1e-12);
+  const double c = b.center[view.axis];
+  lo = c - h;
+  hi = c + h;
+  lo -= std::fabs(lo) * 1e-15;
+  hi += std::fabs(hi) * 1e-15;
+}
+
+class SegmentWorker {
+ public:
+  SegmentWorker(const SortedView& view, const SegmentPlan& plan) : view_(view), plan_(plan) {}
+
+  SegmentStats run(std::vector<std::uint64_t>& out);
+
+ private:
+  void load_window();
+  bool vertex_is_final(VertexId v, std::vector<std::uint64_t>& repairs);
+  bool tet_is_safe(TetId t, std::vector<std::uint64_t>& repairs);
+  // Exact emptiness query of tet t's conflict region against the missing points
+  // whose axis coordinate lies in [lo, hi]; returns the deepest conflicting label,
+  // or kNone.
+  std::uint64_t deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi);
+
+  static constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
+
+  const SortedView& view_;
+  const SegmentPlan& plan_;
+  core::Delaunay dt_;
+  std::vector<double> xyz_;
+  std::vector<std::uint64_t> labels_;
+  std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
+  std::vector<TetId> star_;
+  SegmentStats stats_;
+};
+
+void SegmentWorker::load_window() {
+  const std::uint64_t w0 = plan_.window_begin, w1 = plan_.window_end;
+  const std::size_t n = std::size_t(w1 - w0);
+  for (std::uint64_t h : view_.hull_labels)
+    if (h < w0 || h >= w1) extra_.push_back(h);
+  const std::size_t total = n + extra_.size();
+  xyz_.resize(3 * total);
+  labels_.resize(total);
+  for (std::size_t i = 0; i < n; ++i) {
+    const SortedPoint& p = view_.points[w0 + i];
+    xyz_[3 * i] = p.xyz[0], xyz_[3 * i + 1] = p.xyz[1], xyz_[3 * i + 2] = p.xyz[2];
+    labels_[i] = w0 + i;
+  }
+  for (std::size_t j = 0; j < extra_.size(); ++j) {
+    const SortedPoint& p = view_.points[extra_[j]];
+    for (int k = 0; k < 3; ++k) xyz_[3 * (n + j) + k] = p.xyz[k];
+    labels_[n + j] = extra_[j];
+  }
+  stats_.window_points = total;
+}
+
+std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi) {
+  ++stats_.queries;
+  VertexId v[4];
+  for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
+  int inf = -1;
+  for (int i = 0; i < 4; ++i)
+    if (v[i] == core::kInfiniteVertex) inf = i;
+  const double r2 = ball.radius * ball.radius;
+  std::uint64_t best = kNone;
+  double best_depth = -std::numeric_limits<double>::infinity();
+  auto scan = [&](std::uint64_t first, std::uint64_t last) {
+    for (std::uint64_t label = first; label < last; ++label) {
+      const double* p = view_.points[label].xyz;
+      double d2 = 0;
+      for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
+      if (d2 > r2) continue;  // outside the enclosing ball: cannot conflict
+      if (std::binary_search(extra_.begin(), extra_.end(), label)) continue;
+      ++stats_.query_points;
+      bool conflict;
+      if (inf < 0) {
+        conflict = core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), p,
+                                      dt_.label(v[0]), dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]), label) > 0;
+      } else {
+        const VertexId a = v[core::kFacetVertex[inf][0]], b = v[core::kFacetVertex[inf][1]],
+                       c = v[core::kFacetVertex[inf][2]];
+        conflict = core::infinite_conflict_sos(dt_.point(a), dt_.point(b), dt_.point(c), p, dt_.label(a),
+                                               dt_.label(b), dt_.label(c), label) > 0;
+      }
+      if (conflict && r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
+    }
+  };
+  // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
+  // each side of the window.
+  const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
+  scan(first, std::min(last, plan_.window_begin));
+  scan(std::max(first, plan_.window_end), last);
+  return best;
+}
+
+bool SegmentWorker::tet_is_safe(TetId t, std::vector<std::uint64_t>& repairs) {
+  const ConflictBall ball = conflict_ball(dt_, t);
+  double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
+  if (ball.valid) {
+    clipped_extent(ball, view_, lo, hi);
+    if (lo > hi) return true;
+    // Missing points on the left have axis coordinates <= key(window_begin - 1), on
+    // the right >= key(window_end).
+    const bool left_clear = plan_.window_begin == 0 || lo > view_.key(plan_.window_begin - 1);
+    const bool right_clear = plan_.window_end == view_.count || hi < view_.key(plan_.window_end);
+    if (left_clear && right_clear) return true;
+  }
+  ++stats_.range_failures;
+  ConflictBall query_ball = ball;
+  if (!ball.valid) {
+    // No usable bound: the query examines every missing point exactly.
+    query_ball.radius = std::numeric_limits<double>::infinity();
+    query_ball.center[0] = query_ball.center[1] = query_ball.center[2] = 0;
+  }
+  const std::uint64_t deepest = deepest_missing_conflict(t, query_ball, lo, hi);
+  if (deepest == kNone) return true;
+  repairs.push_back(deepest);
+  return false;
+}
+
+bool SegmentWorker::vertex_is_final(VertexId v, std::vector<std::uint64_t>& repairs) {
+  star_.clear();
+  dt_.star(v, star_);
+  bool final = true;
+  for (TetId t : star_)
+    if (!tet_is_safe(t, repairs)) final = false;
+  return final;
+}
+
+SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
+  auto t0 = Clock::now();
+  load_window();
+  if (dt_.build(xyz_.data(), labels_.data(), labels_.size()) != core::BuildStatus::kOk)
+    throw InputError("the input has fewer than 4 affinely independent distinct points");
+  stats_.seconds_build = since(t0);
+
+  // Zone vertices are local indices [zone_begin - window_begin, zone_end - window_begin).
+  t0 = Clock::now();
+  const VertexId z0 = VertexId(plan_.zone_begin - plan_.window_begin);
+  const VertexId z1 = VertexId(plan_.zone_end - plan_.window_begin);
+  std::vector<VertexId> pending;
+  for (VertexId v = z0; v < z1; ++v) pending.push_back(v);
+  std::vector<std::uint64_t> repairs;
+  while (!pending.empty()) {
+    ++stats_.rounds;
+    repairs.clear();
+    std::vector<VertexId> still;
+    for (VertexId v : pending)
+      if (!vertex_is_final(v, repairs)) still.push_back(v);
+    pending.swap(still);
+    if (pending.empty()) break;
+    std::sort(repairs.begin(), repairs.end());
+    repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
+    // Append the repair points to the window and insert them.
+    const std::size_t old_n = labels_.size();
+    for (std::uint64_t label : repairs) {
+      const SortedPoint& p = view_.points[label];
+      xyz_.insert(xyz_.end(), p.xyz, p.xyz + 3);
+      labels_.push_back(label);
+      extra_.insert(std::upper_bound(extra_.begin(), extra_.end(), label), label);
+    }
+    dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
+    dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
+    stats_.repair_points += repairs.size();
+  }
+  stats_.seconds_check = since(t0);
+
+  // Minimum vertex filter: a tet is emitted by the zone vertex with its smallest label.
+  t0 = Clock::now();
+  for (VertexId v = z0; v < z1; ++v) {
+    star_.clear();
+    dt_.star(v, star_);
+    const std::uint64_t lv = labels_[v];
+    for (TetId t : star_) {
+      if (dt_.is_infinite(t)) continue;
+      std::uint64_t q[4];
+      bool owner = true;
+      for (int i = 0; i < 4; ++i) {
+        q[i] = labels_[dt_.vertex(t, i)];
+        if (q[i] < lv) owner = false;
+      }
+      if (!owner) continue;
+      out.insert(out.end(), q, q + 4);
+      ++stats_.tets;
+    }
+  }
+  stats_.kernel_bytes = dt_.memory_bytes();
+  stats_.seconds_emit = since(t0);
+  return stats_;
+}
+
+}  // namespace
+
+std::uint64_t SortedView::lower_bound(double x) const {
+  std::uint64_t lo = 0, hi = count;
+  while (lo < hi) {
+    const std::uint64_t mid = lo + (hi - lo) / 2;
+    if (key(mid) < x) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+std::uint64_t SortedView::upper_bound(double x) const {
+  std::uint64_t lo = 0, hi = count;
+  while (lo < hi) {
+    const std::uint64_t mid = lo + (hi - lo) / 2;
+    if (key(mid) <= x) lo = mid + 1;
+    else hi = mid;
+  }
+  return lo;
+}
+
+std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width) {
+  std::vector<SegmentPlan> plans;
+  zone_points = std::max<std::uint64_t>(zone_points, 1);
+  const std::uint64_t segments = std::max<std::uint64_t>(1, (view.count + zone_points - 1) / zone_points);
+  for (std::uint64_t s = 0; s < segments; ++s) {
+    SegmentPlan p;
+    // Even split, so the last segment is not a sliver.
+    p.zone_begin = view.count * s / segments;
+    p.zone_end = view.count * (s + 1) / segments;
+    if (p.zone_begin == p.zone_end) continue;
+    p.window_begin = view.lower_bound(view.key(p.zone_begin) - buffer_width);
+    p.window_end = view.upper_bound(view.key(p.zone_end - 1) + buffer_width);
+    plans.push_back(p);
+  }
+  return plans;
+}
+
+SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out) {
+  SegmentWorker worker(view, plan);
+  return worker.run(out);
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,69 @@
+#pragma once
+// Stages 2-4 of `run`: the segment windows over the sorted point file, their
+// triangulation with the kernel, the exactness check of DESIGN.md section 3, and the
+// minimum vertex filter.
+//
+// Segment s owns the labels [zone_begin, zone_end) (its insertion zone). Its window
+// holds those points, buffer points on each side along the sort axis, and the global
+// convex hull's vertices (so the window's hull is the global hull). A zone vertex is
+// *final* when every tet of its star is Delaunay with respect to all points:
+//   (a) range test: the tet's circumball, clipped to the global bounding box in the
+//       other two axes, lies strictly between the last missing point on the left and
+//       the first on the right along the axis (with rigorous error margins), or
+//   (b) emptiness query: no missing point is in conflict with the tet under the
+//       kernel's own exact, perturbed predicates.
+// A query that finds points inserts the deepest one into the window, and the zone's
+// unfinished vertices are checked again (a final vertex stays final: its tets have
+// empty balls, so no insertion touches them). Then each finite tet of a zone vertex's
+// star whose minimum label is that vertex is emitted: every tet exactly once overall.
+#include "core/delaunay.hpp"
+#include "pipeline/point_sort.hpp"
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// The sorted, duplicate-free points, read-only, addressed by label.
+struct SortedView {
+  const SortedPoint* points = nullptr;
+  std::uint64_t count = 0;
+  int axis = 0;
+  double bbox_min[3], bbox_max[3];
+  std::vector<std::uint64_t> hull_labels;  // sorted
+
+  double key(std::uint64_t label) const { return points[label].xyz[axis]; }
+  // First label whose axis coordinate is >= x (count when none).
+  std::uint64_t lower_bound(double x) const;
+  // First label whose axis coordinate is > x.
+  std::uint64_t upper_bound(double x) const;
+};
+
+struct SegmentPlan {
+  std::uint64_t zone_begin = 0, zone_end = 0;      // labels this segment owns
+  std::uint64_t window_begin = 0, window_end = 0;  // labels in its window (zone + buffers)
+};
+
+// Splits [0, count) into zones of about `zone_points` labels and gives each a window
+// extended by `buffer_width` along the axis on each side.
+std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width);
+
+struct SegmentStats {
+  std::uint64_t window_points = 0;  // zone + buffers + hull vertices, before repairs
+  std::uint64_t repair_points = 0;  // inserted by the emptiness queries
+  std::uint64_t range_failures = 0; // star tets the range test could not clear
+  std::uint64_t queries = 0;        // emptiness queries run
+  std::uint64_t query_points = 0;   // points the queries examined
+  std::uint64_t rounds = 0;         // check/repair rounds
+  std::uint64_t tets = 0;           // tets emitted
+  std::uint64_t kernel_bytes = 0;   // the kernel's arrays at the end
+  double seconds_build = 0, seconds_check = 0, seconds_emit = 0;
+};
+
+// Triangulates one segment and appends its tets (4 labels each, positively oriented)
+// to `out`. Throws InputError when the window has fewer than 4 affinely independent
+// points (only possible when the whole input has).
+SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out);
+
+}  // namespace tetstream::pipeline

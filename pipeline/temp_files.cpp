@@ -1,0 +1,69 @@
+#include "pipeline/temp_files.hpp"
+
+#include "core/error.hpp"
+
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+namespace {
+std::string errno_text() { return std::strerror(errno); }
+}  // namespace
+
+TempDir::TempDir(const std::string& parent, const std::string& prefix) {
+  std::string templ = (parent.empty() ? std::string(".") : parent) + "/" + prefix + "-XXXXXX";
+  std::vector<char> buf(templ.begin(), templ.end());
+  buf.push_back('\0');
+  if (!mkdtemp(buf.data()))
+    throw IoError("cannot create a temporary directory in " + parent + ": " + errno_text());
+  dir_ = buf.data();
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(dir_, ec);
+}
+
+void remove_file(const std::string& path) {
+  std::error_code ec;
+  std::filesystem::remove(path, ec);
+}
+
+BinaryFile::BinaryFile(const std::string& path, const char* mode) : path_(path) {
+  f_ = std::fopen(path.c_str(), mode);
+  if (!f_) throw IoError(path + ": cannot open: " + errno_text());
+  std::setvbuf(f_, nullptr, _IOFBF, std::size_t(1) << 20);
+}
+
+BinaryFile::~BinaryFile() {
+  if (f_) std::fclose(f_);
+}
+
+void BinaryFile::write(const void* data, std::size_t size, std::size_t count) {
+  if (count == 0) return;
+  if (std::fwrite(data, size, count, f_) != count) throw IoError(path_ + ": write failed: " + errno_text());
+}
+
+std::size_t BinaryFile::read(void* data, std::size_t size, std::size_t count) {
+  const std::size_t n = std::fread(data, size, count, f_);
+  if (n < count && std::ferror(f_)) throw IoError(path_ + ": read failed: " + errno_text());
+  return n;
+}
+
+void BinaryFile::close() {
+  if (!f_) return;
+  const bool failed = std::fflush(f_) != 0 || std::ferror(f_);
+  const int err = errno;
+  const bool close_failed = std::fclose(f_) != 0;
+  f_ = nullptr;
+  if (failed || close_failed) {
+    errno = err;
+    throw IoError(path_ + ": write failed: " + errno_text());
+  }
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,75 @@
+// `tetstream run`: triangulate a point file out of core into a .tets container.
+#include "core/error.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/run.hpp"
+#include "tools/command.hpp"
+#include "tools/point_options.hpp"
+
+#include <spdlog/spdlog.h>
+
+namespace tetstream::cli {
+namespace {
+
+struct RunArgs {
+  pipeline::RunOptions options;
+  std::string memory = "1G";
+};
+
+void run_run(RunArgs& args, Context& ctx) {
+  auto& o = args.options;
+  o.memory_bytes = pipeline::parse_memory_size(args.memory);
+  o.threads = ctx.global.threads;
+  o.progress = !ctx.global.quiet;
+  const pipeline::RunSummary s = pipeline::run_job(o);
+  const double tets_per_s = s.seconds_total > 0 ? double(s.tets) / s.seconds_total : 0;
+  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments; {} ({:.2f} B/tet)", s.points, s.duplicates,
+               s.tets, s.segments, pipeline::human_bytes(double(s.output_bytes)),
+               s.tets ? double(s.output_bytes) / double(s.tets) : 0.0);
+  spdlog::info("time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
+               "{:.1f}%, {} repair points, {} queries",
+               s.seconds_sort, s.seconds_triangulate, s.seconds_write, s.seconds_total,
+               pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.repair_points, s.queries);
+  ctx.summary = {{"command", "run"},
+                 {"input", o.input},
+                 {"output", o.output},
+                 {"input_points", s.input_points},
+                 {"points", s.points},
+                 {"duplicates", s.duplicates},
+                 {"axis", std::string(1, "xyz"[s.axis])},
+                 {"hull_vertices", s.hull_vertices},
+                 {"segments", s.segments},
+                 {"window_points", s.window_points},
+                 {"repair_points", s.repair_points},
+                 {"range_failures", s.range_failures},
+                 {"queries", s.queries},
+                 {"redundant_ratio", s.redundant_ratio()},
+                 {"tets", s.tets},
+                 {"output_bytes", s.output_bytes},
+                 {"bytes_per_tet", s.tets ? double(s.output_bytes) / double(s.tets) : 0.0},
+                 {"seconds", {{"sort", s.seconds_sort},
+                              {"triangulate", s.seconds_triangulate},
+                              {"write", s.seconds_write},
+                              {"total", s.seconds_total}}},
+                 {"tets_per_second", tets_per_s}};
+}
+
+void setup_run(CLI::App& app, Context& ctx) {
+  auto args = std::make_shared<RunArgs>();
+  auto* cmd = app.add_subcommand("run", "Triangulate a point file out of core into a .tets container");
+  cmd->add_option("input", args->options.input, "Point file (raw, PLY, .npy, text) or - for stdin")->required();
+  cmd->add_option("-o,--output", args->options.output, "Output container (.tets)")->required();
+  cmd->add_option("--memory", args->memory, "Memory budget, e.g. 512M, 4G (peak resident memory stays below it)")
+      ->capture_default_str();
+  cmd->add_option("--tmpdir", args->options.tmpdir, "Directory for temporary files (default: the output's)");
+  cmd->add_option("--buffer", args->options.buffer_spacings,
+                  "Buffer thickness on each side of a segment, in mean point spacings")
+      ->capture_default_str();
+  cmd->add_option("--zone-points", args->options.zone_points,
+                  "Points per segment (default: from --memory; small values force many segments)");
+  add_point_input_options(cmd, args->options.read);
+  cmd->callback([args, &ctx] { run_run(*args, ctx); });
+}
+
+}  // namespace
+TETSTREAM_COMMAND(30, setup_run);
+}  // namespace tetstream::cli
