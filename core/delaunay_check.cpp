@@ -90,7 +90,7 @@ std::uint64_t count_distinct_bucketed(std::size_t buckets, Emit&& emit) {
     emit([&](VertexId b, Value v) { values[next[b]++] = v; });
   }
   std::uint64_t distinct = 0;
-#pragma omp parallel for schedule(dynamic, 4096) reduction(+ : distinct)
+#pragma omp parallel for schedule(dynamic, 4096) reduction(+ : distinct) if (buckets > (1u << 16))
   for (std::int64_t b = 0; b < std::int64_t(buckets); ++b) {
     Value* first = values.data() + offset[b];
     Value* last = values.data() + offset[b + 1];

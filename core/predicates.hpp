@@ -8,9 +8,8 @@
 // assume every operation is rounded as written.
 //
 // Inputs must be finite doubles; any finite doubles are handled exactly (subnormals,
-// 1e-300 next to 1e300, ...): the exact fallback uses expansion arithmetic after an
-// exact power-of-two rescaling, and big integers when the coordinates of one call span
-// more than about 2^340 (see predicates.cpp). Non-finite input gives 0.
+// 1e-300 next to 1e300, ...): the exact fallback is fixed-width integer arithmetic on
+// the mantissas, 1 to 33 limbs wide (see predicates.cpp). Non-finite input gives 0.
 //
 // Conventions (one picture for the whole kernel):
 //   orient3d(a,b,c,d) = sign det[b-a, c-a, d-a]  (rows are the difference vectors)
@@ -50,13 +49,13 @@ namespace tetstream::core {
 
 // Counters of filter failures, for profiling (per thread; summed by the caller).
 //   *_exact      calls the inline filter could not decide (went out of line);
-//   *_expansion  of those, calls that needed full exact arithmetic (the rest were
-//                settled by the cheap lattice test, see predicates.cpp);
+//   *_full_exact of those, calls that needed exact integer arithmetic (the rest
+//                were settled by the cheap lattice test, see predicates.cpp);
 //   insphere_perturbed  insphere_sos calls whose exact insphere was 0 (tie-break).
 struct PredicateStats {
   std::uint64_t orient3d_calls = 0, orient3d_exact = 0;
   std::uint64_t insphere_calls = 0, insphere_exact = 0, insphere_perturbed = 0;
-  std::uint64_t orient3d_expansion = 0, insphere_expansion = 0;
+  std::uint64_t orient3d_full_exact = 0, insphere_full_exact = 0;
 };
 
 namespace detail {

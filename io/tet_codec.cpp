@@ -222,18 +222,38 @@ TS_FORCE_INLINE Canon<L> canonical(const L* t) {
   return {v0, v1, v2, v3, p};
 }
 
-// Sorts a few u64 by rank counting (no data-dependent branches for small sizes).
+// Batcher's odd-even merge sort of N (a power of two) values: a fixed sequence of
+// branch-free compare-exchanges, much faster than a comparison sort on the small,
+// randomly ordered lists of a group.
+template <std::size_t N>
+TS_FORCE_INLINE void sorting_network(std::uint64_t* v) {
+  for (std::size_t p = 1; p < N; p <<= 1)
+    for (std::size_t k = p; k >= 1; k >>= 1)
+      for (std::size_t j = k % p; j + k < N; j += 2 * k)
+        for (std::size_t i = 0; i < std::min(k, N - j - k); ++i)
+          if ((i + j) / (2 * p) == (i + j + k) / (2 * p)) {
+            const std::uint64_t x = v[i + j], y = v[i + j + k];
+            v[i + j] = std::min(x, y), v[i + j + k] = std::max(x, y);
+          }
+}
+
+template <std::size_t N>
+void sort_padded(std::vector<std::uint64_t>& v) {
+  std::uint64_t a[N];
+  const std::size_t n = v.size();
+  std::copy(v.begin(), v.end(), a);
+  std::fill(a + n, a + N, std::numeric_limits<std::uint64_t>::max());
+  sorting_network<N>(a);
+  std::copy(a, a + n, v.begin());
+}
+
 void sort_small(std::vector<std::uint64_t>& v) {
   const std::size_t n = v.size();
-  if (n > 16) return std::sort(v.begin(), v.end());
-  std::uint64_t in[16], out[16];
-  std::copy(v.begin(), v.end(), in);
-  for (std::size_t i = 0; i < n; ++i) {
-    std::size_t rank = 0;
-    for (std::size_t j = 0; j < n; ++j) rank += (in[j] < in[i]) | ((in[j] == in[i]) & (j < i));
-    out[rank] = in[i];
-  }
-  std::copy(out, out + n, v.begin());
+  if (n <= 1) return;
+  if (n <= 4) return sort_padded<4>(v);
+  if (n <= 8) return sort_padded<8>(v);
+  if (n <= 16) return sort_padded<16>(v);
+  std::sort(v.begin(), v.end());
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cstring>
 #include <exception>
 #include <stdexcept>
 
@@ -24,16 +25,17 @@ std::array<std::uint8_t, kPreambleSize> preamble() {
 
 // The bytes every writer of `header` starts with: preamble, HEAD, PNTS's section header.
 std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
-  std::vector<std::uint8_t> b;
   const auto pre = preamble();
-  b.insert(b.end(), pre.begin(), pre.end());
   const std::vector<std::uint8_t> head = serialize_head(h);
   const auto hh = section_header(kTagHead, kSectionCritical, head.size());
-  b.insert(b.end(), hh.begin(), hh.end());
-  b.insert(b.end(), head.begin(), head.end());
-  append_u32(b, crc32c(head.data(), head.size()));
   const auto ph = section_header(kTagPoints, kSectionCritical, h.point_count * h.point_record_bytes());
-  b.insert(b.end(), ph.begin(), ph.end());
+  std::vector<std::uint8_t> b(pre.size() + hh.size() + head.size() + kSectionTrailerSize + ph.size());
+  std::uint8_t* p = b.data();
+  p = std::copy(pre.begin(), pre.end(), p);
+  p = std::copy(hh.begin(), hh.end(), p);
+  p = std::copy(head.begin(), head.end(), p);
+  put_u32(p, crc32c(head.data(), head.size()));
+  std::copy(ph.begin(), ph.end(), p + kSectionTrailerSize);
   return b;
 }
 
@@ -141,16 +143,18 @@ void TetWriter::add_points_impl(const F* xyz, const std::uint64_t* ids, std::siz
     for (std::size_t i = first; i < first + k; ++i) {
       const std::uint64_t id = ids ? ids[i] : points_ + i;
       for (int c = 0; c < 3; ++c) {
-        const double v = double(xyz[3 * i + c]);
-        if (!(v >= header_.bbox_min[c] && v <= header_.bbox_max[c])) {
-          throw std::invalid_argument("TetWriter: point " + std::to_string(points_ + i) +
-                                      " lies outside the header's bounding box");
-        }
+        // The coordinate as stored must lie in the header's bounding box.
+        double v = double(xyz[3 * i + c]);
         if (header_.coord_type == CoordType::kFloat32) {
           const float f = float(v);
           std::memcpy(p, &f, 4);
+          v = f;
         } else {
           std::memcpy(p, &v, 8);
+        }
+        if (!(v >= header_.bbox_min[c] && v <= header_.bbox_max[c])) {
+          throw std::invalid_argument("TetWriter: point " + std::to_string(points_ + i) +
+                                      " lies outside the header's bounding box");
         }
         p += cb;
       }

@@ -1,0 +1,357 @@
+#pragma once
+// A generic external merge sort of fixed-size records within a memory budget.
+//
+//   ExternalSorter<Rec, Less> s({.memory_bytes = 256 << 20, .dir = tmp.dir(), .name = "facets"});
+//   s.push(rec); ... s.push(span);         // any order; sorted runs spill to `dir`
+//   s.push_sorted_run(span);               // a block the caller already sorted: one run
+//   s.merge([](std::span<const Rec> batch) { ... });   // all records, in order
+//
+// Records are trivially copyable values (written to disk as bytes). `Less` is a strict
+// weak order; records that compare equal come out of merge() in push order of their
+// runs (run 0 first), and in unspecified order within one run, so give `Less` a total
+// order when the output must not depend on the budget.
+//
+// Memory: the run buffer grows geometrically up to about 2/3 of memory_bytes (old and
+// new buffers together stay within it); merge() frees it and reads the runs through
+// one block each (memory_bytes / (runs + 1)), at least min_block_bytes: when there are
+// too many runs for that, it first merges groups of them into longer runs (more
+// passes over the data, never more memory). Data that fits in one buffer never
+// touches the disk. Run files are deleted as soon as they are merged and in the
+// destructor, so an exception leaves nothing behind (the caller's TempDir removes the
+// directory itself).
+//
+// Reduction: an optional reducer sees every sorted run before it is written (and the
+// in-memory buffer before merge() serves it); it may combine records that compare
+// equal (drop duplicates, add counts, ...) and returns how many records it kept at the
+// front of the run. Records of one key may still arrive from several runs in merge().
+//
+// Threads: runs are sorted with all OpenMP threads (in-place parallel quicksort);
+// push() and merge() are called from one thread.
+#include "core/error.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+struct ExternalSortOptions {
+  std::size_t memory_bytes = std::size_t(256) << 20;
+  std::string dir;             // directory for run files (normally a TempDir's)
+  // When `dir` is empty, called once at the first spill to create the directory, so
+  // a sort that fits in memory creates nothing on disk.
+  std::function<std::string()> make_dir;
+  std::string name = "sort";   // run files are DIR/NAME-K.run
+  bool parallel = true;        // sort runs on all OpenMP threads
+  std::size_t min_block_bytes = std::size_t(1) << 20;   // smallest read block in a merge
+  std::size_t batch_records = std::size_t(1) << 16;     // records per merge() callback (most)
+};
+
+struct ExternalSortStats {
+  std::uint64_t records_pushed = 0;
+  std::uint64_t runs_written = 0;     // including intermediate merge passes
+  std::uint64_t bytes_written = 0;    // to run files
+  std::uint64_t merge_passes = 0;     // intermediate passes (0: one final merge)
+  std::size_t peak_buffer_bytes = 0;  // largest run buffer held
+};
+
+namespace detail {
+
+// In-place quicksort whose smaller halves become OpenMP tasks; parts below 32 k
+// records (or past the depth limit) go to std::sort.
+template <class T, class Less>
+void quicksort_tasks(T* first, T* last, const Less& less, int depth) {
+  constexpr std::ptrdiff_t kSerial = 1 << 15;
+  while (last - first > kSerial && depth > 0) {
+    T* mid = first + (last - first) / 2;
+    // Median of three, as a value: the partitions below move the records.
+    const T& a = *first;
+    const T& b = *mid;
+    const T& c = *(last - 1);
+    const T pivot = less(a, b) ? (less(b, c) ? b : (less(a, c) ? c : a)) : (less(a, c) ? a : (less(b, c) ? c : b));
+    T* lo_end = std::partition(first, last, [&](const T& x) { return less(x, pivot); });
+    T* hi_begin = std::partition(lo_end, last, [&](const T& x) { return !less(pivot, x); });
+    --depth;
+    // Recurse on the smaller side as a task, loop on the larger.
+    if (lo_end - first < last - hi_begin) {
+      T* f = first;
+      T* l = lo_end;
+#pragma omp task default(none) firstprivate(f, l, depth) shared(less)
+      quicksort_tasks(f, l, less, depth);
+      first = hi_begin;
+    } else {
+      T* f = hi_begin;
+      T* l = last;
+#pragma omp task default(none) firstprivate(f, l, depth) shared(less)
+      quicksort_tasks(f, l, less, depth);
+      last = lo_end;
+    }
+  }
+  std::sort(first, last, less);
+}
+
+int max_threads();   // omp_get_max_threads()
+bool in_parallel();  // omp_in_parallel(): no nested teams
+
+}  // namespace detail
+
+// Sorts in place with all OpenMP threads (not stable; no extra memory beyond the stack).
+template <class T, class Less>
+void parallel_sort(T* first, T* last, const Less& less) {
+  if (last - first < (1 << 16) || detail::max_threads() <= 1 || detail::in_parallel()) {
+    std::sort(first, last, less);
+    return;
+  }
+#pragma omp parallel
+#pragma omp single nowait
+  detail::quicksort_tasks(first, last, less, 48);
+}
+
+template <class T, class Less>
+class ExternalSorter {
+  static_assert(std::is_trivially_copyable_v<T>, "records are written to disk as bytes");
+
+ public:
+  using Reducer = std::function<std::size_t(T* first, std::size_t n)>;
+
+  explicit ExternalSorter(ExternalSortOptions options, Less less = Less())
+      : opt_(std::move(options)), less_(std::move(less)) {
+    max_records_ = std::max<std::size_t>(opt_.memory_bytes / sizeof(T), 1024);
+  }
+  ~ExternalSorter() { remove_runs(); }
+  ExternalSorter(const ExternalSorter&) = delete;
+  ExternalSorter& operator=(const ExternalSorter&) = delete;
+
+  void set_reducer(Reducer r) { reducer_ = std::move(r); }
+
+  void push(const T& r) {
+    if (buf_.size() == buf_.capacity()) make_room();
+    buf_.push_back(r);
+    ++stats_.records_pushed;
+  }
+  void push(std::span<const T> rs) {
+    while (!rs.empty()) {
+      if (buf_.size() == buf_.capacity()) make_room();
+      const std::size_t n = std::min(rs.size(), buf_.capacity() - buf_.size());
+      buf_.insert(buf_.end(), rs.begin(), rs.begin() + std::ptrdiff_t(n));
+      rs = rs.subspan(n);
+      stats_.records_pushed += n;
+    }
+  }
+  // A block already sorted by Less: written as one run at once (reduced first if a
+  // reducer is set, which is why it is mutable). Order relative to push(): it counts
+  // as pushed now, after the records buffered so far.
+  void push_sorted_run(std::span<T> rs) {
+    if (rs.empty()) return;
+    stats_.records_pushed += rs.size();
+    if (!buf_.empty()) flush_buffer();
+    std::size_t n = rs.size();
+    if (reducer_) n = reducer_(rs.data(), n);
+    write_run(rs.data(), n);
+  }
+
+  std::uint64_t records_pushed() const { return stats_.records_pushed; }
+  bool spilled() const { return !runs_.empty(); }
+  const ExternalSortStats& stats() const { return stats_; }
+
+  // Ends the input and calls visit(std::span<const T>) with consecutive batches of
+  // the sorted records (the spans are valid during the call only). Call once.
+  template <class Visit>
+  void merge(Visit&& visit) {
+    if (runs_.empty()) {
+      // Everything is in memory.
+      std::size_t n = buf_.size();
+      sort_and_reduce(buf_.data(), n);
+      buf_.resize(n);
+      const std::size_t b = std::max<std::size_t>(opt_.batch_records, 1);
+      for (std::size_t i = 0; i < buf_.size(); i += b)
+        visit(std::span<const T>(buf_.data() + i, std::min(b, buf_.size() - i)));
+      release_buffer();
+      return;
+    }
+    if (!buf_.empty()) flush_buffer();
+    release_buffer();
+    // Fan-in: one block per run plus the output batch.
+    const std::size_t min_block = std::max<std::size_t>(opt_.min_block_bytes / sizeof(T), 1);
+    const std::size_t fan_in = std::max<std::size_t>(opt_.memory_bytes / sizeof(T) / (min_block + 1), 2);
+    while (runs_.size() > fan_in) {
+      ++stats_.merge_passes;
+      std::vector<Run> next;
+      for (std::size_t i = 0; i < runs_.size(); i += fan_in) {
+        std::vector<Run> group(runs_.begin() + std::ptrdiff_t(i),
+                               runs_.begin() + std::ptrdiff_t(std::min(runs_.size(), i + fan_in)));
+        if (group.size() == 1) {
+          next.push_back(group[0]);
+          continue;
+        }
+        Run out{run_path(next_run_id_++), 0};
+        {
+          BinaryFile f(out.path, "wb");
+          merge_runs(group, [&](std::span<const T> batch) {
+            f.write(batch.data(), sizeof(T), batch.size());
+            out.records += batch.size();
+          });
+          f.close();
+        }
+        stats_.bytes_written += out.records * sizeof(T);
+        ++stats_.runs_written;
+        for (const Run& r : group) remove_file(r.path);
+        next.push_back(out);
+      }
+      runs_ = std::move(next);
+    }
+    merge_runs(runs_, visit);
+    remove_runs();
+  }
+
+ private:
+  struct Run {
+    std::string path;
+    std::uint64_t records = 0;
+  };
+
+  // Sequential reader of one run, a block at a time.
+  class Cursor {
+   public:
+    Cursor(const std::string& path, std::size_t block) : file_(path, "rb"), block_(block) { refill(); }
+    bool done() const { return pos_ == end_; }
+    const T& head() const { return block_[pos_]; }
+    void pop() {
+      if (++pos_ == end_) refill();
+    }
+
+   private:
+    void refill() {
+      end_ = file_.read(block_.data(), sizeof(T), block_.size());
+      pos_ = 0;
+    }
+    BinaryFile file_;
+    std::vector<T> block_;
+    std::size_t pos_ = 0, end_ = 0;
+  };
+
+  std::string run_path(std::uint64_t id) const {
+    return opt_.dir + "/" + opt_.name + "-" + std::to_string(id) + ".run";
+  }
+
+  void sort_and_reduce(T* data, std::size_t& n) {
+    if (opt_.parallel) parallel_sort(data, data + n, less_);
+    else std::sort(data, data + n, less_);
+    if (reducer_) n = reducer_(data, n);
+  }
+
+  // Grows the buffer (old + new within the budget) or spills it.
+  void make_room() {
+    const std::size_t cap = buf_.capacity();
+    const std::size_t want = cap == 0 ? std::min<std::size_t>(max_records_ * 2 / 3, std::size_t(1) << 16)
+                                      : std::min(2 * cap, max_records_ - std::min(cap, max_records_));
+    if (want > cap) {
+      buf_.reserve(want);
+      stats_.peak_buffer_bytes = std::max(stats_.peak_buffer_bytes, buf_.capacity() * sizeof(T));
+      return;
+    }
+    flush_buffer();
+  }
+
+  void flush_buffer() {
+    std::size_t n = buf_.size();
+    sort_and_reduce(buf_.data(), n);
+    write_run(buf_.data(), n);
+    buf_.clear();
+  }
+
+  void write_run(const T* data, std::size_t n) {
+    if (opt_.dir.empty() && opt_.make_dir) opt_.dir = opt_.make_dir();
+    if (opt_.dir.empty()) throw IoError("external sort '" + opt_.name + "': out of memory budget and no temporary directory");
+    Run r{run_path(next_run_id_++), n};
+    BinaryFile f(r.path, "wb");
+    f.write(data, sizeof(T), n);
+    f.close();
+    stats_.bytes_written += n * sizeof(T);
+    ++stats_.runs_written;
+    runs_.push_back(std::move(r));
+  }
+
+  void release_buffer() {
+    buf_.clear();
+    buf_.shrink_to_fit();
+  }
+
+  // k-way merge of `runs` into batches for `emit`; ties go to the earlier run.
+  template <class Emit>
+  void merge_runs(const std::vector<Run>& runs, Emit&& emit) {
+    const std::size_t k = runs.size();
+    const std::size_t total = opt_.memory_bytes / sizeof(T);
+    const std::size_t out_records =
+        std::clamp<std::size_t>(opt_.batch_records, 1, std::max<std::size_t>(total / (k + 1), 1));
+    const std::size_t block = std::max<std::size_t>((total - std::min(total, out_records)) / k, 1);
+    std::vector<std::unique_ptr<Cursor>> cur;
+    cur.reserve(k);
+    for (const Run& r : runs) cur.push_back(std::make_unique<Cursor>(r.path, block));
+    // Binary min-heap of run indices by (head, run index).
+    std::vector<std::size_t> heap;
+    heap.reserve(k);
+    auto before = [&](std::size_t a, std::size_t b) {
+      const T& x = cur[a]->head();
+      const T& y = cur[b]->head();
+      if (less_(x, y)) return true;
+      if (less_(y, x)) return false;
+      return a < b;
+    };
+    auto sift_down = [&](std::size_t i) {
+      const std::size_t n = heap.size();
+      for (;;) {
+        std::size_t m = i, l = 2 * i + 1, r = l + 1;
+        if (l < n && before(heap[l], heap[m])) m = l;
+        if (r < n && before(heap[r], heap[m])) m = r;
+        if (m == i) return;
+        std::swap(heap[i], heap[m]);
+        i = m;
+      }
+    };
+    for (std::size_t i = 0; i < k; ++i)
+      if (!cur[i]->done()) heap.push_back(i);
+    for (std::size_t i = heap.size(); i-- > 0;) sift_down(i);
+    std::vector<T> out;
+    out.reserve(out_records);
+    while (!heap.empty()) {
+      Cursor& c = *cur[heap[0]];
+      out.push_back(c.head());
+      c.pop();
+      if (c.done()) {
+        heap[0] = heap.back();
+        heap.pop_back();
+      }
+      if (!heap.empty()) sift_down(0);
+      if (out.size() == out_records) {
+        emit(std::span<const T>(out));
+        out.clear();
+      }
+    }
+    if (!out.empty()) emit(std::span<const T>(out));
+  }
+
+  void remove_runs() {
+    for (const Run& r : runs_) remove_file(r.path);
+    runs_.clear();
+  }
+
+  ExternalSortOptions opt_;
+  Less less_;
+  Reducer reducer_;
+  std::size_t max_records_ = 0;
+  std::vector<T> buf_;
+  std::vector<Run> runs_;
+  std::uint64_t next_run_id_ = 0;
+  ExternalSortStats stats_;
+};
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,1161 @@
+#include "pipeline/verify.hpp"
+
+#include "core/error.hpp"
+#include "core/predicates.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/external_sort.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <filesystem>
+#include <future>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <omp.h>
+#include <optional>
+#include <sstream>
+#include <type_traits>
+
+namespace tetstream::pipeline {
+
+const char* violation_name(Violation v) {
+  switch (v) {
+    case Violation::kStorage: return "storage";
+    case Violation::kOrientation: return "orientation";
+    case Violation::kDuplicateTet: return "duplicate_tet";
+    case Violation::kFacetOverused: return "facet_overused";
+    case Violation::kFacetSameSide: return "facet_same_side";
+    case Violation::kDelaunay: return "delaunay";
+    case Violation::kHullOpen: return "hull_open";
+    case Violation::kHullConvex: return "hull_convex";
+    case Violation::kHullTopology: return "hull_topology";
+    case Violation::kMissingPoint: return "missing_point";
+    case Violation::kEuler: return "euler";
+    case Violation::kVolume: return "volume";
+    case Violation::kCount: break;
+  }
+  return "?";
+}
+
+void VerifyOptions::validate() const {
+  if (!(sample > 0.0) || sample > 1.0) throw UsageError("--sample must be in (0, 1]");
+  if (memory_bytes < (std::uint64_t(16) << 20)) throw UsageError("--memory must be at least 16M");
+  if (!(volume_tolerance >= 0.0)) throw UsageError("the volume tolerance must be >= 0");
+  if (batch_tets == 0) throw UsageError("batch_tets must be at least 1");
+}
+
+std::uint64_t VerifyReport::violations() const {
+  std::uint64_t n = 0;
+  for (std::uint64_t c : counts) n += c;
+  return n;
+}
+
+std::string VerifyReport::summary() const {
+  std::ostringstream s;
+  s << (ok() ? "VALID" : "INVALID") << (sampled ? " (sample " + std::to_string(sample) + ")" : std::string()) << ": "
+    << points << " points, " << tets << " tets";
+  if (ok() && !sampled) s << " are the Delaunay triangulation of the points";
+  s << "\n";
+  s << "  vertices " << vertices << ", facets " << facets << " (" << interior_facets << " interior, "
+    << boundary_facets << (sampled ? " unpaired in the sample" : " on the hull") << ")";
+  if (!sampled) {
+    s << ", edges " << edges << ", V-E+F-T " << euler << "\n";
+    s << "  hull: " << hull_vertices << " vertices, " << hull_edges << " edges, V-E+F " << hull_euler
+      << "; volume: tets " << tet_volume << ", hull " << hull_volume << ", relative difference " << volume_rel_error;
+  }
+  s << "\n  checked: " << tets_checked << " tets (orient3d), " << facets_checked << " facets, " << insphere_tests
+    << " insphere, " << hull_tests << " hull edge tests";
+  if (spilled_records) s << "; spilled " << spilled_records << " records (" << human_bytes(double(spill_bytes)) << ")";
+  s << "\n  violations: " << violations();
+  for (int k = 0; k < kViolationKinds; ++k)
+    if (counts[std::size_t(k)]) s << ", " << violation_name(Violation(k)) << " " << counts[std::size_t(k)];
+  for (const Listed& l : listed) s << "\n  " << violation_name(l.kind) << ": " << l.text;
+  return s.str();
+}
+
+// ---------------------------------------------------------------------------------
+// Sources.
+
+MemorySource::MemorySource(std::vector<double> xyz, std::vector<std::uint64_t> tets, std::size_t batch_tets)
+    : xyz_(std::move(xyz)), tets_(std::move(tets)) {
+  if (batch_tets == 0) batch_tets = 1;
+  const std::uint64_t t = tets_.size() / 4;
+  for (std::uint64_t first = 0; first < t; first += batch_tets) {
+    Batch b;
+    b.first_tet = first;
+    b.tet_count = std::min<std::uint64_t>(batch_tets, t - first);
+    b.min_label = std::numeric_limits<std::uint64_t>::max();
+    for (std::uint64_t i = 4 * first; i < 4 * (first + b.tet_count); ++i) b.min_label = std::min(b.min_label, tets_[i]);
+    batches_.push_back(b);
+  }
+}
+
+void MemorySource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
+  std::copy(xyz_.begin() + std::ptrdiff_t(3 * first), xyz_.begin() + std::ptrdiff_t(3 * (first + n)), xyz);
+}
+
+void MemorySource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
+  const Batch& b = batches_[k];
+  labels.resize(4 * b.tet_count);
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    const std::uint64_t l = tets_[4 * b.first_tet + i];
+    if (l > 0xFFFFFFFFu) throw InputError("memory: label " + std::to_string(l) + " does not fit 32 bits");
+    labels[i] = std::uint32_t(l);
+  }
+}
+
+void MemorySource::read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const {
+  const Batch& b = batches_[k];
+  labels.assign(tets_.begin() + std::ptrdiff_t(4 * b.first_tet),
+                tets_.begin() + std::ptrdiff_t(4 * (b.first_tet + b.tet_count)));
+}
+
+ContainerSource::ContainerSource(const io::TetReader& reader) : reader_(reader) {}
+std::uint64_t ContainerSource::point_count() const { return reader_.point_count(); }
+std::uint64_t ContainerSource::tet_count() const { return reader_.tet_count(); }
+std::size_t ContainerSource::batch_count() const { return std::size_t(reader_.frame_count()); }
+VerifySource::Batch ContainerSource::batch(std::size_t k) const {
+  const io::FrameEntry& f = reader_.frames()[k];
+  return Batch{f.first_tet, f.tet_count, f.base_label};
+}
+void ContainerSource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
+  reader_.read_points(first, n, xyz, nullptr);
+}
+void ContainerSource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
+  reader_.read_frame(k, labels);
+}
+void ContainerSource::read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const {
+  reader_.read_frame(k, labels);
+}
+std::string ContainerSource::name() const { return reader_.path(); }
+std::string ContainerSource::directory() const {
+  const std::filesystem::path p = std::filesystem::path(reader_.path()).parent_path();
+  return p.empty() ? std::string(".") : p.string();
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// ---------------------------------------------------------------------------------
+// Violations: every one counted, the first max_listed of each kind (by ordinal) kept.
+// Thread-safe; violations are rare, so a mutex is fine.
+class ViolationLog {
+ public:
+  explicit ViolationLog(std::size_t max_listed) : max_(max_listed) {}
+
+  template <class Describe>
+  void add(Violation kind, std::uint64_t where, Describe&& describe) {
+    const auto k = std::size_t(kind);
+    counts_[k].fetch_add(1, std::memory_order_relaxed);
+    if (max_ == 0) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto& list = listed_[k];
+    if (list.size() == max_ && list.back().where <= where) return;
+    VerifyReport::Listed l{kind, where, describe()};
+    auto at = std::upper_bound(list.begin(), list.end(), where,
+                               [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
+    list.insert(at, std::move(l));
+    if (list.size() > max_) list.pop_back();
+  }
+
+  void into(VerifyReport& r) const {
+    for (std::size_t k = 0; k < std::size_t(kViolationKinds); ++k) {
+      r.counts[k] = counts_[k].load();
+      r.listed.insert(r.listed.end(), listed_[k].begin(), listed_[k].end());
+    }
+  }
+
+ private:
+  std::size_t max_;
+  std::mutex mutex_;
+  std::array<std::atomic<std::uint64_t>, kViolationKinds> counts_{};
+  std::array<std::vector<VerifyReport::Listed>, kViolationKinds> listed_;
+};
+
+// ---------------------------------------------------------------------------------
+// Records.
+//
+// FacetRec: one facet (triangle) as seen so far. v: its labels, sorted. x: flags in
+// the top byte, a payload in the low 56 bits:
+//   single  (no flag)  one tet: d is its fourth vertex, payload its ordinal; kSide set
+//                      when that tet, if positively oriented, is (v0, v1, v2, d) in this
+//                      order, i.e. d lies on the positive side of (v0, v1, v2);
+//   kPair              two tets on opposite sides, already checked: d is the vertex on
+//                      the positive side, the payload the one on the negative side;
+//   kBad               already reported (repeated or overused); payload: an ordinal.
+constexpr std::uint64_t kPayload = (std::uint64_t(1) << 56) - 1;
+constexpr std::uint64_t kSide = std::uint64_t(1) << 56;
+constexpr std::uint64_t kPair = std::uint64_t(1) << 57;
+constexpr std::uint64_t kBad = std::uint64_t(1) << 58;
+
+template <class L>
+struct FacetRec {
+  L v[3];
+  L d;
+  std::uint64_t x;
+};
+static_assert(sizeof(FacetRec<std::uint32_t>) == 24);
+
+template <class L>
+struct FacetLess {
+  bool operator()(const FacetRec<L>& a, const FacetRec<L>& b) const {
+    if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
+    if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
+    if (a.v[2] != b.v[2]) return a.v[2] < b.v[2];
+    const std::uint64_t pa = a.x & kPayload, pb = b.x & kPayload;
+    if (pa != pb) return pa < pb;
+    return a.x < b.x;
+  }
+};
+
+template <class L>
+bool same_key(const FacetRec<L>& a, const FacetRec<L>& b) {
+  return a.v[0] == b.v[0] && a.v[1] == b.v[1] && a.v[2] == b.v[2];
+}
+
+// A boundary edge of a boundary facet: u < v, w the facet's third vertex, x: kSide when
+// the facet, oriented outwards, runs u -> v; payload the tet's ordinal.
+template <class L>
+struct HullEdgeRec {
+  L u, v, w;
+  std::uint64_t x;
+};
+
+template <class L>
+struct HullEdgeLess {
+  bool operator()(const HullEdgeRec<L>& a, const HullEdgeRec<L>& b) const {
+    if (a.u != b.u) return a.u < b.u;
+    if (a.v != b.v) return a.v < b.v;
+    return a.x < b.x;
+  }
+};
+
+// Edge keys: (u, v), u < v, ordered by u then v. 32-bit labels pack into one integer.
+struct Edge64 {
+  std::uint64_t u, v;
+  bool operator<(const Edge64& o) const { return u != o.u ? u < o.u : v < o.v; }
+  bool operator==(const Edge64& o) const = default;
+};
+template <class L>
+using EdgeKey = std::conditional_t<sizeof(L) == 4, std::uint64_t, Edge64>;
+inline std::uint64_t make_edge(std::uint32_t u, std::uint32_t v) { return std::uint64_t(u) << 32 | v; }
+inline Edge64 make_edge(std::uint64_t u, std::uint64_t v) { return {u, v}; }
+inline std::uint64_t edge_u(std::uint64_t e) { return e >> 32; }
+inline std::uint64_t edge_u(const Edge64& e) { return e.u; }
+
+// Counter-based hash for the sample (splitmix64's mixer).
+inline std::uint64_t mix(std::uint64_t z) {
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+std::string labels_text(std::initializer_list<std::uint64_t> ls) {
+  std::string s = "(";
+  bool first = true;
+  for (std::uint64_t l : ls) {
+    if (!first) s += ' ';
+    s += std::to_string(l);
+    first = false;
+  }
+  return s + ")";
+}
+
+// det[b-a, c-a, d-a] in floating point: 6 times the signed volume.
+inline double det3(const double* a, const double* b, const double* c, const double* d) {
+  const double bx = b[0] - a[0], by = b[1] - a[1], bz = b[2] - a[2];
+  const double cx = c[0] - a[0], cy = c[1] - a[1], cz = c[2] - a[2];
+  const double dx = d[0] - a[0], dy = d[1] - a[1], dz = d[2] - a[2];
+  return bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+}
+
+// Bit set over labels with atomic set.
+class Bitmap {
+ public:
+  explicit Bitmap(std::uint64_t n) : words_((n + 63) / 64) {}
+  void set(std::uint64_t i) {
+    std::atomic_ref<std::uint64_t>(words_[i >> 6]).fetch_or(std::uint64_t(1) << (i & 63), std::memory_order_relaxed);
+  }
+  bool get(std::uint64_t i) const { return words_[i >> 6] >> (i & 63) & 1; }
+  std::uint64_t count() const {
+    std::uint64_t c = 0;
+    for (std::uint64_t w : words_) c += std::uint64_t(std::popcount(w));
+    return c;
+  }
+  std::size_t bytes() const { return words_.size() * 8; }
+
+ private:
+  std::vector<std::uint64_t> words_;
+};
+
+// Calls f(begin, end) for `parts` pieces of [0, n) whose boundaries are moved forward
+// to group boundaries (is_start(i): element i starts a group), in parallel.
+inline int chunk_count(std::size_t n) { return n < (1u << 14) ? 1 : std::max(1, omp_get_max_threads() * 4); }
+
+template <class IsStart, class F>
+void for_group_chunks(std::size_t n, IsStart&& is_start, F&& f, std::vector<std::size_t>& bounds) {
+  const int parts = chunk_count(n);
+  bounds.assign(std::size_t(parts) + 1, n);
+  bounds[0] = 0;
+  for (int p = 1; p < parts; ++p) {
+    std::size_t b = std::max(bounds[std::size_t(p) - 1], n * std::size_t(p) / std::size_t(parts));
+    while (b < n && !is_start(b)) ++b;
+    bounds[std::size_t(p)] = b;
+  }
+#pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
+  for (int p = 0; p < parts; ++p) f(std::size_t(p), bounds[std::size_t(p)], bounds[std::size_t(p) + 1]);
+}
+
+// ---------------------------------------------------------------------------------
+// The engine, for 32- or 64-bit labels.
+template <class L>
+class Engine {
+ public:
+  using Facet = FacetRec<L>;
+  using HullEdge = HullEdgeRec<L>;
+  using Edge = EdgeKey<L>;
+
+  Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep)
+      : src_(src), opt_(opt), rep_(rep), log_(opt.max_listed), n_(src.point_count()), used_(n_), hull_used_(n_) {
+    sampled_ = opt.sample < 1.0;
+    if (sampled_) sample_cut_ = std::uint64_t(std::ldexp(opt.sample, 64));  // sample < 1: below 2^64
+  }
+
+  void run();
+
+ private:
+  struct PairCheck {
+    L v[3];
+    L dpos, dneg;
+    std::uint64_t tpos, tneg;
+  };
+
+  const double* P(std::uint64_t l) const { return xyz_.data() + 3 * l; }
+  bool tet_sampled(std::uint64_t ordinal) const { return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_; }
+  bool facet_sampled(L a, L b, L c) const {
+    if (!sampled_) return true;
+    return mix(mix(mix(opt_.seed ^ std::uint64_t(a)) + std::uint64_t(b)) + std::uint64_t(c)) < sample_cut_;
+  }
+  std::string tet_text(std::uint64_t ordinal, L a, L b, L c, L d) const {
+    return "tet #" + std::to_string(ordinal) + " " + labels_text({a, b, c, d});
+  }
+  std::string facet_text(const Facet& f) const { return "facet " + labels_text({f.v[0], f.v[1], f.v[2]}); }
+
+  std::string make_tmpdir();
+  void plan_memory();
+  void load_points();
+  void process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min);
+  void process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
+                    bool sorted_by_min, std::uint64_t threshold);
+  std::size_t fold(Facet* first, Facet* last, std::vector<PairCheck>& checks);
+  void combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks);
+  void check_pairs(const std::vector<PairCheck>& checks);
+  void retire_facets(std::uint64_t threshold);
+  void final_facet(const Facet& f);
+  void merge_edges(std::uint64_t threshold);
+  void finish_facets();
+  void finish_edges();
+  void finish_hull();
+  void finish();
+
+  const VerifySource& src_;
+  const VerifyOptions& opt_;
+  VerifyReport& rep_;
+  ViolationLog log_;
+  const std::uint64_t n_;
+  bool sampled_ = false;
+  std::uint64_t sample_cut_ = ~0ull;
+
+  std::vector<double> xyz_;
+  double origin_[3] = {0, 0, 0};  // the lexicographically smallest point: a hull vertex
+  Bitmap used_, hull_used_;
+
+  // Budgets (bytes).
+  std::size_t live_facet_budget_ = 0, live_edge_budget_ = 0, sorter_budget_ = 0;
+  std::optional<TempDir> tmp_;
+  std::string tmp_parent_;
+
+  // Open facets and edges, sorted; spills.
+  std::vector<Facet> live_, merged_, scratch_a_, scratch_b_;
+  std::vector<Edge> live_e_, merged_e_, edges_a_, edges_b_;
+  std::unique_ptr<ExternalSorter<Facet, FacetLess<L>>> facet_spill_;
+  std::unique_ptr<ExternalSorter<Edge, std::less<Edge>>> edge_spill_;
+  std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
+  std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
+
+  std::vector<PairCheck> checks_;
+  std::vector<std::vector<PairCheck>> chunk_checks_;
+  std::vector<std::size_t> bounds_, chunk_sizes_;
+  std::vector<HullEdge> hull_edges_batch_;
+
+  // Totals.
+  long double tet_volume6_ = 0, hull_volume6_ = 0;
+  std::atomic<std::uint64_t> orient_tests_{0}, insphere_tests_{0}, hull_tests_{0};
+  std::uint64_t good_tets_ = 0, interior_ = 0, boundary_ = 0, bad_facets_ = 0, edges_ = 0, hull_edges_ = 0;
+  std::uint64_t facets_checked_ = 0, tets_checked_ = 0;
+  double seconds_points_ = 0, seconds_tets_ = 0, seconds_final_ = 0;
+};
+
+template <class L>
+std::string Engine<L>::make_tmpdir() {
+  if (!tmp_) {
+    tmp_.emplace(tmp_parent_, "tetstream-verify");
+    spdlog::debug("verify: spilling to {}", tmp_->dir());
+  }
+  return tmp_->dir();
+}
+
+template <class L>
+void Engine<L>::plan_memory() {
+  const std::size_t points = std::size_t(n_) * 24 + used_.bytes() + hull_used_.bytes();
+  // Per processing step: canonical labels and flags of a frame, 4 facet and 6 edge
+  // records per tet of a step, and the merged copies.
+  std::size_t max_frame = 0;
+  for (std::size_t k = 0; k < src_.batch_count(); ++k)
+    max_frame = std::max<std::size_t>(max_frame, std::size_t(src_.batch(k).tet_count));
+  const std::size_t step = std::min<std::size_t>(max_frame, opt_.batch_tets);
+  const std::size_t scratch = max_frame * (2 * 4 * sizeof(L) + 1) + step * (8 * sizeof(Facet) + 12 * sizeof(Edge)) +
+                              step * 4 * sizeof(PairCheck) / 4;
+  const std::size_t fixed = points + scratch;
+  std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
+  if (rest < (std::size_t(16) << 20)) {
+    spdlog::warn("verify: --memory {} is below what the points and one batch need ({}); going over it",
+                 human_bytes(double(opt_.memory_bytes)), human_bytes(double(fixed)));
+    rest = std::size_t(16) << 20;
+  }
+  // The open sets live during the pass; the sorters merge after it (when the open
+  // sets are gone), so both may use most of the rest. Merged copies of the open sets
+  // double them while a step is merged in: budget half.
+  live_facet_budget_ = rest * 3 / 10;
+  live_edge_budget_ = rest / 10;
+  if (opt_.open_bytes) live_facet_budget_ = opt_.open_bytes, live_edge_budget_ = opt_.open_bytes / 3;
+  sorter_budget_ = rest * 8 / 10;
+  rep_.memory_planned = fixed + rest;
+  spdlog::debug("verify: memory: points {}, scratch {}, open facets {}, open edges {}, sorts {}",
+                human_bytes(double(points)), human_bytes(double(scratch)), human_bytes(double(live_facet_budget_)),
+                human_bytes(double(live_edge_budget_)), human_bytes(double(sorter_budget_)));
+}
+
+template <class L>
+void Engine<L>::load_points() {
+  const auto t0 = Clock::now();
+  xyz_.resize(3 * std::size_t(n_));
+  constexpr std::uint64_t kChunk = 1 << 20;
+  const std::int64_t chunks = std::int64_t((n_ + kChunk - 1) / kChunk);
+  std::exception_ptr error;
+  std::mutex error_mutex;
+#pragma omp parallel for schedule(dynamic, 1)
+  for (std::int64_t c = 0; c < chunks; ++c) {
+    const std::uint64_t first = std::uint64_t(c) * kChunk;
+    try {
+      src_.read_points(first, std::size_t(std::min(kChunk, n_ - first)), xyz_.data() + 3 * first);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+  // The lexicographically smallest point is a vertex of the convex hull: the cones
+  // from it over the hull facets have non-negative volume (no cancellation).
+  std::uint64_t best = 0;
+  for (std::uint64_t i = 1; i < n_; ++i) {
+    const double* p = P(i);
+    const double* b = P(best);
+    if (p[0] < b[0] || (p[0] == b[0] && (p[1] < b[1] || (p[1] == b[1] && p[2] < b[2])))) best = i;
+  }
+  if (n_ > 0) std::copy(P(best), P(best) + 3, origin_);
+  seconds_points_ = since(t0);
+}
+
+template <class L>
+void Engine<L>::run() {
+  const auto t0 = Clock::now();
+  tmp_parent_ = opt_.tmpdir;
+  if (tmp_parent_.empty()) {
+    const char* env = std::getenv("TMPDIR");
+    tmp_parent_ = env && *env ? std::string(env) : src_.directory();
+    if (tmp_parent_.empty()) tmp_parent_ = ".";
+  }
+  plan_memory();
+  load_points();
+
+  auto make_dir = [this] { return make_tmpdir(); };
+  {
+    ExternalSortOptions o;
+    o.memory_bytes = sorter_budget_;
+    o.make_dir = make_dir;
+    o.name = "facets";
+    facet_spill_ = std::make_unique<ExternalSorter<Facet, FacetLess<L>>>(o);
+    o.name = "edges";
+    edge_spill_ = std::make_unique<ExternalSorter<Edge, std::less<Edge>>>(o);
+    edge_spill_->set_reducer([](Edge* first, std::size_t n) { return std::size_t(std::unique(first, first + n) - first); });
+    o.name = "hull-edges";
+    o.memory_bytes = std::max<std::size_t>(sorter_budget_ / 4, std::size_t(4) << 20);
+    hull_sorter_ = std::make_unique<ExternalSorter<HullEdge, HullEdgeLess<L>>>(o);
+  }
+
+  // Pass over the tets, frame by frame; the next frame decodes while this one is
+  // checked. future_min[k]: the smallest label any frame after k may hold.
+  const auto t1 = Clock::now();
+  const std::size_t frames = src_.batch_count();
+  std::vector<std::uint64_t> future_min(frames + 1, ~0ull);
+  for (std::size_t k = frames; k-- > 0;) future_min[k] = std::min(future_min[k + 1], src_.batch(k).min_label);
+  Progress progress("verifying", "tets", src_.tet_count(), opt_.progress);
+  std::vector<L> current, next;
+  std::future<void> pending;
+  if (frames > 0) pending = std::async(std::launch::async, [&] { src_.read_batch(0, next); });
+  for (std::size_t k = 0; k < frames; ++k) {
+    pending.get();
+    std::swap(current, next);
+    if (k + 1 < frames) pending = std::async(std::launch::async, [&, k] { src_.read_batch(k + 1, next); });
+    try {
+      process_frame(k, current, future_min[k + 1]);
+    } catch (...) {
+      if (pending.valid()) pending.wait();
+      throw;
+    }
+    progress.add(current.size() / 4);
+  }
+  progress.finish();
+  live_.shrink_to_fit();
+  seconds_tets_ = since(t1);
+
+  const auto t2 = Clock::now();
+  finish_facets();
+  if (!sampled_) {
+    finish_hull();
+    finish_edges();
+  }
+  seconds_final_ = since(t2);
+  finish();
+  rep_.seconds = since(t0);
+  spdlog::debug("verify: points {:.2f}s, tets {:.2f}s, final merges {:.2f}s", seconds_points_, seconds_tets_,
+                seconds_final_);
+}
+
+// One frame: storage, orientation and volume of every tet, then its facets and edges
+// in steps of batch_tets tets.
+template <class L>
+void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min) {
+  const VerifySource::Batch b = src_.batch(k);
+  const std::size_t t = labels.size() / 4;
+  if (labels.size() % 4 != 0 || t != b.tet_count)
+    throw InputError(src_.name() + ": frame " + std::to_string(k) + ": " + std::to_string(labels.size() / 4) +
+                     " tets decoded, " + std::to_string(b.tet_count) + " expected");
+  // Canonical form in place: the labels sorted; flags bit 0: odd permutation; bit 1:
+  // broken (storage); bit 2: below the frame's declared smallest label.
+  std::vector<std::uint8_t> flags(t);
+  constexpr std::size_t kChunk = 4096;  // fixed chunks: volume sums independent of threads
+  const std::int64_t chunks = std::int64_t((t + kChunk - 1) / kChunk);
+  std::vector<double> vol(std::size_t(chunks), 0.0);
+  std::uint64_t checked = 0, good = 0;
+  bool below_min = false;
+#pragma omp parallel for schedule(dynamic, 4) reduction(+ : checked, good) reduction(|| : below_min)
+  for (std::int64_t c = 0; c < chunks; ++c) {
+    const std::size_t lo = std::size_t(c) * kChunk, hi = std::min(t, lo + kChunk);
+    double sum = 0;
+    for (std::size_t i = lo; i < hi; ++i) {
+      L* v = labels.data() + 4 * i;
+      const std::uint64_t ordinal = b.first_tet + i;
+      const L g[4] = {v[0], v[1], v[2], v[3]};
+      bool ok = g[0] < n_ && g[1] < n_ && g[2] < n_ && g[3] < n_;
+      // Sort the four labels (5 compare-exchanges), counting swaps for the parity.
+      int swaps = 0;
+      auto cx = [&](int a, int bb) {
+        if (v[a] > v[bb]) std::swap(v[a], v[bb]), ++swaps;
+      };
+      cx(0, 1), cx(2, 3), cx(0, 2), cx(1, 3), cx(1, 2);
+      if (v[0] == v[1] || v[1] == v[2] || v[2] == v[3]) ok = false;
+      std::uint8_t f = std::uint8_t(swaps & 1);
+      if (!ok) {
+        f |= 2;
+        log_.add(Violation::kStorage, ordinal, [&] {
+          return tet_text(ordinal, g[0], g[1], g[2], g[3]) + ": labels must be distinct and below " + std::to_string(n_);
+        });
+        flags[i] = f;
+        continue;
+      }
+      ++good;
+      if (std::uint64_t(v[0]) < b.min_label) below_min = true;
+      for (int j = 0; j < 4; ++j) used_.set(v[j]);
+      const double *p0 = P(g[0]), *p1 = P(g[1]), *p2 = P(g[2]), *p3 = P(g[3]);
+      sum += std::fabs(det3(p0, p1, p2, p3));
+      if (tet_sampled(ordinal)) {
+        ++checked;
+        const int o = core::orient3d(p0, p1, p2, p3);
+        if (o <= 0)
+          log_.add(Violation::kOrientation, ordinal, [&] {
+            return tet_text(ordinal, g[0], g[1], g[2], g[3]) +
+                   (o == 0 ? ": flat (orient3d = 0)" : ": negatively oriented (orient3d = -1)");
+          });
+      }
+      flags[i] = f;
+    }
+    vol[std::size_t(c)] = sum;
+  }
+  if (below_min)
+    throw InputError(src_.name() + ": frame " + std::to_string(k) + ": a label below the frame's declared smallest label " +
+                     std::to_string(b.min_label));
+  for (double s : vol) tet_volume6_ += s;
+  tets_checked_ += checked;
+  good_tets_ += good;
+  orient_tests_ += checked;
+
+  // Steps: after each, keys below the smallest label still to come (in later steps
+  // of this frame or in later frames) are final.
+  const std::size_t step = opt_.batch_tets;
+  const std::size_t steps = (t + step - 1) / step;
+  std::vector<std::uint64_t> later_min(steps + 1, future_min);
+  for (std::size_t s = steps; s-- > 0;) {
+    std::uint64_t m = later_min[s + 1];
+    for (std::size_t i = s * step, hi = std::min(t, (s + 1) * step); i < hi; ++i)
+      if (!(flags[i] & 2)) m = std::min<std::uint64_t>(m, labels[4 * i]);
+    later_min[s] = m;
+  }
+  for (std::size_t s = 0; s < steps; ++s) {
+    const std::size_t lo = s * step, hi = std::min(t, lo + step);
+    bool sorted = true;
+    for (std::size_t i = lo + 1; i < hi && sorted; ++i) sorted = labels[4 * i] >= labels[4 * (i - 1)];
+    process_step(labels.data() + 4 * lo, flags.data() + lo, hi - lo, b.first_tet + lo, sorted, later_min[s + 1]);
+  }
+}
+
+// Facets and edges of `count` canonical tets; then retire what no later tet can touch.
+template <class L>
+void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::size_t count,
+                             std::uint64_t first_ordinal, bool sorted_by_min, std::uint64_t threshold) {
+  // ---- facet records: A = the three facets through the smallest label, B = the one
+  // opposite it. Facet opposite s_i, as (others sorted, s_i), has the orientation of
+  // (s0..s3) times (-1)^(3-i); (s0..s3) has the tet's times (-1)^parity.
+  scratch_a_.resize(3 * count);
+  scratch_b_.resize(count);
+  std::vector<std::uint8_t> keep_a, keep_b;
+  const bool filter = sampled_;
+  if (filter) keep_a.assign(3 * count, 0), keep_b.assign(count, 0);
+#pragma omp parallel for schedule(static)
+  for (std::int64_t ii = 0; ii < std::int64_t(count); ++ii) {
+    const std::size_t i = std::size_t(ii);
+    const L* s = canon + 4 * i;
+    const std::uint64_t ordinal = first_ordinal + i;
+    if (flags[i] & 2) {  // broken: no facets; mark as filtered out
+      for (int j = 0; j < 3; ++j) scratch_a_[3 * i + j] = Facet{{0, 0, 0}, 0, ~0ull};
+      scratch_b_[i] = Facet{{0, 0, 0}, 0, ~0ull};
+      continue;
+    }
+    const int parity = flags[i] & 1;
+    auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
+    scratch_a_[3 * i + 0] = Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)};
+    scratch_a_[3 * i + 1] = Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)};
+    scratch_a_[3 * i + 2] = Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)};
+    scratch_b_[i] = Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)};
+    if (filter) {
+      keep_a[3 * i + 0] = facet_sampled(s[0], s[1], s[2]);
+      keep_a[3 * i + 1] = facet_sampled(s[0], s[1], s[3]);
+      keep_a[3 * i + 2] = facet_sampled(s[0], s[2], s[3]);
+      keep_b[i] = facet_sampled(s[1], s[2], s[3]);
+    }
+  }
+  // Drop broken tets' records (x == ~0) and, in a sample, unsampled facets.
+  auto compact = [](std::vector<Facet>& v, const std::vector<std::uint8_t>* keep) {
+    std::size_t w = 0;
+    for (std::size_t r = 0; r < v.size(); ++r)
+      if (v[r].x != ~0ull && (!keep || (*keep)[r])) v[w++] = v[r];
+    v.resize(w);
+  };
+  compact(scratch_a_, filter ? &keep_a : nullptr);
+  compact(scratch_b_, filter ? &keep_b : nullptr);
+  facets_checked_ += scratch_a_.size() + scratch_b_.size();
+  const FacetLess<L> less;
+  if (sorted_by_min) {
+    // A is grouped by smallest label already: sort each group (a lower star).
+    for_group_chunks(
+        scratch_a_.size(), [&](std::size_t i) { return i == 0 || scratch_a_[i].v[0] != scratch_a_[i - 1].v[0]; },
+        [&](std::size_t, std::size_t lo, std::size_t hi) {
+          std::size_t g = lo;
+          while (g < hi) {
+            std::size_t e = g + 1;
+            while (e < hi && scratch_a_[e].v[0] == scratch_a_[g].v[0]) ++e;
+            std::sort(scratch_a_.begin() + std::ptrdiff_t(g), scratch_a_.begin() + std::ptrdiff_t(e), less);
+            g = e;
+          }
+        },
+        bounds_);
+  } else {
+    parallel_sort(scratch_a_.data(), scratch_a_.data() + scratch_a_.size(), less);
+  }
+  parallel_sort(scratch_b_.data(), scratch_b_.data() + scratch_b_.size(), less);
+
+  // ---- merge with the open facets (earlier records first on equal keys) and fold.
+  merged_.resize(live_.size() + scratch_a_.size() + scratch_b_.size());
+  {
+    // A and B into the tail of merged_, then the open set in front of them.
+    auto tail = merged_.begin() + std::ptrdiff_t(live_.size());
+    std::merge(scratch_a_.begin(), scratch_a_.end(), scratch_b_.begin(), scratch_b_.end(), tail, less);
+    // Merge live_ with [tail, end) into a fresh buffer: reuse scratch_a_ as it.
+    scratch_a_.resize(merged_.size());
+    std::merge(live_.begin(), live_.end(), tail, merged_.end(), scratch_a_.begin(), less);
+    std::swap(scratch_a_, merged_);
+  }
+  const std::size_t n = fold(merged_.data(), merged_.data() + merged_.size(), checks_);
+  merged_.resize(n);
+  check_pairs(checks_);
+  std::swap(live_, merged_);
+  retire_facets(threshold);
+
+  // ---- edges (not in a sample): A = the three through the smallest label, B = the rest.
+  if (!sampled_) {
+    edges_a_.resize(3 * count);
+    edges_b_.resize(3 * count);
+    std::size_t wa = 0, wb = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+      if (flags[i] & 2) continue;
+      const L* s = canon + 4 * i;
+      edges_a_[wa++] = make_edge(s[0], s[1]);
+      edges_a_[wa++] = make_edge(s[0], s[2]);
+      edges_a_[wa++] = make_edge(s[0], s[3]);
+      edges_b_[wb++] = make_edge(s[1], s[2]);
+      edges_b_[wb++] = make_edge(s[1], s[3]);
+      edges_b_[wb++] = make_edge(s[2], s[3]);
+    }
+    edges_a_.resize(wa);
+    edges_b_.resize(wb);
+    const std::less<Edge> eless;
+    if (sorted_by_min) {
+      for_group_chunks(
+          edges_a_.size(), [&](std::size_t i) { return i == 0 || edge_u(edges_a_[i]) != edge_u(edges_a_[i - 1]); },
+          [&](std::size_t, std::size_t lo, std::size_t hi) {
+            std::size_t g = lo;
+            while (g < hi) {
+              std::size_t e = g + 1;
+              while (e < hi && edge_u(edges_a_[e]) == edge_u(edges_a_[g])) ++e;
+              std::sort(edges_a_.begin() + std::ptrdiff_t(g), edges_a_.begin() + std::ptrdiff_t(e), eless);
+              g = e;
+            }
+          },
+          bounds_);
+    } else {
+      parallel_sort(edges_a_.data(), edges_a_.data() + edges_a_.size(), eless);
+    }
+    parallel_sort(edges_b_.data(), edges_b_.data() + edges_b_.size(), eless);
+    edges_a_.erase(std::unique(edges_a_.begin(), edges_a_.end()), edges_a_.end());
+    edges_b_.erase(std::unique(edges_b_.begin(), edges_b_.end()), edges_b_.end());
+    merged_e_.resize(edges_a_.size() + edges_b_.size());
+    std::merge(edges_a_.begin(), edges_a_.end(), edges_b_.begin(), edges_b_.end(), merged_e_.begin(), eless);
+    merged_e_.erase(std::unique(merged_e_.begin(), merged_e_.end()), merged_e_.end());
+    edges_a_.resize(merged_e_.size() + live_e_.size());
+    auto end = std::set_union(live_e_.begin(), live_e_.end(), merged_e_.begin(), merged_e_.end(), edges_a_.begin(), eless);
+    edges_a_.resize(std::size_t(end - edges_a_.begin()));
+    std::swap(live_e_, edges_a_);
+    merge_edges(threshold);
+  }
+}
+
+// Folds runs of records with equal keys (sorted input) in place; returns the new size.
+template <class L>
+std::size_t Engine<L>::fold(Facet* first, Facet* last, std::vector<PairCheck>& checks) {
+  const std::size_t n = std::size_t(last - first);
+  checks.clear();
+  const int parts_hint = chunk_count(n);
+  chunk_checks_.resize(std::size_t(parts_hint));
+  chunk_sizes_.assign(std::size_t(parts_hint), 0);
+  for_group_chunks(
+      n, [&](std::size_t i) { return i == 0 || !same_key(first[i], first[i - 1]); },
+      [&](std::size_t p, std::size_t lo, std::size_t hi) {
+        auto& cc = chunk_checks_[p];
+        cc.clear();
+        std::size_t w = lo;
+        std::size_t g = lo;
+        while (g < hi) {
+          Facet s = first[g];
+          std::size_t e = g + 1;
+          for (; e < hi && same_key(first[e], s); ++e) combine(s, first[e], cc);
+          first[w++] = s;
+          g = e;
+        }
+        chunk_sizes_[p] = w - lo;
+      },
+      bounds_);
+  // Close the gaps between the compacted chunks.
+  std::size_t w = 0;
+  for (std::size_t p = 0; p + 1 < bounds_.size(); ++p) {
+    const std::size_t lo = bounds_[p], m = chunk_sizes_[p];
+    if (w != lo && m) std::memmove(static_cast<void*>(first + w), first + lo, m * sizeof(Facet));
+    w += m;
+    checks.insert(checks.end(), chunk_checks_[p].begin(), chunk_checks_[p].end());
+  }
+  return w;
+}
+
+// s := s combined with r (same key). See FacetRec for the states.
+template <class L>
+void Engine<L>::combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks) {
+  if (s.x & kBad) return;
+  if (r.x & kBad) {
+    s = r;
+    return;
+  }
+  const bool sp = (s.x & kPair) != 0, rp = (r.x & kPair) != 0;
+  if (!sp && !rp) {
+    const bool ss = (s.x & kSide) != 0, rs = (r.x & kSide) != 0;
+    const std::uint64_t ts = s.x & kPayload, tr = r.x & kPayload;
+    if (ss != rs && s.d != r.d) {
+      const Facet& pos = ss ? s : r;
+      const Facet& neg = ss ? r : s;
+      checks.push_back(PairCheck{{s.v[0], s.v[1], s.v[2]}, pos.d, neg.d, pos.x & kPayload, neg.x & kPayload});
+      s.d = pos.d;
+      s.x = kPair | std::uint64_t(neg.d);
+      return;
+    }
+    if (s.d == r.d) {
+      // The same four labels twice; reported once, at the facet opposite the largest.
+      if (s.d > s.v[2])
+        log_.add(Violation::kDuplicateTet, std::max(ts, tr), [&] {
+          return "tet #" + std::to_string(std::max(ts, tr)) + " " + labels_text({s.v[0], s.v[1], s.v[2], s.d}) +
+                 " repeats tet #" + std::to_string(std::min(ts, tr)) +
+                 (ss != rs ? " with the opposite orientation" : "");
+        });
+    } else {
+      log_.add(Violation::kFacetSameSide, std::min(ts, tr), [&] {
+        return "tets #" + std::to_string(ts) + " " + labels_text({s.v[0], s.v[1], s.v[2], s.d}) + " and #" +
+               std::to_string(tr) + " " + labels_text({s.v[0], s.v[1], s.v[2], r.d}) +
+               " lie on the same side of their " + facet_text(s) + " (they overlap)";
+      });
+    }
+    s.x = kBad | std::min(ts, tr);
+    return;
+  }
+  if (sp && rp) {
+    log_.add(Violation::kFacetOverused, 0, [&] {
+      return facet_text(s) + " is in four or more tets (opposite vertices " + std::to_string(s.d) + ", " +
+             std::to_string(s.x & kPayload) + ", " + std::to_string(r.d) + ", " + std::to_string(r.x & kPayload) + ")";
+    });
+    s.x = kBad;
+    return;
+  }
+  const Facet& p = sp ? s : r;
+  const Facet& q = sp ? r : s;  // the single
+  const std::uint64_t dpos = p.d, dneg = p.x & kPayload, tq = q.x & kPayload;
+  const bool qs = (q.x & kSide) != 0;
+  const Facet key = s;
+  if (q.d == dpos || q.d == dneg) {
+    if (q.d > key.v[2])
+      log_.add(Violation::kDuplicateTet, tq, [&] {
+        return "tet #" + std::to_string(tq) + " " + labels_text({key.v[0], key.v[1], key.v[2], q.d}) +
+               " repeats another tet" + ((qs == (q.d == dpos)) ? "" : " with the opposite orientation");
+      });
+  } else {
+    log_.add(Violation::kFacetOverused, tq, [&] {
+      return facet_text(key) + " is in three or more tets: tet #" + std::to_string(tq) + " " +
+             labels_text({key.v[0], key.v[1], key.v[2], q.d}) + " and two tets with opposite vertices " +
+             std::to_string(dpos) + " and " + std::to_string(dneg);
+    });
+  }
+  s.x = kBad | tq;
+}
+
+// The local Delaunay test of each newly paired facet, in parallel.
+template <class L>
+void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
+  const std::int64_t n = std::int64_t(checks.size());
+#pragma omp parallel for schedule(dynamic, 4096) if (n > 8192)
+  for (std::int64_t i = 0; i < n; ++i) {
+    const PairCheck& c = checks[std::size_t(i)];
+    const int s = core::insphere_sos(P(c.v[0]), P(c.v[1]), P(c.v[2]), P(c.dpos), P(c.dneg), c.v[0], c.v[1], c.v[2],
+                                     c.dpos, c.dneg);
+    if (s > 0)
+      log_.add(Violation::kDelaunay, std::min(c.tpos, c.tneg), [&] {
+        return "facet " + labels_text({c.v[0], c.v[1], c.v[2]}) + " of tets #" + std::to_string(c.tpos) + " and #" +
+               std::to_string(c.tneg) + ": vertex " + std::to_string(c.dneg) + " lies inside the circumsphere of " +
+               tet_text(c.tpos, c.v[0], c.v[1], c.v[2], c.dpos);
+      });
+  }
+  insphere_tests_ += std::uint64_t(n);
+}
+
+// Facets whose smallest label is below `threshold` are final (or go to the spill if a
+// spilled run may hold the same key); the rest stay open, spilled when too many.
+template <class L>
+void Engine<L>::retire_facets(std::uint64_t threshold) {
+  const auto cut = std::partition_point(live_.begin(), live_.end(),
+                                        [&](const Facet& f) { return std::uint64_t(f.v[0]) < threshold; });
+  const auto spill_from = std::partition_point(live_.begin(), cut,
+                                               [&](const Facet& f) { return std::uint64_t(f.v[0]) < facet_spill_min_; });
+  for (auto it = live_.begin(); it != spill_from; ++it) final_facet(*it);
+  if (spill_from != cut) facet_spill_->push_sorted_run(std::span<Facet>(&*spill_from, std::size_t(cut - spill_from)));
+  live_.erase(live_.begin(), cut);
+  rep_.peak_open_facets = std::max<std::uint64_t>(rep_.peak_open_facets, live_.size());
+  if (live_.size() * sizeof(Facet) > live_facet_budget_) {
+    facet_spill_min_ = std::min<std::uint64_t>(facet_spill_min_, live_.front().v[0]);
+    facet_spill_->push_sorted_run(std::span<Facet>(live_));
+    live_.clear();
+    live_.shrink_to_fit();
+  }
+  if (!hull_edges_batch_.empty()) {
+    hull_sorter_->push(std::span<const HullEdge>(hull_edges_batch_));
+    hull_edges_batch_.clear();
+  }
+}
+
+// A facet with its final state.
+template <class L>
+void Engine<L>::final_facet(const Facet& f) {
+  if (f.x & kPair) {
+    ++interior_;
+    return;
+  }
+  if (f.x & kBad) {
+    ++bad_facets_;
+    return;
+  }
+  ++boundary_;
+  if (sampled_) return;  // unpaired in the sample: nothing more to say
+  // A boundary facet, oriented outwards: its tet's fourth vertex on the negative side.
+  L a = f.v[0], b = f.v[1], c = f.v[2];
+  if (f.x & kSide) std::swap(b, c);
+  hull_used_.set(a), hull_used_.set(b), hull_used_.set(c);
+  hull_volume6_ += det3(origin_, P(a), P(b), P(c));
+  const std::uint64_t ord = f.x & kPayload;
+  auto edge = [&](L p, L q, L w) {
+    hull_edges_batch_.push_back(p < q ? HullEdge{p, q, w, ord | kSide} : HullEdge{q, p, w, ord});
+  };
+  edge(a, b, c), edge(b, c, a), edge(c, a, b);
+}
+
+template <class L>
+void Engine<L>::merge_edges(std::uint64_t threshold) {
+  const auto cut = std::partition_point(live_e_.begin(), live_e_.end(),
+                                        [&](const Edge& e) { return edge_u(e) < threshold; });
+  const auto spill_from = std::partition_point(live_e_.begin(), cut,
+                                               [&](const Edge& e) { return edge_u(e) < edge_spill_min_; });
+  edges_ += std::uint64_t(spill_from - live_e_.begin());
+  if (spill_from != cut) edge_spill_->push_sorted_run(std::span<Edge>(&*spill_from, std::size_t(cut - spill_from)));
+  live_e_.erase(live_e_.begin(), cut);
+  rep_.peak_open_edges = std::max<std::uint64_t>(rep_.peak_open_edges, live_e_.size());
+  if (live_e_.size() * sizeof(Edge) > live_edge_budget_) {
+    edge_spill_min_ = std::min<std::uint64_t>(edge_spill_min_, edge_u(live_e_.front()));
+    edge_spill_->push_sorted_run(std::span<Edge>(live_e_));
+    live_e_.clear();
+    live_e_.shrink_to_fit();
+  }
+}
+
+// Everything still open is final now; spilled runs are merged with it.
+template <class L>
+void Engine<L>::finish_facets() {
+  retire_facets(~0ull);
+  scratch_a_ = {}, scratch_b_ = {}, merged_ = {};
+  if (facet_spill_->records_pushed() == 0) return;
+  // Groups may straddle merge batches: the tail group waits for the next batch.
+  std::vector<Facet> pending;
+  std::vector<Facet> group_out;
+  auto flush = [&](bool last) {
+    // Fold everything but the last group (unless last), then finalize it.
+    std::size_t end = pending.size();
+    if (!last) {
+      while (end > 0 && same_key(pending[end - 1], pending.back())) --end;
+      if (end == 0) return;
+    }
+    const std::size_t n = fold(pending.data(), pending.data() + end, checks_);
+    check_pairs(checks_);
+    for (std::size_t i = 0; i < n; ++i) final_facet(pending[i]);
+    pending.erase(pending.begin(), pending.begin() + std::ptrdiff_t(end));
+    if (!hull_edges_batch_.empty()) {
+      hull_sorter_->push(std::span<const HullEdge>(hull_edges_batch_));
+      hull_edges_batch_.clear();
+    }
+  };
+  const std::size_t chunk = std::max<std::size_t>(sorter_budget_ / 8 / sizeof(Facet), 1 << 16);
+  facet_spill_->merge([&](std::span<const Facet> batch) {
+    pending.insert(pending.end(), batch.begin(), batch.end());
+    if (pending.size() >= chunk) flush(false);
+  });
+  flush(true);
+  rep_.spilled_records += facet_spill_->stats().records_pushed;
+  rep_.spill_bytes += facet_spill_->stats().bytes_written;
+  facet_spill_.reset();
+}
+
+template <class L>
+void Engine<L>::finish_edges() {
+  merge_edges(~0ull);
+  live_e_ = {}, merged_e_ = {}, edges_a_ = {}, edges_b_ = {};
+  if (edge_spill_->records_pushed() == 0) return;
+  bool have = false;
+  Edge last{};
+  edge_spill_->merge([&](std::span<const Edge> batch) {
+    for (const Edge& e : batch) {
+      if (have && e == last) continue;
+      ++edges_;
+      last = e;
+      have = true;
+    }
+  });
+  rep_.spilled_records += edge_spill_->stats().records_pushed;
+  rep_.spill_bytes += edge_spill_->stats().bytes_written;
+  edge_spill_.reset();
+}
+
+// The boundary surface: closed (each edge in two facets of opposite directions) and
+// locally convex at every edge.
+template <class L>
+void Engine<L>::finish_hull() {
+  struct Job {
+    HullEdge first, second;  // first runs u -> v
+  };
+  std::vector<Job> jobs;
+  std::vector<HullEdge> group;
+  auto run_jobs = [&] {
+    const std::int64_t n = std::int64_t(jobs.size());
+#pragma omp parallel for schedule(dynamic, 1024) if (n > 4096)
+    for (std::int64_t i = 0; i < n; ++i) {
+      const Job& j = jobs[std::size_t(i)];
+      const L u = j.first.u, v = j.first.v, w1 = j.first.w, w2 = j.second.w;
+      const int s1 = core::infinite_conflict_sos(P(u), P(v), P(w1), P(w2), u, v, w1, w2);
+      const int s2 = core::infinite_conflict_sos(P(v), P(u), P(w2), P(w1), v, u, w2, w1);
+      if (s1 > 0 || s2 > 0) {
+        const std::uint64_t t1 = j.first.x & kPayload, t2 = j.second.x & kPayload;
+        log_.add(Violation::kHullConvex, std::min(t1, t2), [&] {
+          const int o = core::orient3d(P(u), P(v), P(w1), P(w2));
+          return "boundary edge " + labels_text({u, v}) + " of tets #" + std::to_string(t1) + " and #" +
+                 std::to_string(t2) + ": facet " + labels_text({v, u, w2}) +
+                 (o > 0 ? " bends inwards (reflex edge: a missing tet or a hole)"
+                        : " is coplanar with facet " + labels_text({u, v, w1}) + " but not perturbed-Delaunay");
+        });
+      }
+    }
+    hull_tests_ += 2 * std::uint64_t(n);
+    jobs.clear();
+  };
+  auto close_group = [&] {
+    if (group.empty()) return;
+    ++hull_edges_;
+    const bool ok = group.size() == 2 && ((group[0].x & kSide) != (group[1].x & kSide)) && group[0].w != group[1].w;
+    if (ok) {
+      const bool first_fwd = (group[0].x & kSide) != 0;
+      jobs.push_back(first_fwd ? Job{group[0], group[1]} : Job{group[1], group[0]});
+      if (jobs.size() >= (1u << 16)) run_jobs();
+    } else {
+      std::uint64_t where = ~0ull;
+      for (const HullEdge& h : group) where = std::min(where, h.x & kPayload);
+      log_.add(Violation::kHullOpen, where, [&] {
+        std::string s = "boundary edge " + labels_text({group[0].u, group[0].v}) + " is in " +
+                        std::to_string(group.size()) + " boundary facet(s):";
+        for (const HullEdge& h : group)
+          s += " tet #" + std::to_string(h.x & kPayload) + " (third vertex " + std::to_string(h.w) +
+               ((h.x & kSide) ? ", forward)" : ", backward)");
+        return s;
+      });
+    }
+    group.clear();
+  };
+  hull_sorter_->merge([&](std::span<const HullEdge> batch) {
+    for (const HullEdge& h : batch) {
+      if (!group.empty() && (group[0].u != h.u || group[0].v != h.v)) close_group();
+      group.push_back(h);
+    }
+  });
+  close_group();
+  run_jobs();
+  rep_.spilled_records += hull_sorter_->stats().runs_written ? hull_sorter_->stats().records_pushed : 0;
+  rep_.spill_bytes += hull_sorter_->stats().bytes_written;
+  hull_sorter_.reset();
+}
+
+template <class L>
+void Engine<L>::finish() {
+  VerifyReport& r = rep_;
+  r.sampled = sampled_;
+  r.sample = opt_.sample;
+  r.points = n_;
+  r.tets = src_.tet_count();
+  r.vertices = used_.count();
+  r.interior_facets = interior_;
+  r.boundary_facets = boundary_;
+  r.facets = interior_ + boundary_ + bad_facets_;
+  r.orient_tests = orient_tests_.load();
+  r.insphere_tests = insphere_tests_.load();
+  r.hull_tests = hull_tests_.load();
+  r.tets_checked = tets_checked_;
+  r.facets_checked = facets_checked_;
+
+  // Coverage: every label a vertex.
+  if (r.vertices < n_) {
+    for (std::uint64_t l = 0; l < n_; ++l)
+      if (!used_.get(l))
+        log_.add(Violation::kMissingPoint, l, [&] {
+          const double* p = P(l);
+          return "point " + std::to_string(l) + " (" + std::to_string(p[0]) + ", " + std::to_string(p[1]) + ", " +
+                 std::to_string(p[2]) + ") is in no tet";
+        });
+  }
+  if (!sampled_) {
+    r.edges = edges_;
+    r.hull_vertices = hull_used_.count();
+    r.hull_edges = hull_edges_;
+    r.euler = std::int64_t(r.vertices) - std::int64_t(r.edges) + std::int64_t(r.facets) - std::int64_t(good_tets_);
+    r.hull_euler = std::int64_t(r.hull_vertices) - std::int64_t(r.hull_edges) + std::int64_t(r.boundary_facets);
+    if (r.euler != 1)
+      log_.add(Violation::kEuler, 0, [&] {
+        return "V - E + F - T = " + std::to_string(r.vertices) + " - " + std::to_string(r.edges) + " + " +
+               std::to_string(r.facets) + " - " + std::to_string(good_tets_) + " = " + std::to_string(r.euler) +
+               ", not 1";
+      });
+    if (r.hull_euler != 2)
+      log_.add(Violation::kHullTopology, 0, [&] {
+        return "boundary V - E + F = " + std::to_string(r.hull_vertices) + " - " + std::to_string(r.hull_edges) +
+               " + " + std::to_string(r.boundary_facets) + " = " + std::to_string(r.hull_euler) +
+               ", not 2: the boundary is not one sphere (a cavity, a loose piece or a tunnel)";
+      });
+    r.tet_volume = double(tet_volume6_ / 6);
+    r.hull_volume = double(hull_volume6_ / 6);
+    const double scale = std::max(std::fabs(r.hull_volume), std::numeric_limits<double>::min());
+    r.volume_rel_error = std::fabs(r.tet_volume - r.hull_volume) / scale;
+    if (!(r.volume_rel_error <= opt_.volume_tolerance))
+      log_.add(Violation::kVolume, 0, [&] {
+        std::ostringstream s;
+        s.precision(17);
+        s << "tets fill " << r.tet_volume << ", the boundary encloses " << r.hull_volume << ": relative difference "
+          << r.volume_rel_error << " > " << opt_.volume_tolerance;
+        return s.str();
+      });
+  }
+  log_.into(r);
+}
+
+}  // namespace
+
+VerifyReport verify(const VerifySource& source, const VerifyOptions& options) {
+  options.validate();
+  VerifyReport report;
+  if (source.point_count() <= 0xFFFFFFFFull && !options.wide_labels) {
+    Engine<std::uint32_t> e(source, options, report);
+    e.run();
+  } else {
+    Engine<std::uint64_t> e(source, options, report);
+    e.run();
+  }
+  return report;
+}
+
+VerifyReport verify_file(const std::string& path, const VerifyOptions& options) {
+  options.validate();
+  io::TetReader reader(path);
+  reader.verify_points();
+  ContainerSource source(reader);
+  return verify(source, options);
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,157 @@
+// The out-of-core pipeline against the in-core kernel: the same tet set, whatever
+// the number of segments, on every distribution, degenerate ones included.
+#include "core/delaunay.hpp"
+#include "io/point_generators.hpp"
+#include "io/point_writer.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/run.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tetstream {
+namespace {
+
+using Quad = std::array<std::uint64_t, 4>;
+
+class PipelineTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("tetstream-pipeline-test-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  std::string write_points(const io::GeneratorOptions& g) {
+    const io::PointGenerator gen(g);
+    std::vector<double> xyz(3 * gen.count());
+    gen.generate(0, gen.count(), xyz.data());
+    const std::string path = (dir_ / "points.f64").string();
+    auto w = io::create_points(path, {}, gen.count());
+    w->write(xyz.data(), gen.count());
+    w->commit();
+    return path;
+  }
+
+  pipeline::RunSummary run(const std::string& input, std::uint64_t zone_points, const std::string& name = "out.tets") {
+    pipeline::RunOptions o;
+    o.input = input;
+    o.output = (dir_ / name).string();
+    o.zone_points = zone_points;
+    o.memory_bytes = std::uint64_t(256) << 20;
+    o.progress = false;
+    return pipeline::run_job(o);
+  }
+
+  // The container's tets as sorted quadruples, and, from its own sorted points, the
+  // in-core kernel's tets (labels = positions in the container's point order).
+  static std::vector<Quad> container_tets(const std::string& path) {
+    io::TetReader reader(path);
+    std::vector<Quad> out;
+    std::vector<std::uint64_t> labels;
+    for (std::uint64_t k = 0; k < reader.frame_count(); ++k) {
+      reader.read_frame(k, labels);
+      for (std::size_t i = 0; i < labels.size(); i += 4) {
+        Quad q{labels[i], labels[i + 1], labels[i + 2], labels[i + 3]};
+        std::sort(q.begin(), q.end());
+        out.push_back(q);
+      }
+    }
+    std::sort(out.begin(), out.end());
+    return out;
+  }
+  static std::vector<Quad> incore_tets(const std::string& path) {
+    io::TetReader reader(path);
+    const std::size_t n = std::size_t(reader.point_count());
+    std::vector<double> xyz(3 * n);
+    std::vector<std::uint64_t> ids(n);
+    reader.read_points(0, n, xyz.data(), ids.data());
+    core::Delaunay dt;
+    EXPECT_EQ(dt.build(xyz.data(), nullptr, n), core::BuildStatus::kOk);
+    std::vector<Quad> out;
+    dt.for_each_finite_tet([&](const core::VertexId* v) {
+      Quad q{v[0], v[1], v[2], v[3]};
+      std::sort(q.begin(), q.end());
+      out.push_back(q);
+    });
+    std::sort(out.begin(), out.end());
+    return out;
+  }
+
+  void expect_same_as_incore(const io::GeneratorOptions& g, std::uint64_t zone_points, std::uint64_t min_segments) {
+    SCOPED_TRACE(std::string(io::to_string(g.dist)) + " n=" + std::to_string(g.n) + " seed=" + std::to_string(g.seed));
+    const std::string input = write_points(g);
+    const auto summary = run(input, zone_points);
+    EXPECT_GE(summary.segments, min_segments);
+    const std::string out = (dir_ / "out.tets").string();
+    const auto ours = container_tets(out);
+    const auto ref = incore_tets(out);
+    EXPECT_EQ(ours.size(), summary.tets);
+    EXPECT_TRUE(std::adjacent_find(ours.begin(), ours.end()) == ours.end()) << "a tet written twice";
+    std::vector<Quad> missing, extra;
+    std::set_difference(ref.begin(), ref.end(), ours.begin(), ours.end(), std::back_inserter(missing));
+    std::set_difference(ours.begin(), ours.end(), ref.begin(), ref.end(), std::back_inserter(extra));
+    EXPECT_EQ(missing.size(), 0u) << "tets of the in-core triangulation missing from the output";
+    EXPECT_EQ(extra.size(), 0u) << "tets in the output that the in-core triangulation lacks";
+  }
+
+  std::filesystem::path dir_;
+};
+
+io::GeneratorOptions dist(io::Distribution d, std::uint64_t n, std::uint64_t seed = 1) {
+  io::GeneratorOptions g;
+  g.dist = d;
+  g.n = n;
+  g.seed = seed;
+  return g;
+}
+
+TEST_F(PipelineTest, UniformManySegments) { expect_same_as_incore(dist(io::Distribution::kUniform, 20000), 1500, 10); }
+TEST_F(PipelineTest, BallManySegments) { expect_same_as_incore(dist(io::Distribution::kBall, 20000, 2), 1500, 10); }
+TEST_F(PipelineTest, EllipsoidShell) { expect_same_as_incore(dist(io::Distribution::kEllipsoidShell, 20000, 3), 1500, 10); }
+TEST_F(PipelineTest, Mixed) { expect_same_as_incore(dist(io::Distribution::kMixed, 20000, 4), 1500, 10); }
+TEST_F(PipelineTest, Clusters) { expect_same_as_incore(dist(io::Distribution::kClusters, 20000, 5), 1500, 10); }
+TEST_F(PipelineTest, GridIsDegenerateButExact) { expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 600, 10); }
+TEST_F(PipelineTest, SphereCospherical) { expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 150, 10); }
+
+TEST_F(PipelineTest, DuplicatesAreMergedAndCounted) {
+  auto g = dist(io::Distribution::kUniform, 10000, 7);
+  g.duplicates = 0.1;
+  const std::string input = write_points(g);
+  const auto s = run(input, 1000);
+  EXPECT_EQ(s.input_points, 10000u);
+  EXPECT_GT(s.duplicates, 500u);
+  EXPECT_EQ(s.points + s.duplicates, s.input_points);
+  const std::string out = (dir_ / "out.tets").string();
+  EXPECT_EQ(container_tets(out), incore_tets(out));
+}
+
+TEST_F(PipelineTest, ResultDoesNotDependOnTheSegmentCount) {
+  const std::string input = write_points(dist(io::Distribution::kUniform, 8000, 8));
+  run(input, 100000, "one.tets");
+  run(input, 700, "many.tets");
+  EXPECT_EQ(container_tets((dir_ / "one.tets").string()), container_tets((dir_ / "many.tets").string()));
+}
+
+TEST_F(PipelineTest, TooFewIndependentPointsIsAnInputError) {
+  // All points on one plane.
+  std::vector<double> xyz;
+  for (int i = 0; i < 100; ++i) xyz.insert(xyz.end(), {double(i % 10), double(i / 10), 0.0});
+  const std::string path = (dir_ / "flat.f64").string();
+  auto w = io::create_points(path, {}, 100);
+  w->write(xyz.data(), 100);
+  w->commit();
+  EXPECT_THROW(run(path, 1000), InputError);
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "out.tets"));
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "out.tets.partial"));
+}
+
+}  // namespace
+}  // namespace tetstream

@@ -1,0 +1,190 @@
+// `tetstream cat OUT.tets`: the tets (or points) of a container on stdout, for pipes.
+//
+//   --format text   "a b c d\n" per tet (default)
+//   --format u32    4 little-endian uint32 per tet, no header
+//   --format u64    4 little-endian uint64 per tet
+//   --original-ids  indices in the user's input order instead of labels (sorted order)
+//   --frames A:B    frames A..B-1 only (Python slice: "A:", ":B", "K" for one frame)
+//   --points        the points instead: "x y z original_id\n" per label, in label order
+//
+// Streams frame by frame in bounded memory. Tets come in stored order (docs/format.md
+// §4.1), each positively oriented.
+#include "core/error.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/progress.hpp"
+#include "tools/command.hpp"
+
+#include <algorithm>
+#include <charconv>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+namespace tetstream::cli {
+namespace {
+
+struct CatArgs {
+  std::string path;
+  std::string format = "text";
+  bool original_ids = false;
+  std::string frames;
+  bool points = false;
+};
+
+// Parses "A:B", "A:", ":B", ":" or "K" against `count` frames into [first, last).
+std::pair<std::uint64_t, std::uint64_t> parse_frames(const std::string& spec, std::uint64_t count) {
+  auto number = [&spec](const std::string& s, std::uint64_t fallback) {
+    if (s.empty()) return fallback;
+    std::uint64_t v = 0;
+    const auto [p, ec] = std::from_chars(s.data(), s.data() + s.size(), v);
+    if (ec != std::errc() || p != s.data() + s.size()) throw UsageError("--frames: bad range '" + spec + "'");
+    return v;
+  };
+  std::uint64_t a = 0, b = count;
+  const auto colon = spec.find(':');
+  if (colon == std::string::npos) {
+    a = number(spec, 0);
+    b = a + 1;
+  } else {
+    a = number(spec.substr(0, colon), 0);
+    b = number(spec.substr(colon + 1), count);
+  }
+  if (a > b || b > count) {
+    throw UsageError("--frames " + spec + ": the file has frames 0.." + std::to_string(count) + " (exclusive end)");
+  }
+  return {a, b};
+}
+
+// Buffered stdout; a write error (full disk, closed pipe) is an IoError.
+class Stdout {
+ public:
+  Stdout() : buf_(new char[kSize]) {}
+  char* reserve(std::size_t n) {
+    if (used_ + n > kSize) flush();
+    return buf_.get() + used_;
+  }
+  void advance(std::size_t n) { used_ += n; }
+  void write(const void* p, std::size_t n) {
+    if (n > kSize - used_) flush();
+    if (n >= kSize) {
+      put(p, n);
+      return;
+    }
+    std::memcpy(buf_.get() + used_, p, n);
+    used_ += n;
+  }
+  void flush() {
+    put(buf_.get(), used_);
+    used_ = 0;
+  }
+
+ private:
+  static constexpr std::size_t kSize = std::size_t(1) << 20;
+  static void put(const void* p, std::size_t n) {
+    if (n && std::fwrite(p, 1, n, stdout) != n) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
+  }
+  std::unique_ptr<char[]> buf_;
+  std::size_t used_ = 0;
+};
+
+void run_cat(const CatArgs& args, Context& ctx) {
+  const io::TetReader r(args.path);
+  const auto [first, last] = parse_frames(args.frames.empty() ? ":" : args.frames, r.frame_count());
+  Stdout out;
+  std::uint64_t written = 0;
+
+  if (args.points) {
+    if (args.format != "text") throw UsageError("--points prints text; use `convert` for binary meshes");
+    if (!args.frames.empty()) throw UsageError("--points and --frames do not go together");
+    pipeline::Progress progress("cat", "points", r.point_count(), !ctx.global.quiet);
+    constexpr std::size_t kChunk = 1 << 16;
+    std::vector<double> xyz(3 * kChunk);
+    std::vector<std::uint64_t> ids(kChunk);
+    for (std::uint64_t p = 0; p < r.point_count(); p += kChunk) {
+      const std::size_t n = std::size_t(std::min<std::uint64_t>(kChunk, r.point_count() - p));
+      r.read_points(p, n, xyz.data(), ids.data());
+      for (std::size_t i = 0; i < n; ++i) {
+        char* s = out.reserve(128);
+        char* e = s;
+        for (int c = 0; c < 3; ++c) {
+          e = std::to_chars(e, s + 128, xyz[3 * i + c]).ptr;
+          *e++ = ' ';
+        }
+        e = std::to_chars(e, s + 128, ids[i]).ptr;
+        *e++ = '\n';
+        out.advance(std::size_t(e - s));
+      }
+      progress.add(n);
+      written += n;
+    }
+    out.flush();
+    progress.finish();
+    ctx.summary = {{"command", "cat"}, {"file", args.path}, {"points", written}};
+    return;
+  }
+
+  // A 32-bit output must hold every value: decide before writing anything.
+  if (args.format == "u32") {
+    const std::uint64_t top = args.original_ids ? std::max(r.header().input_count, r.point_count())
+                                                : (first < last ? std::max_element(r.frames().begin() + first,
+                                                                                   r.frames().begin() + last,
+                                                                                   [](const auto& a, const auto& b) {
+                                                                                     return a.max_label < b.max_label;
+                                                                                   })->max_label + 1
+                                                                : 0);
+    if (top > (std::uint64_t(1) << 32)) throw UsageError("values do not fit 32 bits: use --format u64");
+  }
+
+  std::uint64_t total = 0;
+  for (std::uint64_t k = first; k < last; ++k) total += r.frames()[k].tet_count;
+  pipeline::Progress progress("cat", "tets", total, !ctx.global.quiet);
+  std::vector<std::uint64_t> labels;
+  std::vector<std::uint32_t> narrow;
+  for (std::uint64_t k = first; k < last; ++k) {
+    r.read_frame(k, labels);
+    if (args.original_ids) r.map_to_original(labels);
+    if (args.format == "text") {
+      for (std::size_t i = 0; i < labels.size(); i += 4) {
+        char* s = out.reserve(96);
+        char* e = s;
+        for (int c = 0; c < 4; ++c) {
+          e = std::to_chars(e, s + 96, labels[i + c]).ptr;
+          *e++ = c == 3 ? '\n' : ' ';
+        }
+        out.advance(std::size_t(e - s));
+      }
+    } else if (args.format == "u32") {
+      narrow.assign(labels.begin(), labels.end());
+      out.write(narrow.data(), 4 * narrow.size());
+    } else {
+      out.write(labels.data(), 8 * labels.size());
+    }
+    written += labels.size() / 4;
+    progress.add(labels.size() / 4);
+  }
+  out.flush();
+  if (std::fflush(stdout) != 0) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
+  progress.finish();
+  ctx.summary = {{"command", "cat"},       {"file", args.path},          {"format", args.format},
+                 {"tets", written},        {"frames", {first, last}},    {"original_ids", args.original_ids}};
+}
+
+void setup_cat(CLI::App& app, Context& ctx) {
+  auto args = std::make_shared<CatArgs>();
+  CLI::App* cmd = app.add_subcommand("cat", "Write a .tets container's tets (or points) to stdout, for pipes");
+  cmd->add_option("file", args->path, ".tets container")->required();
+  cmd->add_option("--format", args->format, "text (\"a b c d\" per line), u32 or u64 (4 little-endian labels per tet)")
+      ->check(CLI::IsMember({"text", "u32", "u64"}))
+      ->capture_default_str();
+  cmd->add_flag("--original-ids", args->original_ids,
+                "Vertex indices in the original input order instead of labels (sorted order)");
+  cmd->add_option("--frames", args->frames, "Frames A:B (0-based, end exclusive; 'A:', ':B', or K for one frame)");
+  cmd->add_flag("--points", args->points, "Print the points instead: \"x y z original_id\" per label");
+  cmd->callback([args, &ctx] { run_cat(*args, ctx); });
+}
+
+TETSTREAM_COMMAND(50, setup_cat);
+
+}  // namespace
+}  // namespace tetstream::cli
