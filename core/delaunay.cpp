@@ -404,18 +404,22 @@ void Delaunay::star(VertexId v, std::vector<TetId>& out) const {
   const TetId start = vertex_tet_[v];
   if (start == kNoTet) return;
   const std::size_t first = out.size();
+  // Breadth-first over the tets around v, marked in tet_flags_ while the search runs
+  // (every alive tet is kAlive between insertions) and unmarked before returning.
+  tet_flags_[start] = kStarMark;
   out.push_back(start);
-  // Stars are small (about 27 tets on average): a linear membership test beats a
-  // hash set, and the method stays const and allocation-free after warm-up.
   for (std::size_t i = first; i < out.size(); ++i) {
     const TetId t = out[i];
     const VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
     for (int f = 0; f < 4; ++f) {
       if (tv[f] == v) continue;  // the facet opposite v does not hold v
       const TetId n = tet_neighbor_[4 * std::size_t(t) + f] >> 2;
-      if (std::find(out.begin() + std::ptrdiff_t(first), out.end(), n) == out.end()) out.push_back(n);
+      if (tet_flags_[n] == kStarMark) continue;
+      tet_flags_[n] = kStarMark;
+      out.push_back(n);
     }
   }
+  for (std::size_t i = first; i < out.size(); ++i) tet_flags_[out[i]] = kAlive;
 }
 
 Circumsphere Delaunay::tet_circumsphere(TetId t) const {

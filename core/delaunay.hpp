@@ -120,6 +120,7 @@ class Delaunay {
   }
 
   // The tets incident to v (finite and infinite), appended to out. v must be a vertex.
+  // Not thread-safe on one kernel (it marks tets while it searches).
   void star(VertexId v, std::vector<TetId>& out) const;
   // One tet incident to v, or kNoTet when v is not a vertex (a duplicate, not inserted).
   TetId incident_tet(VertexId v) const { return vertex_tet_[v]; }
@@ -135,6 +136,7 @@ class Delaunay {
   static constexpr std::uint8_t kAlive = 0;
   static constexpr std::uint8_t kInCavity = 1;
   static constexpr std::uint8_t kNotInConflict = 2;
+  static constexpr std::uint8_t kStarMark = 3;  // only inside star()
   static constexpr std::uint8_t kFreeFlag = 0xFF;
 
   struct NewTet {  // one facet of the cavity boundary, joined to the new point
@@ -158,7 +160,7 @@ class Delaunay {
   // Struct-of-arrays tet storage; free slots are chained through tet_neighbor_[4t].
   std::vector<VertexId> tet_vertex_;
   std::vector<FacetHandle> tet_neighbor_;
-  std::vector<std::uint8_t> tet_flags_;
+  mutable std::vector<std::uint8_t> tet_flags_;  // mutable: star() marks and unmarks
   TetId free_head_ = kNoTet;
   std::size_t num_alive_ = 0;
   std::size_t num_infinite_ = 0;

@@ -331,6 +331,11 @@ CheckReport check_delaunay(const Delaunay& dt, const CheckOptions& options) {
       return "topology: num_finite_tets() = " + std::to_string(dt.num_finite_tets()) + " but " +
              std::to_string(r.finite_tets) + " finite tets are alive";
     });
+  if (dt.num_infinite_tets() != r.infinite_tets)
+    bad.add(r.bad_topology, [&] {
+      return "topology: num_infinite_tets() = " + std::to_string(dt.num_infinite_tets()) + " but " +
+             std::to_string(r.infinite_tets) + " infinite tets are alive";
+    });
   if (dt.num_vertices() != r.vertices)
     bad.add(r.bad_topology, [&] {
       return "topology: num_vertices() = " + std::to_string(dt.num_vertices()) + " but " +

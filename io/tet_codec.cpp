@@ -223,18 +223,37 @@ TS_FORCE_INLINE Canon<L> canonical(const L* t) {
 }
 
 // Batcher's odd-even merge sort of N (a power of two) values: a fixed sequence of
-// branch-free compare-exchanges, much faster than a comparison sort on the small,
-// randomly ordered lists of a group.
+// branch-free compare-exchanges (pairs computed at compile time), much faster than a
+// comparison sort on the small, randomly ordered lists of a group.
 template <std::size_t N>
-TS_FORCE_INLINE void sorting_network(std::uint64_t* v) {
+constexpr std::size_t network_size() {
+  std::size_t c = 0;
+  for (std::size_t p = 1; p < N; p <<= 1)
+    for (std::size_t k = p; k >= 1; k >>= 1)
+      for (std::size_t j = k % p; j + k < N; j += 2 * k)
+        for (std::size_t i = 0; i < std::min(k, N - j - k); ++i) c += (i + j) / (2 * p) == (i + j + k) / (2 * p);
+  return c;
+}
+
+template <std::size_t N>
+constexpr auto network_pairs() {
+  std::array<std::array<std::uint8_t, 2>, network_size<N>()> pairs{};
+  std::size_t c = 0;
   for (std::size_t p = 1; p < N; p <<= 1)
     for (std::size_t k = p; k >= 1; k >>= 1)
       for (std::size_t j = k % p; j + k < N; j += 2 * k)
         for (std::size_t i = 0; i < std::min(k, N - j - k); ++i)
-          if ((i + j) / (2 * p) == (i + j + k) / (2 * p)) {
-            const std::uint64_t x = v[i + j], y = v[i + j + k];
-            v[i + j] = std::min(x, y), v[i + j + k] = std::max(x, y);
-          }
+          if ((i + j) / (2 * p) == (i + j + k) / (2 * p)) pairs[c++] = {std::uint8_t(i + j), std::uint8_t(i + j + k)};
+  return pairs;
+}
+
+template <std::size_t N>
+TS_FORCE_INLINE void sorting_network(std::uint64_t* v) {
+  static constexpr auto kPairs = network_pairs<N>();
+  for (const auto& [a, b] : kPairs) {
+    const std::uint64_t x = v[a], y = v[b];
+    v[a] = std::min(x, y), v[b] = std::max(x, y);
+  }
 }
 
 template <std::size_t N>

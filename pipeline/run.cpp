@@ -110,6 +110,10 @@ RunSummary run_job(const RunOptions& options) {
   view.axis = sorted.axis;
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
+  PointIndex index;
+  index.build(view.points, view.count, view.axis);
+  view.index = &index;
+
   // The global hull: the hull of the runs' candidates.
   {
     std::vector<double> xyz;
@@ -200,9 +204,9 @@ RunSummary run_job(const RunOptions& options) {
     summary.rounds_max = std::max(summary.rounds_max, s.rounds);
     summary.tets += s.tets;
     spdlog::debug("segment [{}, {}): window {} (+{} repairs), {} range failures, {} queries, {} rounds, {} tets, "
-                  "build {:.2f}s check {:.2f}s emit {:.2f}s, kernel {}",
+                  "build {:.2f}s check {:.2f}s, kernel {}",
                   plan.zone_begin, plan.zone_end, s.window_points, s.repair_points, s.range_failures, s.queries,
-                  s.rounds, s.tets, s.seconds_build, s.seconds_check, s.seconds_emit, human_bytes(double(s.kernel_bytes)));
+                  s.rounds, s.tets, s.seconds_build, s.seconds_check, human_bytes(double(s.kernel_bytes)));
     release_pages(mapping.data(), mapping.size());
     progress.add(plan.zone_end - plan.zone_begin);
   }

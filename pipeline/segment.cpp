@@ -98,8 +98,11 @@ class SegmentWorker {
 
  private:
   void load_window();
-  bool vertex_is_final(VertexId v, std::vector<std::uint64_t>& repairs);
-  bool tet_is_safe(TetId t, std::vector<std::uint64_t>& repairs);
+  // One round: marks the pending zone vertices whose stars hold a tet that is not
+  // safe (collecting repair points), emits the tets owned by the others, and
+  // returns how many zone vertices remain pending.
+  std::size_t check_round(std::vector<std::uint64_t>& repairs, std::vector<std::uint64_t>& out);
+  bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
   // Exact emptiness query of tet t's conflict region against the missing points
   // whose axis coordinate lies in [lo, hi]; returns the deepest conflicting label,
   // or kNone.
@@ -113,7 +116,12 @@ class SegmentWorker {
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
   std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
-  std::vector<TetId> star_;
+  VertexId zone_first_ = 0, zone_last_ = 0;  // local ids of the zone's vertices
+  // Per zone vertex (index v - zone_first_): kPending until it is final and its tets
+  // are emitted, then kDone.
+  std::vector<std::uint8_t> zone_state_;
+  std::vector<std::uint64_t> owner_start_;  // scratch of the emission's counting sort
+  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
   SegmentStats stats_;
 };
 
@@ -148,36 +156,34 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   const double r2 = ball.radius * ball.radius;
   std::uint64_t best = kNone;
   double best_depth = -std::numeric_limits<double>::infinity();
-  auto scan = [&](std::uint64_t first, std::uint64_t last) {
-    for (std::uint64_t label = first; label < last; ++label) {
-      const double* p = view_.points[label].xyz;
-      double d2 = 0;
-      for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
-      if (d2 > r2) continue;  // outside the enclosing ball: cannot conflict
-      if (std::binary_search(extra_.begin(), extra_.end(), label)) continue;
-      ++stats_.query_points;
-      bool conflict;
-      if (inf < 0) {
-        conflict = core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), p,
-                                      dt_.label(v[0]), dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]), label) > 0;
-      } else {
-        const VertexId a = v[core::kFacetVertex[inf][0]], b = v[core::kFacetVertex[inf][1]],
-                       c = v[core::kFacetVertex[inf][2]];
-        conflict = core::infinite_conflict_sos(dt_.point(a), dt_.point(b), dt_.point(c), p, dt_.label(a),
-                                               dt_.label(b), dt_.label(c), label) > 0;
-      }
-      if (conflict && r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
+  auto visit = [&](std::uint64_t label) {
+    const double* p = view_.points[label].xyz;
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
+    if (d2 > r2) return;  // outside the enclosing ball: cannot conflict
+    if (std::binary_search(extra_.begin(), extra_.end(), label)) return;
+    ++stats_.query_points;
+    bool conflict;
+    if (inf < 0) {
+      conflict = core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), p,
+                                    dt_.label(v[0]), dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]), label) > 0;
+    } else {
+      const VertexId a = v[core::kFacetVertex[inf][0]], b = v[core::kFacetVertex[inf][1]],
+                     c = v[core::kFacetVertex[inf][2]];
+      conflict = core::infinite_conflict_sos(dt_.point(a), dt_.point(b), dt_.point(c), p, dt_.label(a),
+                                             dt_.label(b), dt_.label(c), label) > 0;
     }
+    if (conflict && r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
-  // each side of the window.
+  // each side of the window, searched through the spatial index.
   const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
-  scan(first, std::min(last, plan_.window_begin));
-  scan(std::max(first, plan_.window_end), last);
+  view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_.window_begin), visit);
+  view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_end), last, visit);
   return best;
 }
 
-bool SegmentWorker::tet_is_safe(TetId t, std::vector<std::uint64_t>& repairs) {
+bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   const ConflictBall ball = conflict_ball(dt_, t);
   double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
   if (ball.valid) {
@@ -202,13 +208,70 @@ bool SegmentWorker::tet_is_safe(TetId t, std::vector<std::uint64_t>& repairs) {
   return false;
 }
 
-bool SegmentWorker::vertex_is_final(VertexId v, std::vector<std::uint64_t>& repairs) {
-  star_.clear();
-  dt_.star(v, star_);
-  bool final = true;
-  for (TetId t : star_)
-    if (!tet_is_safe(t, repairs)) final = false;
-  return final;
+// The round scans the tet arrays in memory order rather than walking vertex stars:
+// a zone vertex is final when no tet incident to it is unsafe, and a tet belongs to
+// the star of each of its vertices, so one pass marks the blocked vertices and a
+// second emits, for each final vertex, the tets whose minimum label it holds (the
+// minimum vertex filter). A final vertex's star never changes again: no later
+// repair point lies in any of its tets' balls.
+std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs, std::vector<std::uint64_t>& out) {
+  const std::size_t slots = dt_.num_tet_slots();
+  auto pending_zone_vertex = [&](VertexId v) {
+    return v >= zone_first_ && v < zone_last_ && zone_state_[v - zone_first_] != kDone;
+  };
+  for (std::size_t t = 0; t < slots; ++t) {
+    if (!dt_.is_alive(TetId(t))) continue;
+    VertexId v[4];
+    bool touches_pending = false;
+    for (int i = 0; i < 4; ++i) {
+      v[i] = dt_.vertex(TetId(t), i);
+      touches_pending |= v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i]);
+    }
+    if (!touches_pending || check_tet(TetId(t), repairs)) continue;
+    for (int i = 0; i < 4; ++i)
+      if (v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i])) zone_state_[v[i] - zone_first_] = kBlocked;
+  }
+  // Emission in owner order (a counting sort over the zone's labels, two passes over
+  // the tets): the container codes each tet from its minimum label, and a stream in
+  // label order compresses best and reads back in a spatially coherent order.
+  std::vector<std::uint64_t>& start = owner_start_;
+  start.assign(zone_state_.size() + 1, 0);
+  auto owner_of = [&](TetId t, std::uint64_t q[4]) -> std::int64_t {
+    int owner = 0;
+    for (int i = 0; i < 4; ++i) {
+      q[i] = labels_[dt_.vertex(t, i)];
+      if (q[i] < q[owner]) owner = i;
+    }
+    const VertexId m = dt_.vertex(t, owner);
+    if (m < zone_first_ || m >= zone_last_ || zone_state_[m - zone_first_] != kPending) return -1;
+    return std::int64_t(m - zone_first_);
+  };
+  for (int pass = 0; pass < 2; ++pass) {
+    for (std::size_t t = 0; t < slots; ++t) {
+      if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
+      std::uint64_t q[4];
+      const std::int64_t m = owner_of(TetId(t), q);
+      if (m < 0) continue;
+      if (pass == 0) {
+        ++start[std::size_t(m) + 1];
+      } else {
+        std::copy(q, q + 4, &out[4 * start[std::size_t(m)]++]);
+      }
+    }
+    if (pass == 0) {
+      const std::size_t base = out.size() / 4;
+      start[0] = base;
+      for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
+      stats_.tets += start.back() - base;
+      out.resize(4 * start.back());
+    }
+  }
+  std::size_t still = 0;
+  for (auto& state : zone_state_) {
+    if (state == kPending) state = kDone;
+    else if (state == kBlocked) state = kPending, ++still;
+  }
+  return still;
 }
 
 SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
@@ -220,19 +283,14 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
 
   // Zone vertices are local indices [zone_begin - window_begin, zone_end - window_begin).
   t0 = Clock::now();
-  const VertexId z0 = VertexId(plan_.zone_begin - plan_.window_begin);
-  const VertexId z1 = VertexId(plan_.zone_end - plan_.window_begin);
-  std::vector<VertexId> pending;
-  for (VertexId v = z0; v < z1; ++v) pending.push_back(v);
+  zone_first_ = VertexId(plan_.zone_begin - plan_.window_begin);
+  zone_last_ = VertexId(plan_.zone_end - plan_.window_begin);
+  zone_state_.assign(zone_last_ - zone_first_, kPending);
   std::vector<std::uint64_t> repairs;
-  while (!pending.empty()) {
+  for (;;) {
     ++stats_.rounds;
     repairs.clear();
-    std::vector<VertexId> still;
-    for (VertexId v : pending)
-      if (!vertex_is_final(v, repairs)) still.push_back(v);
-    pending.swap(still);
-    if (pending.empty()) break;
+    if (check_round(repairs, out) == 0) break;
     std::sort(repairs.begin(), repairs.end());
     repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
     // Append the repair points to the window and insert them.
@@ -248,28 +306,7 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
     stats_.repair_points += repairs.size();
   }
   stats_.seconds_check = since(t0);
-
-  // Minimum vertex filter: a tet is emitted by the zone vertex with its smallest label.
-  t0 = Clock::now();
-  for (VertexId v = z0; v < z1; ++v) {
-    star_.clear();
-    dt_.star(v, star_);
-    const std::uint64_t lv = labels_[v];
-    for (TetId t : star_) {
-      if (dt_.is_infinite(t)) continue;
-      std::uint64_t q[4];
-      bool owner = true;
-      for (int i = 0; i < 4; ++i) {
-        q[i] = labels_[dt_.vertex(t, i)];
-        if (q[i] < lv) owner = false;
-      }
-      if (!owner) continue;
-      out.insert(out.end(), q, q + 4);
-      ++stats_.tets;
-    }
-  }
   stats_.kernel_bytes = dt_.memory_bytes();
-  stats_.seconds_emit = since(t0);
   return stats_;
 }
 

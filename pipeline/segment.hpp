@@ -17,6 +17,7 @@
 // empty balls, so no insertion touches them). Then each finite tet of a zone vertex's
 // star whose minimum label is that vertex is emitted: every tet exactly once overall.
 #include "core/delaunay.hpp"
+#include "pipeline/point_index.hpp"
 #include "pipeline/point_sort.hpp"
 
 #include <cstdint>
@@ -32,6 +33,7 @@ struct SortedView {
   int axis = 0;
   double bbox_min[3], bbox_max[3];
   std::vector<std::uint64_t> hull_labels;  // sorted
+  const PointIndex* index = nullptr;       // over points[0, count)
 
   double key(std::uint64_t label) const { return points[label].xyz[axis]; }
   // First label whose axis coordinate is >= x (count when none).
@@ -58,7 +60,7 @@ struct SegmentStats {
   std::uint64_t rounds = 0;         // check/repair rounds
   std::uint64_t tets = 0;           // tets emitted
   std::uint64_t kernel_bytes = 0;   // the kernel's arrays at the end
-  double seconds_build = 0, seconds_check = 0, seconds_emit = 0;
+  double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
 };
 
 // Triangulates one segment and appends its tets (4 labels each, positively oriented)

@@ -812,11 +812,10 @@ void Engine<L>::combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks
     const bool ss = (s.x & kSide) != 0, rs = (r.x & kSide) != 0;
     const std::uint64_t ts = s.x & kPayload, tr = r.x & kPayload;
     if (ss != rs && s.d != r.d) {
-      const Facet& pos = ss ? s : r;
-      const Facet& neg = ss ? r : s;
-      checks.push_back(PairCheck{{s.v[0], s.v[1], s.v[2]}, pos.d, neg.d, pos.x & kPayload, neg.x & kPayload});
-      s.d = pos.d;
-      s.x = kPair | std::uint64_t(neg.d);
+      const L dpos = ss ? s.d : r.d, dneg = ss ? r.d : s.d;
+      checks.push_back(PairCheck{{s.v[0], s.v[1], s.v[2]}, dpos, dneg, ss ? ts : tr, ss ? tr : ts});
+      s.d = dpos;
+      s.x = kPair | std::uint64_t(dneg);
       return;
     }
     if (s.d == r.d) {

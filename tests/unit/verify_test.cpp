@@ -307,7 +307,7 @@ TEST(Verify, UnorderedTetsWithSpills) {
 
 TEST(Verify, FlippedTet) {
   Output o = uniform_output();
-  const std::size_t t = o.tets.size() / 8;
+  const std::size_t t = o.tets.size() / 4 / 2;
   std::swap(o.tets[4 * t + 2], o.tets[4 * t + 3]);  // an odd permutation
   const VerifyReport r = verify_output(o, "flipped.tets");
   EXPECT_FALSE(r.ok());
@@ -319,7 +319,7 @@ TEST(Verify, FlippedTet) {
 TEST(Verify, RemovedInteriorTet) {
   Output o = uniform_output();
   const Facets f(o.tets);
-  std::size_t t = o.tets.size() / 8;
+  std::size_t t = o.tets.size() / 4 / 2;
   while (f.hull_facets_of(o.tets, t) != 0) ++t;
   erase_tet(o.tets, t);
   const VerifyReport r = verify_output(o, "removed.tets");
@@ -333,15 +333,16 @@ TEST(Verify, RemovedInteriorTet) {
 
 TEST(Verify, DuplicatedTet) {
   Output o = uniform_output();
-  const std::size_t t = o.tets.size() / 3;
-  // One copy far away (another frame), one rotated evenly within the same frame.
-  o.tets.insert(o.tets.end(), o.tets.begin() + std::ptrdiff_t(4 * t), o.tets.begin() + std::ptrdiff_t(4 * t + 4));
+  const std::size_t t = o.tets.size() / 4 / 3;
+  // A copy far away (in the last frame).
+  const std::array<std::uint64_t, 4> copy = {o.tets[4 * t], o.tets[4 * t + 1], o.tets[4 * t + 2], o.tets[4 * t + 3]};
+  o.tets.insert(o.tets.end(), copy.begin(), copy.end());
   const VerifyReport r = verify_output(o, "duplicated.tets");
   EXPECT_FALSE(r.ok());
   EXPECT_EQ(count(r, Violation::kDuplicateTet), 1u) << r.summary();
   expect_only(r, {Violation::kDuplicateTet, Violation::kEuler, Violation::kVolume, Violation::kHullTopology});
 
-  // Same frame, adjacent.
+  // A copy rotated evenly, next to it in the same frame.
   Output o2 = uniform_output();
   const std::uint64_t c[4] = {o2.tets[4 * t + 1], o2.tets[4 * t + 2], o2.tets[4 * t], o2.tets[4 * t + 3]};
   o2.tets.insert(o2.tets.begin() + std::ptrdiff_t(4 * t), c, c + 4);
@@ -402,8 +403,9 @@ TEST(Verify, MissingHullTet) {
     for (int i = 0; i < 4; ++i) inside += hull_vertices.count(o.tets[4 * t + std::size_t(i)]) == 0;
     return inside == 1;
   };
-  std::size_t t = o.tets.size() / 2;
-  while (f.hull_facets_of(o.tets, t) != 1 || !inner_apex(t)) ++t;
+  std::size_t t = o.tets.size() / 4 / 2;
+  while (t < o.tets.size() / 4 && (f.hull_facets_of(o.tets, t) != 1 || !inner_apex(t))) ++t;
+  ASSERT_LT(t, o.tets.size() / 4);
   erase_tet(o.tets, t);
   const VerifyReport r = verify_output(o, "missing_hull_tet.tets");
   EXPECT_FALSE(r.ok());
@@ -440,8 +442,13 @@ TEST(Verify, StorageAndOverusedFacets) {
   const Facets f(o.tets);
   for (const auto& [key, ts] : f.of) {
     if (ts.size() != 2) continue;
-    std::uint64_t apex = 0;
-    while (apex == key[0] || apex == key[1] || apex == key[2]) ++apex;
+    // An apex far from the facet (not one of the two tets already on it).
+    std::uint64_t apex = o.count() - 1;
+    while (std::find(key.begin(), key.end(), apex) != key.end() || apex == o.tets[4 * ts[0]] ||
+           apex == o.tets[4 * ts[0] + 1] || apex == o.tets[4 * ts[0] + 2] || apex == o.tets[4 * ts[0] + 3] ||
+           apex == o.tets[4 * ts[1]] || apex == o.tets[4 * ts[1] + 1] || apex == o.tets[4 * ts[1] + 2] ||
+           apex == o.tets[4 * ts[1] + 3])
+      --apex;
     std::array<std::uint64_t, 4> t = {key[0], key[1], key[2], apex};
     if (core::orient3d(o.p(t[0]), o.p(t[1]), o.p(t[2]), o.p(t[3])) == 0) continue;
     if (core::orient3d(o.p(t[0]), o.p(t[1]), o.p(t[2]), o.p(t[3])) < 0) std::swap(t[0], t[1]);

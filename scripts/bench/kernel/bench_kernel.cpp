@@ -22,6 +22,7 @@
 #include <gmsh.h>
 #include <omp.h>
 #include <sys/resource.h>
+#include <time.h>
 
 #include <chrono>
 #include <cmath>
@@ -101,8 +102,25 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// CPU time of the whole process (all its threads): on a shared machine it is far
+// less disturbed by other jobs than wall time.
+double process_cpu_seconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+// Wall and CPU time of one call.
+struct Timer {
+  std::chrono::steady_clock::time_point wall0 = std::chrono::steady_clock::now();
+  double cpu0 = process_cpu_seconds();
+  double wall() const { return seconds_since(wall0); }
+  double cpu() const { return process_cpu_seconds() - cpu0; }
+};
+
 struct Result {
   double seconds = 0;
+  double cpu_seconds = 0;
   std::uint64_t tets = 0;
   std::string extra;  // tool-specific key=value pairs
 };
@@ -111,9 +129,9 @@ Result run_ours(tp::Points& xyz, std::size_t n, bool check) {
   Result r;
   tc::reset_predicate_stats();
   tc::Delaunay dt;
-  const auto t0 = std::chrono::steady_clock::now();
+  const Timer timer;
   const tc::BuildStatus status = dt.build(xyz.data(), nullptr, n);
-  r.seconds = seconds_since(t0);
+  r.seconds = timer.wall(), r.cpu_seconds = timer.cpu();
   const tc::PredicateStats ps = tc::predicate_stats();
   if (status != tc::BuildStatus::kOk) {
     std::fprintf(stderr, "bench_kernel: build failed\n");
@@ -145,9 +163,9 @@ Result run_cgal(tp::Points& xyz, std::size_t n) {
   for (std::size_t i = 0; i < n; ++i) in.emplace_back(K::Point_3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]), std::uint32_t(i));
   tp::Points().swap(xyz);  // CGAL holds its own copy
   Result r;
-  const auto t0 = std::chrono::steady_clock::now();
+  const Timer timer;
   Cgal dt(in.begin(), in.end());
-  r.seconds = seconds_since(t0);
+  r.seconds = timer.wall(), r.cpu_seconds = timer.cpu();
   r.tets = dt.number_of_finite_cells();
   return r;
 }
@@ -162,9 +180,9 @@ Result run_hxt(tp::Points& xyz, int threads) {
   gmsh::model::add("bench");
   std::vector<std::size_t> tetra;
   Result r;
-  const auto t0 = std::chrono::steady_clock::now();
+  const Timer timer;
   gmsh::model::mesh::tetrahedralize(xyz, tetra);
-  r.seconds = seconds_since(t0);
+  r.seconds = timer.wall(), r.cpu_seconds = timer.cpu();
   r.tets = tetra.size() / 4;
   return r;
 }
@@ -185,9 +203,9 @@ int main(int argc, char** argv) {
   else if (a.tool == "cgal") r = run_cgal(xyz, n);
   else r = run_hxt(xyz, a.threads);
   const std::uint64_t peak = peak_rss_bytes();
-  std::printf("tool=%s dist=%s n=%zu threads=%d seconds=%.4f tets=%llu tets_per_s=%.0f peak_rss=%llu start_rss=%llu "
+  std::printf("tool=%s dist=%s n=%zu threads=%d seconds=%.4f cpu_seconds=%.4f tets=%llu tets_per_s=%.0f peak_rss=%llu start_rss=%llu "
               "points_rss=%llu bytes_per_point=%.1f %s\n",
-              a.tool.c_str(), a.dist.c_str(), n, a.threads, r.seconds, (unsigned long long)r.tets,
+              a.tool.c_str(), a.dist.c_str(), n, a.threads, r.seconds, r.cpu_seconds, (unsigned long long)r.tets,
               double(r.tets) / r.seconds, (unsigned long long)peak, (unsigned long long)start_rss,
               (unsigned long long)base_rss, double(peak - start_rss) / double(n), r.extra.c_str());
   std::fflush(stdout);
