@@ -185,7 +185,7 @@ bool Delaunay::make_initial_tet(const std::vector<std::uint32_t>& order, std::ui
   num_vertices_ = 4;
   stats_.inserted = 4;
   last_tet_ = 0;
-  used[0] = a, used[1] = b, used[2] = c, used[3] = d;
+  used[0] = a, used[1] = bb, used[2] = c, used[3] = d;
   return true;
 }
 

@@ -19,14 +19,15 @@
 //              facet of such a tet is a hull facet, and the hull's interior lies on
 //              the negative side of it (in kFacetVertex order).
 //
-//        v3
-//        /|\         facet 0 = (v1 v3 v2)   facet 1 = (v0 v2 v3)
-//       / | \        facet 2 = (v0 v3 v1)   facet 3 = (v0 v1 v2)
-//      /  |  \
-//    v0---|---v2     Each facet, in this order, turns clockwise seen from outside
-//      \  |  /       the tet (its own vertex lies on the positive side).
-//       \ | /
-//        v1
+//            v3
+//           /|\ .        facet 0 = (v1 v3 v2)   facet 1 = (v0 v2 v3)
+//          / | \ .       facet 2 = (v0 v3 v1)   facet 3 = (v0 v1 v2)
+//         /  |  \ .
+//       v0---|---v2 .    Each facet, in this order, sees its own vertex on its
+//         \  |  / .      positive side (it turns clockwise seen from outside).
+//          \ | / .
+//           \|/ .
+//            v1
 //
 // Vertices are local indices into the caller's point array (uint32: a window holds
 // fewer than 4 G points). Each point also has a 64-bit global label that drives the

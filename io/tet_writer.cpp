@@ -215,20 +215,24 @@ void TetWriter::add_tets_impl(std::span<const L> labels) {
   if (frames == 0) return;
   const int threads = int(std::min<std::size_t>(frames, options_.threads > 0 ? options_.threads : omp_get_max_threads()));
   while (encoders_.size() < std::size_t(threads)) encoders_.push_back(std::make_unique<FrameEncoder>(options_.zstd_level));
-  if (batch_.size() < frames) batch_.resize(frames);
-  std::exception_ptr error;
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (threads > 1)
-  for (std::size_t f = 0; f < frames; ++f) {
-    try {
-      encoders_[omp_get_thread_num()]->encode(labels.subspan(4 * bounds[f], 4 * (bounds[f + 1] - bounds[f])), batch_[f]);
-    } catch (...) {
+  batch_.resize(threads);
+  // In waves of `threads` frames, so memory stays bounded whatever the batch size.
+  for (std::size_t wave = 0; wave < frames; wave += threads) {
+    const std::size_t count = std::min<std::size_t>(threads, frames - wave);
+    std::exception_ptr error;
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (count > 1)
+    for (std::size_t i = 0; i < count; ++i) {
+      const std::size_t f = wave + i;
+      try {
+        encoders_[omp_get_thread_num()]->encode(labels.subspan(4 * bounds[f], 4 * (bounds[f + 1] - bounds[f])), batch_[i]);
+      } catch (...) {
 #pragma omp critical(tetstream_writer_error)
-      if (!error) error = std::current_exception();
+        if (!error) error = std::current_exception();
+      }
     }
+    if (error) std::rethrow_exception(error);
+    for (std::size_t i = 0; i < count; ++i) add_frame(batch_[i]);
   }
-  if (error) std::rethrow_exception(error);
-  for (std::size_t f = 0; f < frames; ++f) add_frame(batch_[f]);
-  if (frames > 1) batch_.resize(1);  // don't hold a big batch's frames between calls
 }
 
 void TetWriter::add_tets(std::span<const std::uint32_t> labels) { add_tets_impl(labels); }

@@ -13,12 +13,12 @@
 // count to persist, and TetWriter::resume() reopens the partial file at it.
 //
 // Frames: add_tets() splits a batch into frames of at most options.frame_tets and
-// encodes them on up to options.threads OpenMP threads; the bytes do not depend on the
-// thread count. A pipeline that encodes elsewhere uses io::FrameEncoder (one per thread)
+// encodes them on up to options.threads OpenMP threads (1 by default, so a writer stage
+// does not compete with the kernel's threads); the bytes do not depend on the count. A pipeline that encodes elsewhere uses io::FrameEncoder (one per thread)
 // and hands the frames to add_frame() in sequence order.
 //
-// Memory: one write buffer, the frame index (40 bytes per frame), and, inside
-// add_tets(), the encoded frames of one batch (~1.5 bytes per tet).
+// Memory: one write buffer, the frame index (40 bytes per frame), and per encoding
+// thread one frame's scratch (about 40 bytes per tet of frame_tets) and encoded bytes.
 // Thread-safety: none; one thread drives a writer.
 #include "io/tet_codec.hpp"
 #include "io/tet_container.hpp"
@@ -37,7 +37,7 @@ class OutputFile;
 struct TetWriterOptions {
   int zstd_level = kDefaultZstdLevel;
   std::uint32_t frame_tets = kDefaultFrameTets;  // most tets per frame, 1..kMaxFrameTets
-  int threads = 0;                               // add_tets() encoders; 0: omp_get_max_threads()
+  int threads = 1;                               // add_tets() encoders (OpenMP); 0: omp_get_max_threads()
   bool sync = true;                              // fsync before the rename (and in checkpoint())
   std::size_t buffer_bytes = std::size_t(8) << 20;
 };

@@ -100,6 +100,8 @@ void quicksort_tasks(T* first, T* last, const Less& less, int depth) {
 
 int max_threads();   // omp_get_max_threads()
 bool in_parallel();  // omp_in_parallel(): no nested teams
+int team_size();     // omp_get_num_threads()
+int thread_id();     // omp_get_thread_num()
 
 }  // namespace detail
 
@@ -113,6 +115,62 @@ void parallel_sort(T* first, T* last, const Less& less) {
 #pragma omp parallel
 #pragma omp single nowait
   detail::quicksort_tasks(first, last, less, 48);
+}
+
+// Stable LSD radix sort of data[0, n) by the low `bits` bits of key(x) (an unsigned
+// 64-bit integer), 11 bits per pass, on all OpenMP threads for large inputs; `tmp`
+// is resized to n and used as the other buffer. Passes in which every key has the
+// same digit are skipped. Stability makes multi-word keys easy: sort by the least
+// significant word first, then by the next, and so on.
+template <class T, class Key>
+void radix_sort(T* data, std::size_t n, std::vector<T>& tmp, int bits, const Key& key) {
+  static_assert(std::is_trivially_copyable_v<T>);
+  constexpr int kDigitBits = 11;
+  constexpr std::size_t kBuckets = std::size_t(1) << kDigitBits;
+  if (n < 2 || bits <= 0) return;
+  if (n < 256) {
+    std::stable_sort(data, data + n, [&](const T& a, const T& b) {
+      const std::uint64_t m = bits >= 64 ? ~std::uint64_t(0) : (std::uint64_t(1) << bits) - 1;
+      return (key(a) & m) < (key(b) & m);
+    });
+    return;
+  }
+  tmp.resize(n);
+  T* src = data;
+  T* dst = tmp.data();
+  const int threads = (n < (std::size_t(1) << 16) || detail::in_parallel()) ? 1 : std::max(1, detail::max_threads());
+  std::vector<std::size_t> count(std::size_t(threads) * kBuckets);
+  for (int shift = 0; shift < bits; shift += kDigitBits) {
+    bool skip = false;
+#pragma omp parallel num_threads(threads) if (threads > 1)
+    {
+      const int nt = detail::team_size(), t = detail::thread_id();
+      const std::size_t lo = n * std::size_t(t) / std::size_t(nt), hi = n * (std::size_t(t) + 1) / std::size_t(nt);
+      std::size_t* c = count.data() + std::size_t(t) * kBuckets;
+      std::fill(c, c + kBuckets, 0);
+      for (std::size_t i = lo; i < hi; ++i) ++c[(key(src[i]) >> shift) & (kBuckets - 1)];
+#pragma omp barrier
+#pragma omp single
+      {
+        // Offsets: bucket-major, thread-minor, so the scatter is stable.
+        std::size_t sum = 0;
+        for (std::size_t b = 0; b < kBuckets; ++b) {
+          const std::size_t before = sum;
+          for (int u = 0; u < nt; ++u) {
+            std::size_t& x = count[std::size_t(u) * kBuckets + b];
+            const std::size_t v = x;
+            x = sum;
+            sum += v;
+          }
+          if (sum - before == n) skip = true;  // one digit value everywhere: nothing to do
+        }
+      }
+      if (!skip)
+        for (std::size_t i = lo; i < hi; ++i) dst[c[(key(src[i]) >> shift) & (kBuckets - 1)]++] = src[i];
+    }
+    if (!skip) std::swap(src, dst);
+  }
+  if (src != data) std::copy(src, src + n, data);
 }
 
 template <class T, class Less>

@@ -22,6 +22,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <omp.h>
 #include <optional>
 #include <sstream>
@@ -287,7 +288,9 @@ class Bitmap {
  public:
   explicit Bitmap(std::uint64_t n) : words_((n + 63) / 64) {}
   void set(std::uint64_t i) {
-    std::atomic_ref<std::uint64_t>(words_[i >> 6]).fetch_or(std::uint64_t(1) << (i & 63), std::memory_order_relaxed);
+    std::atomic_ref<std::uint64_t> w(words_[i >> 6]);
+    const std::uint64_t bit = std::uint64_t(1) << (i & 63);
+    if (!(w.load(std::memory_order_relaxed) & bit)) w.fetch_or(bit, std::memory_order_relaxed);
   }
   bool get(std::uint64_t i) const { return words_[i >> 6] >> (i & 63) & 1; }
   std::uint64_t count() const {
@@ -319,6 +322,97 @@ void for_group_chunks(std::size_t n, IsStart&& is_start, F&& f, std::vector<std:
   for (int p = 0; p < parts; ++p) f(std::size_t(p), bounds[std::size_t(p)], bounds[std::size_t(p) + 1]);
 }
 
+// Stable k-way merge of sorted ranges into out (ties: the earlier range first).
+template <class T, class Less>
+void multiway_merge(std::vector<std::pair<const T*, const T*>>& rs, T* out, const Less& less) {
+  std::erase_if(rs, [](const auto& r) { return r.first == r.second; });
+  if (rs.empty()) return;
+  if (rs.size() == 1) {
+    std::copy(rs[0].first, rs[0].second, out);
+    return;
+  }
+  if (rs.size() == 2) {
+    std::merge(rs[0].first, rs[0].second, rs[1].first, rs[1].second, out, less);
+    return;
+  }
+  std::vector<std::size_t> heap(rs.size());
+  std::iota(heap.begin(), heap.end(), std::size_t(0));
+  auto before = [&](std::size_t a, std::size_t b) {
+    if (less(*rs[a].first, *rs[b].first)) return true;
+    if (less(*rs[b].first, *rs[a].first)) return false;
+    return a < b;
+  };
+  auto sift_down = [&](std::size_t i) {
+    const std::size_t n = heap.size();
+    for (;;) {
+      std::size_t m = i, l = 2 * i + 1, r = l + 1;
+      if (l < n && before(heap[l], heap[m])) m = l;
+      if (r < n && before(heap[r], heap[m])) m = r;
+      if (m == i) return;
+      std::swap(heap[i], heap[m]);
+      i = m;
+    }
+  };
+  for (std::size_t i = heap.size(); i-- > 0;) sift_down(i);
+  while (!heap.empty()) {
+    auto& r = rs[heap[0]];
+    *out++ = *r.first++;
+    if (r.first == r.second) {
+      heap[0] = heap.back();
+      heap.pop_back();
+    }
+    if (!heap.empty()) sift_down(0);
+  }
+}
+
+// Merges sorted inputs into `out`, one key range per thread (ties: the earlier input
+// first). Ranges are cut between keys (key_less), so the records of one key meet in
+// one range. finish(r, first, m) post-processes range r in place on its thread and
+// returns how many records it kept at the front; the kept records are then packed.
+// Returns their number.
+template <class T, class Less, class KeyLess, class Finish>
+std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<T>& out, const Less& less,
+                         const KeyLess& key_less, std::vector<std::size_t>& kept, Finish&& finish) {
+  std::size_t total = 0, biggest = 0;
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    total += in[i].size();
+    if (in[i].size() > in[biggest].size()) biggest = i;
+  }
+  out.resize(total);
+  const std::size_t ranges = total < (1u << 15) ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
+  const std::size_t k = in.size();
+  // bounds[i * (ranges + 1) + r]: where range r starts in input i; splitters are
+  // evenly spaced keys of the biggest input.
+  std::vector<std::size_t> bounds(k * (ranges + 1)), offset(ranges + 1, 0);
+  for (std::size_t r = 0; r <= ranges; ++r) {
+    const bool inner = r > 0 && r < ranges;
+    const T* split = inner ? &in[biggest][in[biggest].size() * r / ranges] : nullptr;
+    for (std::size_t i = 0; i < k; ++i) {
+      std::size_t b = r == 0 ? 0 : in[i].size();
+      if (inner) b = std::size_t(std::lower_bound(in[i].begin(), in[i].end(), *split, key_less) - in[i].begin());
+      bounds[i * (ranges + 1) + r] = b;
+      offset[r] += b;
+    }
+  }
+  kept.assign(ranges, 0);
+#pragma omp parallel for num_threads(int(ranges)) schedule(static, 1) if (ranges > 1)
+  for (std::int64_t rr = 0; rr < std::int64_t(ranges); ++rr) {
+    const std::size_t r = std::size_t(rr);
+    std::vector<std::pair<const T*, const T*>> rs(k);
+    for (std::size_t i = 0; i < k; ++i)
+      rs[i] = {in[i].data() + bounds[i * (ranges + 1) + r], in[i].data() + bounds[i * (ranges + 1) + r + 1]};
+    T* first = out.data() + offset[r];
+    multiway_merge(rs, first, less);
+    kept[r] = finish(r, first, offset[r + 1] - offset[r]);
+  }
+  std::size_t w = 0;
+  for (std::size_t r = 0; r < ranges; ++r) {
+    if (w != offset[r] && kept[r]) std::memmove(static_cast<void*>(out.data() + w), out.data() + offset[r], kept[r] * sizeof(T));
+    w += kept[r];
+  }
+  return w;
+}
+
 // ---------------------------------------------------------------------------------
 // The engine, for 32- or 64-bit labels.
 template <class L>
@@ -331,6 +425,7 @@ class Engine {
   Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep)
       : src_(src), opt_(opt), rep_(rep), log_(opt.max_listed), n_(src.point_count()), used_(n_), hull_used_(n_) {
     sampled_ = opt.sample < 1.0;
+    label_bits_ = std::max(1, int(std::bit_width(n_ > 0 ? n_ - 1 : 0)));
     if (sampled_) sample_cut_ = std::uint64_t(std::ldexp(opt.sample, 64));  // sample < 1: below 2^64
   }
 
@@ -354,15 +449,28 @@ class Engine {
   }
   std::string facet_text(const Facet& f) const { return "facet " + labels_text({f.v[0], f.v[1], f.v[2]}); }
 
+  // Stable radix sorts into FacetLess / edge order (records of one key keep their
+  // order, which is ordinal order for freshly generated records).
+  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const;
+  void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const;
   std::string make_tmpdir();
   void plan_memory();
   void load_points();
   void process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min);
+  // Per-thread buffers of a step's slice of tets.
+  struct Part {
+    std::vector<Facet> a, b, f, tmp;   // A and B facets, merged
+    std::vector<Edge> ea, eb, e, etmp;
+  };
   void process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
                     bool sorted_by_min, std::uint64_t threshold);
-  std::size_t fold(Facet* first, Facet* last, std::vector<PairCheck>& checks);
+  void build_part(Part& part, const L* canon, const std::uint8_t* flags, std::size_t lo, std::size_t hi,
+                  std::uint64_t first_ordinal, bool sorted_by_min);
+  // Folds runs of equal keys in place (returns the new size); new pairs go to chunk_checks_.
+  std::size_t fold(Facet* first, Facet* last);
   void combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks);
-  void check_pairs(const std::vector<PairCheck>& checks);
+  void check_pairs();  // the pairs fold() found
+  void check_pairs(const std::vector<PairCheck>& checks);  // on this thread
   void retire_facets(std::uint64_t threshold);
   void final_facet(const Facet& f);
   void merge_edges(std::uint64_t threshold);
@@ -389,14 +497,15 @@ class Engine {
   std::string tmp_parent_;
 
   // Open facets and edges, sorted; spills.
-  std::vector<Facet> live_, merged_, scratch_a_, scratch_b_;
-  std::vector<Edge> live_e_, merged_e_, edges_a_, edges_b_;
+  std::vector<Facet> live_, merged_;
+  std::vector<Edge> live_e_, merged_e_;
   std::unique_ptr<ExternalSorter<Facet, FacetLess<L>>> facet_spill_;
   std::unique_ptr<ExternalSorter<Edge, std::less<Edge>>> edge_spill_;
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
   std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
 
-  std::vector<PairCheck> checks_;
+  int label_bits_ = 1;  // bits of the largest label
+  std::vector<Part> parts_;
   std::vector<std::vector<PairCheck>> chunk_checks_;
   std::vector<std::size_t> bounds_, chunk_sizes_;
   std::vector<HullEdge> hull_edges_batch_;
@@ -408,6 +517,33 @@ class Engine {
   std::uint64_t facets_checked_ = 0, tets_checked_ = 0;
   double seconds_points_ = 0, seconds_tets_ = 0, seconds_final_ = 0;
 };
+
+template <class L>
+void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const {
+  const int b = label_bits_;
+  if (3 * b <= 64) {
+    radix_sort(v.data(), v.size(), tmp, 3 * b, [b](const Facet& f) {
+      return std::uint64_t(f.v[0]) << (2 * b) | std::uint64_t(f.v[1]) << b | std::uint64_t(f.v[2]);
+    });
+  } else {
+    for (int j = 2; j >= 0; --j)
+      radix_sort(v.data(), v.size(), tmp, b, [j](const Facet& f) { return std::uint64_t(f.v[j]); });
+  }
+}
+
+template <class L>
+void Engine<L>::sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const {
+  const int b = label_bits_;
+  if constexpr (sizeof(L) == 4) {
+    radix_sort(v.data(), v.size(), tmp, 2 * b,
+               [b](std::uint64_t e) { return (e >> 32) << b | (e & 0xFFFFFFFFu); });
+  } else if (2 * b <= 64) {
+    radix_sort(v.data(), v.size(), tmp, 2 * b, [b](const Edge& e) { return e.u << b | e.v; });
+  } else {
+    radix_sort(v.data(), v.size(), tmp, b, [](const Edge& e) { return e.v; });
+    radix_sort(v.data(), v.size(), tmp, b, [](const Edge& e) { return e.u; });
+  }
+}
 
 template <class L>
 std::string Engine<L>::make_tmpdir() {
@@ -634,140 +770,142 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
 }
 
 // Facets and edges of `count` canonical tets; then retire what no later tet can touch.
+// Two parallel regions: each thread builds the sorted records of a slice of the tets;
+// then each thread merges one key range of all slices and the open set, folds it and
+// runs the insphere tests of the pairs it formed.
 template <class L>
 void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::size_t count,
                              std::uint64_t first_ordinal, bool sorted_by_min, std::uint64_t threshold) {
-  // ---- facet records: A = the three facets through the smallest label, B = the one
-  // opposite it. Facet opposite s_i, as (others sorted, s_i), has the orientation of
-  // (s0..s3) times (-1)^(3-i); (s0..s3) has the tet's times (-1)^parity.
-  scratch_a_.resize(3 * count);
-  scratch_b_.resize(count);
-  std::vector<std::uint8_t> keep_a, keep_b;
-  const bool filter = sampled_;
-  if (filter) keep_a.assign(3 * count, 0), keep_b.assign(count, 0);
-#pragma omp parallel for schedule(static)
-  for (std::int64_t ii = 0; ii < std::int64_t(count); ++ii) {
-    const std::size_t i = std::size_t(ii);
-    const L* s = canon + 4 * i;
-    const std::uint64_t ordinal = first_ordinal + i;
-    if (flags[i] & 2) {  // broken: no facets; mark as filtered out
-      for (int j = 0; j < 3; ++j) scratch_a_[3 * i + j] = Facet{{0, 0, 0}, 0, ~0ull};
-      scratch_b_[i] = Facet{{0, 0, 0}, 0, ~0ull};
-      continue;
-    }
-    const int parity = flags[i] & 1;
-    auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
-    scratch_a_[3 * i + 0] = Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)};
-    scratch_a_[3 * i + 1] = Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)};
-    scratch_a_[3 * i + 2] = Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)};
-    scratch_b_[i] = Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)};
-    if (filter) {
-      keep_a[3 * i + 0] = facet_sampled(s[0], s[1], s[2]);
-      keep_a[3 * i + 1] = facet_sampled(s[0], s[1], s[3]);
-      keep_a[3 * i + 2] = facet_sampled(s[0], s[2], s[3]);
-      keep_b[i] = facet_sampled(s[1], s[2], s[3]);
-    }
+  const int threads = count >= 8192 ? std::max(1, omp_get_max_threads()) : 1;
+  if (parts_.size() < std::size_t(threads)) parts_.resize(std::size_t(threads));
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (threads > 1)
+  for (int p = 0; p < threads; ++p) {
+    const std::size_t lo = count * std::size_t(p) / std::size_t(threads);
+    const std::size_t hi = count * (std::size_t(p) + 1) / std::size_t(threads);
+    build_part(parts_[std::size_t(p)], canon, flags, lo, hi, first_ordinal, sorted_by_min);
   }
-  // Drop broken tets' records (x == ~0) and, in a sample, unsampled facets.
-  auto compact = [](std::vector<Facet>& v, const std::vector<std::uint8_t>* keep) {
-    std::size_t w = 0;
-    for (std::size_t r = 0; r < v.size(); ++r)
-      if (v[r].x != ~0ull && (!keep || (*keep)[r])) v[w++] = v[r];
-    v.resize(w);
-  };
-  compact(scratch_a_, filter ? &keep_a : nullptr);
-  compact(scratch_b_, filter ? &keep_b : nullptr);
-  facets_checked_ += scratch_a_.size() + scratch_b_.size();
-  const FacetLess<L> less;
-  if (sorted_by_min) {
-    // A is grouped by smallest label already: sort each group (a lower star).
-    for_group_chunks(
-        scratch_a_.size(), [&](std::size_t i) { return i == 0 || scratch_a_[i].v[0] != scratch_a_[i - 1].v[0]; },
-        [&](std::size_t, std::size_t lo, std::size_t hi) {
-          std::size_t g = lo;
-          while (g < hi) {
+
+  // ---- facets: merge the slices with the open set (open first on equal keys), fold.
+  if (chunk_checks_.size() < std::size_t(std::max(1, omp_get_max_threads())))
+    chunk_checks_.resize(std::size_t(std::max(1, omp_get_max_threads())));
+  {
+    std::vector<std::span<const Facet>> in;
+    in.emplace_back(live_);
+    for (int p = 0; p < threads; ++p) {
+      in.emplace_back(parts_[std::size_t(p)].f);
+      facets_checked_ += parts_[std::size_t(p)].f.size();
+    }
+    const FacetLess<L> less;
+    auto key_less = [](const Facet& a, const Facet& b) {
+      if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
+      if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
+      return a.v[2] < b.v[2];
+    };
+    const std::size_t n = merge_ranges(
+        in, merged_, less, key_less, chunk_sizes_, [&](std::size_t r, Facet* first, std::size_t m) {
+          auto& cc = chunk_checks_[r];
+          cc.clear();
+          std::size_t w = 0, g = 0;
+          while (g < m) {
+            Facet st = first[g];
             std::size_t e = g + 1;
-            while (e < hi && scratch_a_[e].v[0] == scratch_a_[g].v[0]) ++e;
-            std::sort(scratch_a_.begin() + std::ptrdiff_t(g), scratch_a_.begin() + std::ptrdiff_t(e), less);
+            for (; e < m && same_key(first[e], st); ++e) combine(st, first[e], cc);
+            first[w++] = st;
             g = e;
           }
-        },
-        bounds_);
-  } else {
-    parallel_sort(scratch_a_.data(), scratch_a_.data() + scratch_a_.size(), less);
+          check_pairs(cc);
+          return w;
+        });
+    merged_.resize(n);
+    std::swap(live_, merged_);
+    retire_facets(threshold);
   }
-  parallel_sort(scratch_b_.data(), scratch_b_.data() + scratch_b_.size(), less);
 
-  // ---- merge with the open facets (earlier records first on equal keys) and fold.
-  merged_.resize(live_.size() + scratch_a_.size() + scratch_b_.size());
-  {
-    // A and B into the tail of merged_, then the open set in front of them.
-    auto tail = merged_.begin() + std::ptrdiff_t(live_.size());
-    std::merge(scratch_a_.begin(), scratch_a_.end(), scratch_b_.begin(), scratch_b_.end(), tail, less);
-    // Merge live_ with [tail, end) into a fresh buffer: reuse scratch_a_ as it.
-    scratch_a_.resize(merged_.size());
-    std::merge(live_.begin(), live_.end(), tail, merged_.end(), scratch_a_.begin(), less);
-    std::swap(scratch_a_, merged_);
-  }
-  const std::size_t n = fold(merged_.data(), merged_.data() + merged_.size(), checks_);
-  merged_.resize(n);
-  check_pairs(checks_);
-  std::swap(live_, merged_);
-  retire_facets(threshold);
-
-  // ---- edges (not in a sample): A = the three through the smallest label, B = the rest.
+  // ---- edges (not in a sample): union of the slices and the open set.
   if (!sampled_) {
-    edges_a_.resize(3 * count);
-    edges_b_.resize(3 * count);
-    std::size_t wa = 0, wb = 0;
-    for (std::size_t i = 0; i < count; ++i) {
-      if (flags[i] & 2) continue;
-      const L* s = canon + 4 * i;
-      edges_a_[wa++] = make_edge(s[0], s[1]);
-      edges_a_[wa++] = make_edge(s[0], s[2]);
-      edges_a_[wa++] = make_edge(s[0], s[3]);
-      edges_b_[wb++] = make_edge(s[1], s[2]);
-      edges_b_[wb++] = make_edge(s[1], s[3]);
-      edges_b_[wb++] = make_edge(s[2], s[3]);
-    }
-    edges_a_.resize(wa);
-    edges_b_.resize(wb);
-    const std::less<Edge> eless;
-    if (sorted_by_min) {
-      for_group_chunks(
-          edges_a_.size(), [&](std::size_t i) { return i == 0 || edge_u(edges_a_[i]) != edge_u(edges_a_[i - 1]); },
-          [&](std::size_t, std::size_t lo, std::size_t hi) {
-            std::size_t g = lo;
-            while (g < hi) {
-              std::size_t e = g + 1;
-              while (e < hi && edge_u(edges_a_[e]) == edge_u(edges_a_[g])) ++e;
-              std::sort(edges_a_.begin() + std::ptrdiff_t(g), edges_a_.begin() + std::ptrdiff_t(e), eless);
-              g = e;
-            }
-          },
-          bounds_);
-    } else {
-      parallel_sort(edges_a_.data(), edges_a_.data() + edges_a_.size(), eless);
-    }
-    parallel_sort(edges_b_.data(), edges_b_.data() + edges_b_.size(), eless);
-    edges_a_.erase(std::unique(edges_a_.begin(), edges_a_.end()), edges_a_.end());
-    edges_b_.erase(std::unique(edges_b_.begin(), edges_b_.end()), edges_b_.end());
-    merged_e_.resize(edges_a_.size() + edges_b_.size());
-    std::merge(edges_a_.begin(), edges_a_.end(), edges_b_.begin(), edges_b_.end(), merged_e_.begin(), eless);
-    merged_e_.erase(std::unique(merged_e_.begin(), merged_e_.end()), merged_e_.end());
-    edges_a_.resize(merged_e_.size() + live_e_.size());
-    auto end = std::set_union(live_e_.begin(), live_e_.end(), merged_e_.begin(), merged_e_.end(), edges_a_.begin(), eless);
-    edges_a_.resize(std::size_t(end - edges_a_.begin()));
-    std::swap(live_e_, edges_a_);
+    std::vector<std::span<const Edge>> in;
+    in.emplace_back(live_e_);
+    for (int p = 0; p < threads; ++p) in.emplace_back(parts_[std::size_t(p)].e);
+    const std::less<Edge> less;
+    const std::size_t n = merge_ranges(in, merged_e_, less, less, chunk_sizes_, [](std::size_t, Edge* first, std::size_t m) {
+      return std::size_t(std::unique(first, first + m) - first);
+    });
+    merged_e_.resize(n);
+    std::swap(live_e_, merged_e_);
     merge_edges(threshold);
   }
 }
 
+// The sorted facet and edge records of tets [lo, hi) of a step, on one thread.
+// A = the three facets (edges) through the tet's smallest label, B = the rest. Facet
+// opposite s_i, written (others sorted, s_i), has the orientation of (s0..s3) times
+// (-1)^(3-i), and (s0..s3) has the tet's times (-1)^parity.
+template <class L>
+void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags, std::size_t lo, std::size_t hi,
+                           std::uint64_t first_ordinal, bool sorted_by_min) {
+  auto& a = part.a;
+  auto& b = part.b;
+  a.clear(), b.clear();
+  a.reserve(3 * (hi - lo)), b.reserve(hi - lo);
+  for (std::size_t i = lo; i < hi; ++i) {
+    if (flags[i] & 2) continue;  // broken: no facets
+    const L* s = canon + 4 * i;
+    const std::uint64_t ordinal = first_ordinal + i;
+    const int parity = flags[i] & 1;
+    auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
+    if (facet_sampled(s[0], s[1], s[2])) a.push_back(Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)});
+    if (facet_sampled(s[0], s[1], s[3])) a.push_back(Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)});
+    if (facet_sampled(s[0], s[2], s[3])) a.push_back(Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)});
+    if (facet_sampled(s[1], s[2], s[3])) b.push_back(Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)});
+  }
+  const FacetLess<L> less;
+  if (sorted_by_min) {
+    // A is grouped by smallest label already: sort each group (a lower star).
+    for (std::size_t g = 0; g < a.size();) {
+      std::size_t e = g + 1;
+      while (e < a.size() && a[e].v[0] == a[g].v[0]) ++e;
+      std::sort(a.begin() + std::ptrdiff_t(g), a.begin() + std::ptrdiff_t(e), less);
+      g = e;
+    }
+  } else {
+    sort_facets(a, part.tmp);
+  }
+  sort_facets(b, part.tmp);
+  part.f.resize(a.size() + b.size());
+  std::merge(a.begin(), a.end(), b.begin(), b.end(), part.f.begin(), less);
+
+  if (sampled_) return;
+  auto& ea = part.ea;
+  auto& eb = part.eb;
+  ea.clear(), eb.clear();
+  ea.reserve(3 * (hi - lo)), eb.reserve(3 * (hi - lo));
+  for (std::size_t i = lo; i < hi; ++i) {
+    if (flags[i] & 2) continue;
+    const L* s = canon + 4 * i;
+    ea.push_back(make_edge(s[0], s[1])), ea.push_back(make_edge(s[0], s[2])), ea.push_back(make_edge(s[0], s[3]));
+    eb.push_back(make_edge(s[1], s[2])), eb.push_back(make_edge(s[1], s[3])), eb.push_back(make_edge(s[2], s[3]));
+  }
+  if (sorted_by_min) {
+    for (std::size_t g = 0; g < ea.size();) {
+      std::size_t e = g + 1;
+      while (e < ea.size() && edge_u(ea[e]) == edge_u(ea[g])) ++e;
+      std::sort(ea.begin() + std::ptrdiff_t(g), ea.begin() + std::ptrdiff_t(e));
+      g = e;
+    }
+  } else {
+    sort_edges(ea, part.etmp);
+  }
+  sort_edges(eb, part.etmp);
+  ea.erase(std::unique(ea.begin(), ea.end()), ea.end());
+  eb.erase(std::unique(eb.begin(), eb.end()), eb.end());
+  part.e.resize(ea.size() + eb.size());
+  part.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), part.e.begin()), part.e.end());
+}
+
 // Folds runs of records with equal keys (sorted input) in place; returns the new size.
 template <class L>
-std::size_t Engine<L>::fold(Facet* first, Facet* last, std::vector<PairCheck>& checks) {
+std::size_t Engine<L>::fold(Facet* first, Facet* last) {
   const std::size_t n = std::size_t(last - first);
-  checks.clear();
   const int parts_hint = chunk_count(n);
   chunk_checks_.resize(std::size_t(parts_hint));
   chunk_sizes_.assign(std::size_t(parts_hint), 0);
@@ -794,7 +932,6 @@ std::size_t Engine<L>::fold(Facet* first, Facet* last, std::vector<PairCheck>& c
     const std::size_t lo = bounds_[p], m = chunk_sizes_[p];
     if (w != lo && m) std::memmove(static_cast<void*>(first + w), first + lo, m * sizeof(Facet));
     w += m;
-    checks.insert(checks.end(), chunk_checks_[p].begin(), chunk_checks_[p].end());
   }
   return w;
 }
@@ -867,11 +1004,17 @@ void Engine<L>::combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks
 
 // The local Delaunay test of each newly paired facet, in parallel.
 template <class L>
+void Engine<L>::check_pairs() {
+  std::uint64_t n = 0;
+  for (const auto& part : chunk_checks_) n += part.size();
+  const std::int64_t parts = std::int64_t(chunk_checks_.size());
+#pragma omp parallel for schedule(dynamic, 1) if (n > 8192)
+  for (std::int64_t p = 0; p < parts; ++p) check_pairs(chunk_checks_[std::size_t(p)]);
+}
+
+template <class L>
 void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
-  const std::int64_t n = std::int64_t(checks.size());
-#pragma omp parallel for schedule(dynamic, 4096) if (n > 8192)
-  for (std::int64_t i = 0; i < n; ++i) {
-    const PairCheck& c = checks[std::size_t(i)];
+  for (const PairCheck& c : checks) {
     const int s = core::insphere_sos(P(c.v[0]), P(c.v[1]), P(c.v[2]), P(c.dpos), P(c.dneg), c.v[0], c.v[1], c.v[2],
                                      c.dpos, c.dneg);
     if (s > 0)
@@ -881,7 +1024,7 @@ void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
                tet_text(c.tpos, c.v[0], c.v[1], c.v[2], c.dpos);
       });
   }
-  insphere_tests_ += std::uint64_t(n);
+  insphere_tests_ += checks.size();
 }
 
 // Facets whose smallest label is below `threshold` are final (or go to the spill if a
@@ -955,7 +1098,7 @@ void Engine<L>::merge_edges(std::uint64_t threshold) {
 template <class L>
 void Engine<L>::finish_facets() {
   retire_facets(~0ull);
-  scratch_a_ = {}, scratch_b_ = {}, merged_ = {};
+  parts_ = {}, merged_ = {};
   if (facet_spill_->records_pushed() == 0) return;
   // Groups may straddle merge batches: the tail group waits for the next batch.
   std::vector<Facet> pending;
@@ -967,8 +1110,8 @@ void Engine<L>::finish_facets() {
       while (end > 0 && same_key(pending[end - 1], pending.back())) --end;
       if (end == 0) return;
     }
-    const std::size_t n = fold(pending.data(), pending.data() + end, checks_);
-    check_pairs(checks_);
+    const std::size_t n = fold(pending.data(), pending.data() + end);
+    check_pairs();
     for (std::size_t i = 0; i < n; ++i) final_facet(pending[i]);
     pending.erase(pending.begin(), pending.begin() + std::ptrdiff_t(end));
     if (!hull_edges_batch_.empty()) {
@@ -990,7 +1133,7 @@ void Engine<L>::finish_facets() {
 template <class L>
 void Engine<L>::finish_edges() {
   merge_edges(~0ull);
-  live_e_ = {}, merged_e_ = {}, edges_a_ = {}, edges_b_ = {};
+  live_e_ = {}, merged_e_ = {};
   if (edge_spill_->records_pushed() == 0) return;
   bool have = false;
   Edge last{};

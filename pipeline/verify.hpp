@@ -73,7 +73,7 @@ struct VerifyOptions {
   std::uint64_t seed = 1;      // of the sample
   double volume_tolerance = 1e-9;  // relative
   std::size_t max_listed = 10;     // violations described, per kind (all are counted)
-  std::size_t batch_tets = std::size_t(1) << 18;  // tets per processing step (a frame is split)
+  std::size_t batch_tets = std::size_t(1) << 16;  // tets per processing step (a frame is split)
   bool progress = true;
   bool wide_labels = false;  // the 64-bit label path even when labels fit 32 bits (tests)
   std::size_t open_bytes = 0;  // cap on the open facets (edges: a third); 0: from memory_bytes (tests force spills)

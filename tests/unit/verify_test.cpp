@@ -633,5 +633,21 @@ TEST(ExternalSort, ParallelSortSorts) {
   EXPECT_EQ(v, ref);
 }
 
+TEST(ExternalSort, RadixSortIsStable) {
+  for (std::size_t n : {std::size_t(100), std::size_t(5000), std::size_t(300000)}) {
+    SCOPED_TRACE(n);
+    std::mt19937_64 g(n);
+    std::vector<Rec> v(n), tmp;
+    for (std::uint32_t i = 0; i < n; ++i) v[i] = {g() % 3000 + (std::uint64_t(1) << 40), i, 0};  // constant high digits
+    std::vector<Rec> ref = v;
+    std::stable_sort(ref.begin(), ref.end(), RecLess());
+    pipeline::radix_sort(v.data(), v.size(), tmp, 48, [](const Rec& r) { return r.key; });
+    for (std::size_t i = 0; i < n; ++i) {
+      ASSERT_EQ(v[i].key, ref[i].key) << i;
+      ASSERT_EQ(v[i].seq, ref[i].seq) << i;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tetstream
