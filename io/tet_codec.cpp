@@ -12,6 +12,7 @@
 #include <bit>
 #include <cstring>
 #include <limits>
+#include <utility>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -84,9 +85,12 @@ class Context {
     for (unsigned i = 0; i < n; ++i) {
       const std::uint16_t x = s.e[1 + i];
       const __m128i key = _mm_set1_epi16(static_cast<short>(x ^ 0x8000));
-      const unsigned below = unsigned(_mm_movemask_epi8(_mm_cmplt_epi16(b0, key))) |
-                             unsigned(_mm_movemask_epi8(_mm_cmplt_epi16(b1, key))) << 16;
-      off[std::popcount(below) / 2] = x;
+      // One bit per lane below x; then count them (SWAR: no POPCNT in baseline x86-64).
+      unsigned below = unsigned(_mm_movemask_epi8(_mm_packs_epi16(_mm_cmplt_epi16(b0, key), _mm_cmplt_epi16(b1, key))));
+      below = below - ((below >> 1) & 0x5555u);
+      below = (below & 0x3333u) + ((below >> 2) & 0x3333u);
+      below = (below + (below >> 4)) & 0x0F0Fu;
+      off[(below + (below >> 8)) & 0x1Fu] = x;
     }
 #else
     for (unsigned i = 0; i < n; ++i) {
@@ -190,13 +194,17 @@ inline void put_varint(std::vector<std::uint8_t>& out, std::uint64_t v) {
   out.push_back(static_cast<std::uint8_t>(v));
 }
 
-inline void put_escaped(std::vector<std::uint8_t>& out, std::uint64_t v) {
+// Writes an escaped value (format.md §4.2) at p; returns the end. At most 11 bytes.
+TS_FORCE_INLINE std::uint8_t* put_escaped(std::uint8_t* p, std::uint64_t v) {
   if (TS_LIKELY(v < 255)) {
-    out.push_back(static_cast<std::uint8_t>(v));
-  } else {
-    out.push_back(255);
-    put_varint(out, v - 255);
+    *p++ = static_cast<std::uint8_t>(v);
+    return p;
   }
+  *p++ = 255;
+  v -= 255;
+  while (v >= 0x80) *p++ = static_cast<std::uint8_t>(v | 0x80), v >>= 7;
+  *p++ = static_cast<std::uint8_t>(v);
+  return p;
 }
 
 template <class L>
@@ -247,32 +255,37 @@ constexpr auto network_pairs() {
   return pairs;
 }
 
+template <std::size_t N, std::size_t... I>
+TS_FORCE_INLINE void sorting_network(std::uint64_t* v, std::index_sequence<I...>) {
+  // Unrolled with constant indices, so the values stay in registers.
+  static constexpr auto kPairs = network_pairs<N>();
+  auto cx = [](std::uint64_t& x, std::uint64_t& y) {
+    const std::uint64_t a = x, b = y;
+    x = std::min(a, b), y = std::max(a, b);
+  };
+  (cx(v[kPairs[I][0]], v[kPairs[I][1]]), ...);
+}
+
 template <std::size_t N>
 TS_FORCE_INLINE void sorting_network(std::uint64_t* v) {
-  static constexpr auto kPairs = network_pairs<N>();
-  for (const auto& [a, b] : kPairs) {
-    const std::uint64_t x = v[a], y = v[b];
-    v[a] = std::min(x, y), v[b] = std::max(x, y);
-  }
+  sorting_network<N>(v, std::make_index_sequence<network_size<N>()>());
 }
 
 template <std::size_t N>
-void sort_padded(std::vector<std::uint64_t>& v) {
+void sort_padded(std::uint64_t* v, std::size_t n) {
   std::uint64_t a[N];
-  const std::size_t n = v.size();
-  std::copy(v.begin(), v.end(), a);
+  std::copy(v, v + n, a);
   std::fill(a + n, a + N, std::numeric_limits<std::uint64_t>::max());
   sorting_network<N>(a);
-  std::copy(a, a + n, v.begin());
+  std::copy(a, a + n, v);
 }
 
-void sort_small(std::vector<std::uint64_t>& v) {
-  const std::size_t n = v.size();
+void sort_small(std::uint64_t* v, std::size_t n) {
   if (n <= 1) return;
-  if (n <= 4) return sort_padded<4>(v);
-  if (n <= 8) return sort_padded<8>(v);
-  if (n <= 16) return sort_padded<16>(v);
-  std::sort(v.begin(), v.end());
+  if (n <= 4) return sort_padded<4>(v, n);
+  if (n <= 8) return sort_padded<8>(v, n);
+  if (n <= 16) return sort_padded<16>(v, n);
+  std::sort(v, v + n);
 }
 
 }  // namespace
@@ -403,7 +416,8 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
   auto& ghi = streams[kGapHi];
   auto& idx = streams[kIndex];
   auto& par = streams[kParity];
-  idx.reserve(3 * n + 64);
+  idx.resize(3 * n + 64);  // written through a pointer; trimmed to idx_used below
+  std::size_t idx_used = 0;
   par.reserve(n / 8 + 1);
 
   std::uint64_t prev_m = base;
@@ -421,7 +435,7 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
 
     // Classify each label of the group: known (its position in K(m)) or new.
     const std::size_t t = j - i;
-    codes.resize(3 * t);
+    if (codes.size() < 3 * t) codes.resize(3 * t);
     fresh.clear();
     unsigned seen = 0;
     for (std::size_t k = 0; k < t; ++k) {
@@ -439,7 +453,7 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
         }
       }
     }
-    sort_small(fresh);
+    sort_small(fresh.data(), fresh.size());
     fresh.erase(std::unique(fresh.begin(), fresh.end()), fresh.end());
     const unsigned absent_mask = ((1u << nk) - 1) & ~seen;
     put_varint(head, t);
@@ -461,8 +475,8 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
     // U(m) = the known labels still present merged with the new ones: U(m) itself, the
     // position in it of each known label (by its position in K) and of each new label.
     std::uint32_t known_pos[16];
-    fresh_pos.resize(fresh.size());
-    ulabels.resize(nk + fresh.size());
+    if (fresh_pos.size() < fresh.size()) fresh_pos.resize(fresh.size());
+    if (ulabels.size() < nk + fresh.size()) ulabels.resize(nk + fresh.size());
     std::uint32_t nu = 0;
     {
       std::size_t f = 0;
@@ -482,9 +496,9 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
     };
 
     // Stored order within the group: by (a, lo, hi, p), i.e. by positions in U(m).
-    keys.resize(t);
+    if (keys.size() < t) keys.resize(t);
     const bool packed = nu <= kMaxPackedPosition;
-    if (!packed) wide.resize(t);
+    if (!packed && wide.size() < t) wide.resize(t);
     for (std::size_t k = 0; k < t; ++k) {
       const Canon<L>& x = c[i + k];
       const std::uint64_t ia = pos(k, 0, x.a), il = pos(k, 1, x.lo), ih = pos(k, 2, x.hi);
@@ -495,11 +509,14 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
       }
     }
     if (packed) {
-      sort_small(keys);
+      sort_small(keys.data(), t);
     } else {
-      std::sort(wide.begin(), wide.end());
+      std::sort(wide.begin(), wide.begin() + std::ptrdiff_t(t));
     }
 
+    // At most 3 escaped values of 11 bytes per tet.
+    if (idx.size() < idx_used + 33 * t) idx.resize(std::max(2 * idx.size(), idx_used + 33 * t));
+    std::uint8_t* ip = idx.data() + idx_used;
     std::uint64_t ia_prev = 0;
     for (std::size_t k = 0; k < t; ++k) {
       std::uint64_t ia, il, ih, p;
@@ -509,17 +526,19 @@ void FrameEncoder::Impl::encode(std::span<const L> labels, EncodedFrame& out) {
       } else {
         ia = wide[k][0], il = wide[k][1], ih = wide[k][2], p = wide[k][3];
       }
-      put_escaped(idx, ia - ia_prev);
-      put_escaped(idx, il - ia - 1);
-      put_escaped(idx, ih - il - 1);
+      ip = put_escaped(ip, ia - ia_prev);
+      ip = put_escaped(ip, il - ia - 1);
+      ip = put_escaped(ip, ih - il - 1);
       ia_prev = ia;
       bits |= std::uint8_t(p << nbits);
       if (++nbits == 8) par.push_back(bits), bits = 0, nbits = 0;
       ctx.insert_tet(m, ulabels[ia], ulabels[il], ulabels[ih]);
     }
+    idx_used = std::size_t(ip - idx.data());
     i = j;
   }
   if (nbits) par.push_back(bits);
+  idx.resize(idx_used);
 
   // Payload: header, then each stream as one zstd frame.
   std::size_t bound = kFrameHeaderSize;

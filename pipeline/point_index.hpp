@@ -29,10 +29,11 @@ class PointIndex {
   void build(const SortedPoint* points, std::uint64_t count, int axis);
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
-  // closed ball (center, radius); points certainly outside are skipped.
-  template <class Visit>
+  // closed ball (center, radius); points certainly outside are skipped. Stops early,
+  // between cells, once stop() returns true.
+  template <class Visit, class Stop>
   void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last,
-                          Visit&& visit) const {
+                          Visit&& visit, Stop&& stop) const {
     if (first >= last) return;
     const std::uint64_t b0 = first / kBlockPoints, b1 = (last - 1) / kBlockPoints;
     for (std::uint64_t b = b0; b <= b1; ++b) {
@@ -42,6 +43,7 @@ class PointIndex {
       for (std::uint32_t c = blocks_[b].first_cell; c < c_end; ++c) {
         const Cell& cell = cells_[c];
         if (!box_meets_ball(cell.box, center, radius)) continue;
+        if (stop()) return;
         for (std::uint32_t i = cell.begin; i < cell.end; ++i) {
           const std::uint64_t label = base + offsets_[base + i];
           if (label >= first && label < last) visit(label);

@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <array>
 #include <limits>
+#include <unordered_set>
 
 namespace tetstream::pipeline {
 
@@ -121,6 +123,15 @@ class SegmentWorker {
   // are emitted, then kDone.
   std::vector<std::uint8_t> zone_state_;
   std::vector<std::uint64_t> owner_start_;  // scratch of the emission's counting sort
+  using TetKey = std::array<VertexId, 4>;  // sorted vertex ids: a tet's identity
+  struct TetKeyHash {
+    std::size_t operator()(const TetKey& k) const {
+      std::uint64_t h = 0x9E3779B97F4A7C15ULL;
+      for (VertexId v : k) h = (h ^ v) * 0xBF58476D1CE4E5B9ULL;
+      return std::size_t(h ^ (h >> 31));
+    }
+  };
+  std::unordered_set<TetKey, TetKeyHash> proved_empty_;
   static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
   SegmentStats stats_;
 };
@@ -156,6 +167,12 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   const double r2 = ball.radius * ball.radius;
   std::uint64_t best = kNone;
   double best_depth = -std::numeric_limits<double>::infinity();
+  // The query proves a ball empty by visiting all its candidates, but a ball that
+  // holds points (a tet of the window's ragged edge) can hold thousands: stop after
+  // a few conflicts and insert the deepest of those. Any conflicting point is a
+  // correct repair; the deepest of a sample converges nearly as fast.
+  constexpr std::uint64_t kEnoughConflicts = 16;
+  std::uint64_t found = 0;
   auto visit = [&](std::uint64_t label) {
     const double* p = view_.points[label].xyz;
     double d2 = 0;
@@ -173,13 +190,17 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
       conflict = core::infinite_conflict_sos(dt_.point(a), dt_.point(b), dt_.point(c), p, dt_.label(a),
                                              dt_.label(b), dt_.label(c), label) > 0;
     }
-    if (conflict && r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
+    if (!conflict) return;
+    ++found;
+    if (r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
   // each side of the window, searched through the spatial index.
   const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
-  view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_.window_begin), visit);
-  view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_end), last, visit);
+  auto enough = [&] { return found >= kEnoughConflicts; };
+  view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_.window_begin), visit, enough);
+  if (!enough())
+    view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_end), last, visit, enough);
   return best;
 }
 
@@ -196,6 +217,12 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
     if (left_clear && right_clear) return true;
   }
   ++stats_.range_failures;
+  // A tet proved empty stays empty for the rest of the segment: later repairs insert
+  // only points that were missing, and none of those is in its ball.
+  TetKey key;
+  for (int i = 0; i < 4; ++i) key[i] = dt_.vertex(t, i);
+  std::sort(key.begin(), key.end());
+  if (proved_empty_.count(key)) return true;
   ConflictBall query_ball = ball;
   if (!ball.valid) {
     // No usable bound: the query examines every missing point exactly.
@@ -203,7 +230,10 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
     query_ball.center[0] = query_ball.center[1] = query_ball.center[2] = 0;
   }
   const std::uint64_t deepest = deepest_missing_conflict(t, query_ball, lo, hi);
-  if (deepest == kNone) return true;
+  if (deepest == kNone) {
+    proved_empty_.insert(key);
+    return true;
+  }
   repairs.push_back(deepest);
   return false;
 }

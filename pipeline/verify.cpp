@@ -557,14 +557,15 @@ std::string Engine<L>::make_tmpdir() {
 template <class L>
 void Engine<L>::plan_memory() {
   const std::size_t points = std::size_t(n_) * 24 + used_.bytes() + hull_used_.bytes();
-  // Per processing step: canonical labels and flags of a frame, 4 facet and 6 edge
-  // records per tet of a step, and the merged copies.
+  // A frame: two label buffers (one decoding) and flags. A step, per tet: the slices'
+  // A, B, merged and radix buffers (11 facets, 15 edges), the merged copy (4 facets,
+  // 6 edges) and up to 2 pair checks.
   std::size_t max_frame = 0;
   for (std::size_t k = 0; k < src_.batch_count(); ++k)
     max_frame = std::max<std::size_t>(max_frame, std::size_t(src_.batch(k).tet_count));
   const std::size_t step = std::min<std::size_t>(max_frame, opt_.batch_tets);
-  const std::size_t scratch = max_frame * (2 * 4 * sizeof(L) + 1) + step * (8 * sizeof(Facet) + 12 * sizeof(Edge)) +
-                              step * 4 * sizeof(PairCheck) / 4;
+  const std::size_t scratch = max_frame * (2 * 4 * sizeof(L) + 1) +
+                              step * (15 * sizeof(Facet) + 21 * sizeof(Edge) + 2 * sizeof(PairCheck));
   const std::size_t fixed = points + scratch;
   std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
   if (rest < (std::size_t(16) << 20)) {
@@ -691,8 +692,8 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
   if (labels.size() % 4 != 0 || t != b.tet_count)
     throw InputError(src_.name() + ": frame " + std::to_string(k) + ": " + std::to_string(labels.size() / 4) +
                      " tets decoded, " + std::to_string(b.tet_count) + " expected");
-  // Canonical form in place: the labels sorted; flags bit 0: odd permutation; bit 1:
-  // broken (storage); bit 2: below the frame's declared smallest label.
+  // Canonical form in place: the labels sorted; flags bit 0: odd permutation (the
+  // sorted order has the opposite orientation), bit 1: broken (storage).
   std::vector<std::uint8_t> flags(t);
   constexpr std::size_t kChunk = 4096;  // fixed chunks: volume sums independent of threads
   const std::int64_t chunks = std::int64_t((t + kChunk - 1) / kChunk);

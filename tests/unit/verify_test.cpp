@@ -414,6 +414,58 @@ TEST(Verify, MissingHullTet) {
   expect_only(r, {Violation::kHullConvex});
 }
 
+// On a grid the hull's flat faces must be triangulated as the perturbed 2D Delaunay
+// triangulation (what infinite_conflict_sos says): flipping the diagonal of one hull
+// square (a 2-2 flip of the two tets below it) leaves a valid triangulation of the
+// hull, with coplanar hull facets that the perturbation rejects.
+TEST(Verify, FlatHullFacesFollowThePerturbation) {
+  Output o = triangulate(test::grid(5));
+  ASSERT_TRUE(verify_output(o, "grid_ok.tets").ok());
+  const Facets f(o.tets);
+  auto apex = [&](std::size_t t, const std::array<std::uint64_t, 3>& k) {
+    for (int i = 0; i < 4; ++i) {
+      const std::uint64_t l = o.tets[4 * t + std::size_t(i)];
+      if (std::find(k.begin(), k.end(), l) == k.end()) return l;
+    }
+    return std::uint64_t(0);
+  };
+  std::vector<std::pair<std::array<std::uint64_t, 3>, std::size_t>> hull;
+  for (const auto& [key, ts] : f.of)
+    if (ts.size() == 1) hull.push_back({key, ts[0]});
+  bool done = false;
+  for (std::size_t i = 0; i < hull.size() && !done; ++i)
+    for (std::size_t j = i + 1; j < hull.size() && !done; ++j) {
+      const auto& [k1, t1] = hull[i];
+      const auto& [k2, t2] = hull[j];
+      std::vector<std::uint64_t> common;
+      std::set_intersection(k1.begin(), k1.end(), k2.begin(), k2.end(), std::back_inserter(common));
+      if (common.size() != 2 || apex(t1, k1) != apex(t2, k2)) continue;
+      const std::uint64_t p = common[0], r = common[1], x = apex(t1, k1);
+      const std::uint64_t q = k1[0] + k1[1] + k1[2] - p - r, s = k2[0] + k2[1] + k2[2] - p - r;
+      if (core::orient3d(o.p(p), o.p(q), o.p(r), o.p(s)) != 0) continue;  // coplanar hull facets
+      // The flip is valid when p and r lie strictly on opposite sides of plane (q, s, x).
+      const int sp = core::orient3d(o.p(q), o.p(s), o.p(x), o.p(p));
+      const int sr = core::orient3d(o.p(q), o.p(s), o.p(x), o.p(r));
+      if (sp == 0 || sp == sr) continue;
+      std::vector<std::array<std::uint64_t, 4>> add = {{q, r, s, x}, {p, q, s, x}};
+      for (auto& t : add)
+        if (core::orient3d(o.p(t[0]), o.p(t[1]), o.p(t[2]), o.p(t[3])) < 0) std::swap(t[0], t[1]);
+      erase_tet(o.tets, std::max(t1, t2));
+      erase_tet(o.tets, std::min(t1, t2));
+      for (const auto& t : add) o.tets.insert(o.tets.end(), t.begin(), t.end());
+      sort_by_min(o.tets);
+      done = true;
+    }
+  ASSERT_TRUE(done);
+  const VerifyReport r = verify_output(o, "grid_flipped_hull.tets");
+  EXPECT_FALSE(r.ok());
+  EXPECT_GT(count(r, Violation::kHullConvex), 0u) << r.summary();
+  EXPECT_NE(r.summary().find("coplanar"), std::string::npos) << r.summary();
+  expect_only(r, {Violation::kHullConvex, Violation::kDelaunay});
+  EXPECT_EQ(r.euler, 1);
+  EXPECT_EQ(r.hull_euler, 2);
+}
+
 TEST(Verify, MissingPoint) {
   Output o;
   o.xyz = sorted_distinct(test::uniform_cube(1500, 41));
