@@ -16,7 +16,10 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <atomic>
+#include <exception>
 #include <malloc.h>
+#include <omp.h>
 #include <sys/mman.h>
 
 namespace tetstream::pipeline {
@@ -43,6 +46,49 @@ void release_pages(const void* data, std::size_t bytes) {
   const std::uintptr_t aligned = begin & ~(page - 1);
   madvise(reinterpret_cast<void*>(aligned), bytes + (begin - aligned), MADV_DONTNEED);
 }
+
+// Tets per frame, about: a frame is cut at the first change of minimum label after
+// this many tets. The segments emit their tets grouped by minimum label and the
+// zones follow each other in label order, so the job's whole stream is ordered by
+// minimum label, and the frames (each a set, stored canonically by the codec) are
+// the same for any segment plan or thread count: the same budget gives the same
+// bytes, and two budgets give the same frames but for the header's options.
+constexpr std::size_t kFrameTets = std::size_t(1) << 20;
+
+class FrameCutter {
+ public:
+  explicit FrameCutter(io::TetWriter& writer) : writer_(writer) {}
+
+  void add(const std::vector<std::uint64_t>& tets) {
+    pending_.insert(pending_.end(), tets.begin(), tets.end());
+    std::size_t begin = 0;
+    const std::size_t n = pending_.size() / 4;
+    while (n - begin > kFrameTets) {
+      std::size_t cut = begin + kFrameTets;
+      while (cut < n && min_label(cut) == min_label(cut - 1)) ++cut;
+      if (cut == n) break;  // the group may continue in the next batch
+      write(begin, cut);
+      begin = cut;
+    }
+    pending_.erase(pending_.begin(), pending_.begin() + std::ptrdiff_t(4 * begin));
+  }
+  void flush() {
+    if (!pending_.empty()) write(0, pending_.size() / 4);
+    pending_.clear();
+  }
+
+ private:
+  std::uint64_t min_label(std::size_t t) const {
+    const std::uint64_t* q = &pending_[4 * t];
+    return std::min(std::min(q[0], q[1]), std::min(q[2], q[3]));
+  }
+  void write(std::size_t begin, std::size_t end) {
+    writer_.add_tets(std::span<const std::uint64_t>(pending_.data() + 4 * begin, 4 * (end - begin)));
+  }
+
+  io::TetWriter& writer_;
+  std::vector<std::uint64_t> pending_;
+};
 
 }  // namespace
 
@@ -136,9 +182,11 @@ RunSummary run_job(const RunOptions& options) {
   const double buffer_width = options.buffer_spacings * spacing;
   const double points_per_length = double(view.count) / std::max(extent[view.axis], 1e-300);
   const double buffer_points = std::min(double(view.count), 2 * buffer_width * points_per_length);
+  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
   std::uint64_t zone_points = options.zone_points;
   if (zone_points == 0) {
-    const double avail = double(options.memory_bytes) - kFixedOverheadBytes -
+    // Each of the `threads` segments in flight gets an equal share of the budget.
+    const double avail = (double(options.memory_bytes) - kFixedOverheadBytes) / threads -
                          kWindowBytesPerPoint * (buffer_points + double(view.hull_labels.size()));
     const double z = avail / (kWindowBytesPerPoint + kOutputBytesPerPoint);
     if (z < 1000)
@@ -170,6 +218,8 @@ RunSummary run_job(const RunOptions& options) {
                        .dump();
   io::TetWriterOptions writer_options;
   writer_options.threads = options.threads;
+  // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
+  writer_options.frame_tets = 2 * kFrameTets;
   io::TetWriter writer(options.output, header, writer_options);
   {
     constexpr std::size_t kChunk = 1 << 16;
@@ -187,34 +237,74 @@ RunSummary run_job(const RunOptions& options) {
     release_pages(mapping.data(), mapping.size());
   }
 
-  // ---- stages 2-5: segments ----
+  // ---- stages 2-5: segments, `threads` at a time, written in segment order ----
+  // Each thread triangulates whole segments (they are independent given the sorted
+  // file); the ordered region hands their tets to the writer in plan order, so the
+  // bytes do not depend on the thread count, and a finished segment waits there for
+  // its predecessors: at most `threads` segments are in memory at once, which is
+  // what the zone size above was planned for.
   Progress progress("triangulating", "points", view.count, options.progress);
-  std::vector<std::uint64_t> tets;
-  for (const SegmentPlan& plan : plans) {
-    tets.clear();
-    auto t0 = Clock::now();
-    const SegmentStats s = triangulate_segment(view, plan, tets);
-    summary.seconds_triangulate += since(t0);
-    t0 = Clock::now();
-    writer.add_tets(std::span<const std::uint64_t>(tets));
-    summary.seconds_write += since(t0);
-    summary.zone_points += plan.zone_end - plan.zone_begin;
-    summary.window_points += s.window_points;
-    summary.repair_points += s.repair_points;
-    summary.range_failures += s.range_failures;
-    summary.queries += s.queries;
-    summary.rounds_max = std::max(summary.rounds_max, s.rounds);
-    summary.tets += s.tets;
-    spdlog::debug("segment [{}, {}): window {} (+{} repairs), {} range failures, {} queries, {} rounds, {} tets, "
-                  "build {:.2f}s check {:.2f}s, kernel {}",
-                  plan.zone_begin, plan.zone_end, s.window_points, s.repair_points, s.range_failures, s.queries,
-                  s.rounds, s.tets, s.seconds_build, s.seconds_check, human_bytes(double(s.kernel_bytes)));
-    release_pages(mapping.data(), mapping.size());
-    malloc_trim(0);  // hand the segment's freed heap back, so resident memory tracks the window
-    progress.add(plan.zone_end - plan.zone_begin);
+  FrameCutter cutter(writer);
+  std::exception_ptr failure;
+  std::atomic<bool> cancelled{false};
+  const auto stage_start = Clock::now();
+  const std::int64_t segment_count = std::int64_t(plans.size());
+#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads)
+  for (std::int64_t i = 0; i < segment_count; ++i) {
+    const SegmentPlan& plan = plans[std::size_t(i)];
+    std::vector<std::uint64_t> tets;
+    SegmentStats s;
+    if (!cancelled.load()) {
+      try {
+        s = triangulate_segment(view, plan, tets);
+      } catch (...) {
+        // A worker never throws out of the parallel region (that would terminate the
+        // process): the first failure is kept, the others stop, and it is rethrown
+        // after the join.
+#pragma omp critical(tetstream_run_failure)
+        if (!failure) failure = std::current_exception();
+        cancelled = true;
+      }
+    }
+#pragma omp ordered
+    {
+      if (!cancelled.load()) {
+        try {
+          const auto t0 = Clock::now();
+          cutter.add(tets);
+          summary.seconds_write += since(t0);
+        } catch (...) {
+#pragma omp critical(tetstream_run_failure)
+          if (!failure) failure = std::current_exception();
+          cancelled = true;
+        }
+        summary.seconds_segments += s.seconds_build + s.seconds_check;
+        summary.zone_points += plan.zone_end - plan.zone_begin;
+        summary.window_points += s.window_points;
+        summary.repair_points += s.repair_points;
+        summary.range_failures += s.range_failures;
+        summary.queries += s.queries;
+        summary.rounds_max = std::max(summary.rounds_max, s.rounds);
+        summary.tets += s.tets;
+        spdlog::debug("segment [{}, {}): window {} (+{} repairs), {} range failures, {} queries, {} rounds, {} tets, "
+                      "build {:.2f}s check {:.2f}s, kernel {}",
+                      plan.zone_begin, plan.zone_end, s.window_points, s.repair_points, s.range_failures, s.queries,
+                      s.rounds, s.tets, s.seconds_build, s.seconds_check, human_bytes(double(s.kernel_bytes)));
+        progress.add(plan.zone_end - plan.zone_begin);
+      }
+      std::vector<std::uint64_t>().swap(tets);
+      release_pages(mapping.data(), mapping.size());
+      malloc_trim(0);  // hand the segment's freed heap back, so resident memory tracks the windows
+    }
   }
+  if (failure) std::rethrow_exception(failure);
+  {
+    const auto t0 = Clock::now();
+    cutter.flush();
+    summary.seconds_write += since(t0);
+  }
+  summary.seconds_triangulate = since(stage_start) - summary.seconds_write;
   progress.finish();
-  std::vector<std::uint64_t>().swap(tets);
   auto t0 = Clock::now();
   writer.finish();
   summary.seconds_write += since(t0);

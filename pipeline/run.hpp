@@ -34,7 +34,8 @@ struct RunSummary {
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
   std::uint64_t tets = 0, output_bytes = 0;
   int axis = 0;
-  double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;
+  double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;  // wall clock
+  double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
   double redundant_ratio() const {  // points inserted beyond one per point, per point
     return points ? double(window_points + repair_points) / double(points) - 1.0 : 0.0;
   }

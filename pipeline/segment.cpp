@@ -101,9 +101,10 @@ class SegmentWorker {
  private:
   void load_window();
   // One round: marks the pending zone vertices whose stars hold a tet that is not
-  // safe (collecting repair points), emits the tets owned by the others, and
-  // returns how many zone vertices remain pending.
-  std::size_t check_round(std::vector<std::uint64_t>& repairs, std::vector<std::uint64_t>& out);
+  // safe (collecting repair points), declares the others final, and returns how
+  // many zone vertices remain pending.
+  std::size_t check_round(std::vector<std::uint64_t>& repairs);
+  void emit(std::vector<std::uint64_t>& out);
   bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
   // Exact emptiness query of tet t's conflict region against the missing points
   // whose axis coordinate lies in [lo, hi]; returns the deepest conflicting label,
@@ -122,7 +123,6 @@ class SegmentWorker {
   // Per zone vertex (index v - zone_first_): kPending until it is final and its tets
   // are emitted, then kDone.
   std::vector<std::uint8_t> zone_state_;
-  std::vector<std::uint64_t> owner_start_;  // scratch of the emission's counting sort
   using TetKey = std::array<VertexId, 4>;  // sorted vertex ids: a tet's identity
   struct TetKeyHash {
     std::size_t operator()(const TetKey& k) const {
@@ -240,11 +240,10 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
 
 // The round scans the tet arrays in memory order rather than walking vertex stars:
 // a zone vertex is final when no tet incident to it is unsafe, and a tet belongs to
-// the star of each of its vertices, so one pass marks the blocked vertices and a
-// second emits, for each final vertex, the tets whose minimum label it holds (the
-// minimum vertex filter). A final vertex's star never changes again: no later
-// repair point lies in any of its tets' balls.
-std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs, std::vector<std::uint64_t>& out) {
+// the star of each of its vertices, so one pass marks the blocked vertices. A final
+// vertex's star never changes again (no later repair point lies in any of its tets'
+// balls), so its tets can be emitted after the last round.
+std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
   const std::size_t slots = dt_.num_tet_slots();
   auto pending_zone_vertex = [&](VertexId v) {
     return v >= zone_first_ && v < zone_last_ && zone_state_[v - zone_first_] != kDone;
@@ -261,11 +260,22 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs, std:
     for (int i = 0; i < 4; ++i)
       if (v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i])) zone_state_[v[i] - zone_first_] = kBlocked;
   }
-  // Emission in owner order (a counting sort over the zone's labels, two passes over
-  // the tets): the container codes each tet from its minimum label, and a stream in
-  // label order compresses best and reads back in a spatially coherent order.
-  std::vector<std::uint64_t>& start = owner_start_;
-  start.assign(zone_state_.size() + 1, 0);
+  std::size_t still = 0;
+  for (auto& state : zone_state_) {
+    if (state == kPending) state = kDone;
+    else if (state == kBlocked) state = kPending, ++still;
+  }
+  return still;
+}
+
+// Minimum vertex filter, once every zone vertex is final: each finite tet whose
+// smallest label is a zone vertex is emitted, grouped by that label in increasing
+// order (a counting sort over the zone, two passes over the tets). The stream of a
+// whole job is then ordered by minimum label whatever the segment plan, which lets
+// the writer cut identical frames for any budget split or thread count.
+void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
+  const std::size_t slots = dt_.num_tet_slots();
+  std::vector<std::uint64_t> start(zone_state_.size() + 1, 0);
   auto owner_of = [&](TetId t, std::uint64_t q[4]) -> std::int64_t {
     int owner = 0;
     for (int i = 0; i < 4; ++i) {
@@ -273,7 +283,7 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs, std:
       if (q[i] < q[owner]) owner = i;
     }
     const VertexId m = dt_.vertex(t, owner);
-    if (m < zone_first_ || m >= zone_last_ || zone_state_[m - zone_first_] != kPending) return -1;
+    if (m < zone_first_ || m >= zone_last_) return -1;
     return std::int64_t(m - zone_first_);
   };
   for (int pass = 0; pass < 2; ++pass) {
@@ -282,11 +292,8 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs, std:
       std::uint64_t q[4];
       const std::int64_t m = owner_of(TetId(t), q);
       if (m < 0) continue;
-      if (pass == 0) {
-        ++start[std::size_t(m) + 1];
-      } else {
-        std::copy(q, q + 4, &out[4 * start[std::size_t(m)]++]);
-      }
+      if (pass == 0) ++start[std::size_t(m) + 1];
+      else std::copy(q, q + 4, &out[4 * start[std::size_t(m)]++]);
     }
     if (pass == 0) {
       const std::size_t base = out.size() / 4;
@@ -296,12 +303,6 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs, std:
       out.resize(4 * start.back());
     }
   }
-  std::size_t still = 0;
-  for (auto& state : zone_state_) {
-    if (state == kPending) state = kDone;
-    else if (state == kBlocked) state = kPending, ++still;
-  }
-  return still;
 }
 
 SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
@@ -320,7 +321,7 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
   for (;;) {
     ++stats_.rounds;
     repairs.clear();
-    if (check_round(repairs, out) == 0) break;
+    if (check_round(repairs) == 0) break;
     std::sort(repairs.begin(), repairs.end());
     repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
     // Append the repair points to the window and insert them.
@@ -335,6 +336,7 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
     stats_.repair_points += repairs.size();
   }
+  emit(out);
   stats_.seconds_check = since(t0);
   stats_.kernel_bytes = dt_.memory_bytes();
   return stats_;

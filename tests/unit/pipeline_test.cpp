@@ -11,6 +11,8 @@
 #include <algorithm>
 #include <array>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -40,8 +42,10 @@ class PipelineTest : public ::testing::Test {
     return path;
   }
 
-  pipeline::RunSummary run(const std::string& input, std::uint64_t zone_points, const std::string& name = "out.tets") {
+  pipeline::RunSummary run(const std::string& input, std::uint64_t zone_points, const std::string& name = "out.tets",
+                           int threads = 1) {
     pipeline::RunOptions o;
+    o.threads = threads;
     o.input = input;
     o.output = (dir_ / name).string();
     o.zone_points = zone_points;
@@ -138,6 +142,37 @@ TEST_F(PipelineTest, ResultDoesNotDependOnTheSegmentCount) {
   run(input, 100000, "one.tets");
   run(input, 700, "many.tets");
   EXPECT_EQ(container_tets((dir_ / "one.tets").string()), container_tets((dir_ / "many.tets").string()));
+}
+
+std::string file_bytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+TEST_F(PipelineTest, BytesDoNotDependOnTheThreadCount) {
+  const std::string input = write_points(dist(io::Distribution::kClusters, 12000, 9));
+  for (int threads : {1, 2, 3, 8}) run(input, 800, "t" + std::to_string(threads) + ".tets", threads);
+  const std::string one = file_bytes(dir_ / "t1.tets");
+  ASSERT_FALSE(one.empty());
+  for (int threads : {2, 3, 8})
+    EXPECT_TRUE(file_bytes(dir_ / ("t" + std::to_string(threads) + ".tets")) == one) << threads << " threads";
+}
+
+TEST_F(PipelineTest, StoredOrderDoesNotDependOnTheSegmentPlan) {
+  // Not only the set: the frames, hence the tets in stored order, are the same.
+  const std::string input = write_points(dist(io::Distribution::kUniform, 8000, 10));
+  run(input, 100000, "one.tets");
+  run(input, 500, "many.tets", 2);
+  auto stored = [](const std::string& path) {
+    io::TetReader reader(path);
+    std::vector<std::uint64_t> all, frame;
+    for (std::uint64_t k = 0; k < reader.frame_count(); ++k) {
+      reader.read_frame(k, frame);
+      all.insert(all.end(), frame.begin(), frame.end());
+    }
+    return all;
+  };
+  EXPECT_EQ(stored((dir_ / "one.tets").string()), stored((dir_ / "many.tets").string()));
 }
 
 TEST_F(PipelineTest, TooFewIndependentPointsIsAnInputError) {
