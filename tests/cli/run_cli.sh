@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# `tetstream run` as a user runs it: every input format, stdin, the README spelling,
+# verify on the result, --json, and the failure modes (bad input, bad options, I/O):
+# the right exit code, one line naming the problem, no output left looking complete,
+# no temporary files left behind.
+# Usage: bash run_cli.sh /path/to/tetstream
+set -euo pipefail
+T=$(realpath "${1:?usage: run_cli.sh /path/to/tetstream}")
+dir=$(mktemp -d)
+trap 'chmod -R u+w "$dir" 2>/dev/null; rm -rf "$dir"' EXIT
+cd "$dir"
+mkdir tmp
+fail() { echo "FAIL: $*" >&2; exit 1; }
+json() { python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+no_leftovers() {
+  [ -z "$(ls -A tmp)" ] || fail "temporary files left in tmp: $(ls tmp)"
+  ls ./*.partial >/dev/null 2>&1 && fail "partial output left: $(ls ./*.partial)"
+  return 0
+}
+
+# The README spelling, then verify; the same tets from every input format and stdin.
+"$T" -q gen --dist ellipsoid-shell --n 20000 --seed 7 -o points.f64
+s=$("$T" -q --json run points.f64 -o out.tets --memory 64M --tmpdir tmp --zone-points 2000)
+[ "$(echo "$s" | json "d['points'], d['segments'] >= 10, d['tets'] > 100000")" = "20000 True True" ] || fail "run --json: $s"
+"$T" -q verify out.tets >/dev/null || fail "verify rejected the output of run"
+no_leftovers
+for f in points.ply points.npy points.txt; do
+  "$T" -q gen --dist ellipsoid-shell --n 20000 --seed 7 -o "$f"
+  "$T" -q run "$f" -o "out-${f#points.}.tets" --memory 64M --tmpdir tmp --zone-points 2000
+  cmp -s <("$T" -q cat out.tets --original-ids) <("$T" -q cat "out-${f#points.}.tets" --original-ids) \
+    || fail "$f gives other tets than points.f64"
+done
+"$T" -q run - --format f64 -o stdin.tets --memory 64M --tmpdir tmp --zone-points 2000 < points.f64
+cmp -s <("$T" -q cat out.tets) <("$T" -q cat stdin.tets) || fail "stdin gives other tets"
+no_leftovers
+
+# Bad input: one line naming the file and offset, exit 1, nothing left behind.
+python3 -c "
+import struct
+open('nan.f64','wb').write(struct.pack('<9d', 0,0,0, 1,0,0, float('nan'),1,0))"
+set +e
+msg=$("$T" -q run nan.f64 -o bad.tets --tmpdir tmp 2>&1); rc=$?
+set -e
+[ $rc = 1 ] || fail "NaN input: exit $rc"
+[ "$(echo "$msg" | wc -l)" = 1 ] || fail "NaN input: more than one line: $msg"
+echo "$msg" | grep -q "nan.f64: byte 48" || fail "NaN input message: $msg"
+[ ! -e bad.tets ] || fail "NaN input left bad.tets"
+no_leftovers
+
+head -c 100 points.f64 > truncated.f64
+set +e; msg=$("$T" -q run truncated.f64 -o bad.tets --tmpdir tmp 2>&1); rc=$?; set -e
+[ $rc = 1 ] || fail "truncated input: exit $rc ($msg)"
+echo "$msg" | grep -q "truncated.f64" || fail "truncated message: $msg"
+no_leftovers
+
+python3 -c "
+import struct
+open('flat.f64','wb').write(b''.join(struct.pack('<3d', i % 7, i // 7, 0) for i in range(49)))"
+set +e; msg=$("$T" -q run flat.f64 -o bad.tets --tmpdir tmp 2>&1); rc=$?; set -e
+[ $rc = 1 ] || fail "coplanar input: exit $rc ($msg)"
+echo "$msg" | grep -q "affinely independent" || fail "coplanar message: $msg"
+[ ! -e bad.tets ] && [ ! -e bad.tets.partial ] || fail "coplanar input left output"
+no_leftovers
+
+# Usage errors: exit 2.
+set +e
+"$T" -q run points.f64 -o bad.tets --memory 12Q >/dev/null 2>&1; rc1=$?
+"$T" -q run points.f64 -o bad.tets --memory 1M >/dev/null 2>&1; rc2=$?
+"$T" -q run points.f64 >/dev/null 2>&1; rc3=$?
+set -e
+[ "$rc1 $rc2 $rc3" = "2 2 2" ] || fail "usage errors exit $rc1 $rc2 $rc3"
+
+# I/O failures: exit 3.
+set +e
+"$T" -q run does-not-exist.f64 -o bad.tets --tmpdir tmp >/dev/null 2>&1; rc1=$?
+"$T" -q run points.f64 -o bad.tets --tmpdir /nonexistent/dir >/dev/null 2>&1; rc2=$?
+set -e
+[ "$rc1 $rc2" = "3 3" ] || fail "I/O errors exit $rc1 $rc2"
+no_leftovers
+echo "run_cli: all checks passed"
