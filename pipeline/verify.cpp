@@ -378,6 +378,10 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
     total += in[i].size();
     if (in[i].size() > in[biggest].size()) biggest = i;
   }
+  if (out.capacity() < total) {
+    out = {};
+    out.reserve(total);  // exactly: no doubling of the biggest buffer
+  }
   out.resize(total);
   const std::size_t ranges = total < (1u << 15) ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
   const std::size_t k = in.size();
@@ -573,13 +577,14 @@ void Engine<L>::plan_memory() {
                  human_bytes(double(opt_.memory_bytes)), human_bytes(double(fixed)));
     rest = std::size_t(16) << 20;
   }
-  // The open sets live during the pass; the sorters merge after it (when the open
-  // sets are gone), so both may use most of the rest. Merged copies of the open sets
-  // double them while a step is merged in: budget half.
-  live_facet_budget_ = rest * 3 / 10;
-  live_edge_budget_ = rest / 10;
+  // During the pass: the open sets, each with a merged copy of the same size (3/8 +
+  // 1/8 of the rest, doubled). After it, the open sets are gone and one spill merges
+  // at a time (5/8), while the boundary-edge sort may hold its buffer (1/8) and the
+  // merged facets wait to be folded (1/8).
+  live_facet_budget_ = rest * 3 / 16;
+  live_edge_budget_ = rest / 16;
   if (opt_.open_bytes) live_facet_budget_ = opt_.open_bytes, live_edge_budget_ = opt_.open_bytes / 3;
-  sorter_budget_ = rest * 8 / 10;
+  sorter_budget_ = rest * 5 / 8;
   rep_.memory_planned = fixed + rest;
   spdlog::debug("verify: memory: points {}, scratch {}, open facets {}, open edges {}, sorts {}",
                 human_bytes(double(points)), human_bytes(double(scratch)), human_bytes(double(live_facet_budget_)),
@@ -640,26 +645,32 @@ void Engine<L>::run() {
     edge_spill_ = std::make_unique<ExternalSorter<Edge, std::less<Edge>>>(o);
     edge_spill_->set_reducer([](Edge* first, std::size_t n) { return std::size_t(std::unique(first, first + n) - first); });
     o.name = "hull-edges";
-    o.memory_bytes = std::max<std::size_t>(sorter_budget_ / 4, std::size_t(4) << 20);
+    o.memory_bytes = std::max<std::size_t>(sorter_budget_ / 5, std::size_t(4) << 20);
     hull_sorter_ = std::make_unique<ExternalSorter<HullEdge, HullEdgeLess<L>>>(o);
   }
 
-  // Pass over the tets, frame by frame; the next frame decodes while this one is
-  // checked. future_min[k]: the smallest label any frame after k may hold.
+  // Pass over the tets, frame by frame in order of their smallest label (frames
+  // are independent, so any order is allowed, and this one retires keys soonest even
+  // when a writer appended a late frame); the next frame decodes while this one is
+  // checked. later_min[j]: the smallest label of the frames after position j.
   const auto t1 = Clock::now();
   const std::size_t frames = src_.batch_count();
-  std::vector<std::uint64_t> future_min(frames + 1, ~0ull);
-  for (std::size_t k = frames; k-- > 0;) future_min[k] = std::min(future_min[k + 1], src_.batch(k).min_label);
+  std::vector<std::size_t> order(frames);
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return src_.batch(a).min_label < src_.batch(b).min_label; });
+  std::vector<std::uint64_t> later_min(frames + 1, ~0ull);
+  for (std::size_t j = frames; j-- > 0;) later_min[j] = std::min(later_min[j + 1], src_.batch(order[j]).min_label);
   Progress progress("verifying", "tets", src_.tet_count(), opt_.progress);
   std::vector<L> current, next;
   std::future<void> pending;
-  if (frames > 0) pending = std::async(std::launch::async, [&] { src_.read_batch(0, next); });
-  for (std::size_t k = 0; k < frames; ++k) {
+  if (frames > 0) pending = std::async(std::launch::async, [&] { src_.read_batch(order[0], next); });
+  for (std::size_t j = 0; j < frames; ++j) {
     pending.get();
     std::swap(current, next);
-    if (k + 1 < frames) pending = std::async(std::launch::async, [&, k] { src_.read_batch(k + 1, next); });
+    if (j + 1 < frames) pending = std::async(std::launch::async, [&, j] { src_.read_batch(order[j + 1], next); });
     try {
-      process_frame(k, current, future_min[k + 1]);
+      process_frame(order[j], current, later_min[j + 1]);
     } catch (...) {
       if (pending.valid()) pending.wait();
       throw;
@@ -667,10 +678,16 @@ void Engine<L>::run() {
     progress.add(current.size() / 4);
   }
   progress.finish();
-  live_.shrink_to_fit();
+  current = {}, next = {};
   seconds_tets_ = since(t1);
 
+  // Everything still open is final now (or goes to the spills): free the open sets
+  // before the spills merge.
   const auto t2 = Clock::now();
+  if (!sampled_) merge_edges(~0ull);
+  live_e_ = {}, merged_e_ = {};
+  retire_facets(~0ull);
+  live_ = {}, merged_ = {}, parts_ = {};
   finish_facets();
   if (!sampled_) {
     finish_hull();
@@ -1098,8 +1115,6 @@ void Engine<L>::merge_edges(std::uint64_t threshold) {
 // Everything still open is final now; spilled runs are merged with it.
 template <class L>
 void Engine<L>::finish_facets() {
-  retire_facets(~0ull);
-  parts_ = {}, merged_ = {};
   if (facet_spill_->records_pushed() == 0) return;
   // Groups may straddle merge batches: the tail group waits for the next batch.
   std::vector<Facet> pending;
@@ -1120,7 +1135,7 @@ void Engine<L>::finish_facets() {
       hull_edges_batch_.clear();
     }
   };
-  const std::size_t chunk = std::max<std::size_t>(sorter_budget_ / 8 / sizeof(Facet), 1 << 16);
+  const std::size_t chunk = std::max<std::size_t>(sorter_budget_ / 5 / sizeof(Facet), 1 << 16);
   facet_spill_->merge([&](std::span<const Facet> batch) {
     pending.insert(pending.end(), batch.begin(), batch.end());
     if (pending.size() >= chunk) flush(false);
@@ -1133,8 +1148,6 @@ void Engine<L>::finish_facets() {
 
 template <class L>
 void Engine<L>::finish_edges() {
-  merge_edges(~0ull);
-  live_e_ = {}, merged_e_ = {};
   if (edge_spill_->records_pushed() == 0) return;
   bool have = false;
   Edge last{};
