@@ -1,6 +1,7 @@
 #include "pipeline/run.hpp"
 
 #include "core/error.hpp"
+#include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/hull.hpp"
 #include "pipeline/point_sort.hpp"
@@ -53,7 +54,7 @@ void release_pages(const void* data, std::size_t bytes) {
 // minimum label, and the frames (each a set, stored canonically by the codec) are
 // the same for any segment plan or thread count: the same budget gives the same
 // bytes, and two budgets give the same frames but for the header's options.
-constexpr std::size_t kFrameTets = std::size_t(1) << 20;
+constexpr std::size_t kFrameTets = std::size_t(1) << 18;
 
 class FrameCutter {
  public:
@@ -309,6 +310,7 @@ RunSummary run_job(const RunOptions& options) {
   writer.finish();
   summary.seconds_write += since(t0);
   summary.output_bytes = writer.bytes_written();
+  summary.tet_bytes = io::TetReader(options.output).tet_bytes();
   summary.seconds_total = since(start);
   return summary;
 }

@@ -33,6 +33,7 @@ struct RunSummary {
   std::uint64_t segments = 0, zone_points = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
   std::uint64_t tets = 0, output_bytes = 0;
+  std::uint64_t tet_bytes = 0;  // of the tet frames alone (the file also holds the points)
   int axis = 0;
   double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;  // wall clock
   double seconds_segments = 0;  // summed over segments (more than the wall time with threads)

@@ -22,9 +22,9 @@ void run_run(RunArgs& args, Context& ctx) {
   o.progress = !ctx.global.quiet;
   const pipeline::RunSummary s = pipeline::run_job(o);
   const double tets_per_s = s.seconds_total > 0 ? double(s.tets) / s.seconds_total : 0;
-  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments; {} ({:.2f} B/tet)", s.points, s.duplicates,
-               s.tets, s.segments, pipeline::human_bytes(double(s.output_bytes)),
-               s.tets ? double(s.output_bytes) / double(s.tets) : 0.0);
+  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments; {} written, tets {:.2f} B/tet", s.points,
+               s.duplicates, s.tets, s.segments, pipeline::human_bytes(double(s.output_bytes)),
+               s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0);
   spdlog::info("time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
                "{:.1f}%, {} repair points, {} queries",
                s.seconds_sort, s.seconds_triangulate, s.seconds_write, s.seconds_total,
@@ -45,8 +45,10 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"redundant_ratio", s.redundant_ratio()},
                  {"tets", s.tets},
                  {"output_bytes", s.output_bytes},
-                 {"bytes_per_tet", s.tets ? double(s.output_bytes) / double(s.tets) : 0.0},
+                 {"tet_bytes", s.tet_bytes},
+                 {"bytes_per_tet", s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0},
                  {"seconds", {{"sort", s.seconds_sort},
+                              {"segments_summed", s.seconds_segments},
                               {"triangulate", s.seconds_triangulate},
                               {"write", s.seconds_write},
                               {"total", s.seconds_total}}},
