@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/predicates.hpp"
+#include "core/spatial_sort.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -119,8 +120,12 @@ class SegmentWorker {
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
   std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
-  VertexId zone_first_ = 0, zone_last_ = 0;  // local ids of the zone's vertices
-  // Per zone vertex (index v - zone_first_): kPending until it is final and its tets
+  // Zone index of local vertex v (its label minus zone_begin), or -1 outside the zone.
+  std::int64_t zone_index(VertexId v) const {
+    const std::uint64_t l = labels_[v];
+    return l >= plan_.zone_begin && l < plan_.zone_end ? std::int64_t(l - plan_.zone_begin) : -1;
+  }
+  // Per zone vertex (by zone index): kPending until it is final and its tets
   // are emitted, then kDone.
   std::vector<std::uint8_t> zone_state_;
   using TetKey = std::array<VertexId, 4>;  // sorted vertex ids: a tet's identity
@@ -154,6 +159,18 @@ void SegmentWorker::load_window() {
     for (int k = 0; k < 3; ++k) xyz_[3 * (n + j) + k] = p.xyz[k];
     labels_[n + j] = extra_[j];
   }
+  // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
+  // spatially coherent numbering keeps those accesses in cache (the labels, not the
+  // local ids, carry the order of the sorted file).
+  const std::vector<std::uint32_t> order = core::hilbert_order(xyz_.data(), total);
+  std::vector<double> xyz(3 * total);
+  std::vector<std::uint64_t> labels(total);
+  for (std::size_t i = 0; i < total; ++i) {
+    std::copy_n(&xyz_[3 * std::size_t(order[i])], 3, &xyz[3 * i]);
+    labels[i] = labels_[order[i]];
+  }
+  xyz_.swap(xyz);
+  labels_.swap(labels);
   stats_.window_points = total;
 }
 
@@ -246,7 +263,8 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
 std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
   const std::size_t slots = dt_.num_tet_slots();
   auto pending_zone_vertex = [&](VertexId v) {
-    return v >= zone_first_ && v < zone_last_ && zone_state_[v - zone_first_] != kDone;
+    const std::int64_t z = zone_index(v);
+    return z >= 0 && zone_state_[std::size_t(z)] != kDone;
   };
   for (std::size_t t = 0; t < slots; ++t) {
     if (!dt_.is_alive(TetId(t))) continue;
@@ -258,7 +276,7 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
     }
     if (!touches_pending || check_tet(TetId(t), repairs)) continue;
     for (int i = 0; i < 4; ++i)
-      if (v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i])) zone_state_[v[i] - zone_first_] = kBlocked;
+      if (v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i])) zone_state_[std::size_t(zone_index(v[i]))] = kBlocked;
   }
   std::size_t still = 0;
   for (auto& state : zone_state_) {
@@ -283,8 +301,7 @@ void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
       if (q[i] < q[owner]) owner = i;
     }
     const VertexId m = dt_.vertex(t, owner);
-    if (m < zone_first_ || m >= zone_last_) return -1;
-    return std::int64_t(m - zone_first_);
+    return zone_index(m);
   };
   for (int pass = 0; pass < 2; ++pass) {
     for (std::size_t t = 0; t < slots; ++t) {
@@ -312,11 +329,8 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
     throw InputError("the input has fewer than 4 affinely independent distinct points");
   stats_.seconds_build = since(t0);
 
-  // Zone vertices are local indices [zone_begin - window_begin, zone_end - window_begin).
   t0 = Clock::now();
-  zone_first_ = VertexId(plan_.zone_begin - plan_.window_begin);
-  zone_last_ = VertexId(plan_.zone_end - plan_.window_begin);
-  zone_state_.assign(zone_last_ - zone_first_, kPending);
+  zone_state_.assign(plan_.zone_end - plan_.zone_begin, kPending);
   std::vector<std::uint64_t> repairs;
   for (;;) {
     ++stats_.rounds;

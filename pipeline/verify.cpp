@@ -8,6 +8,8 @@
 #include "pipeline/temp_files.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -132,6 +134,15 @@ VerifySource::Batch ContainerSource::batch(std::size_t k) const {
 }
 void ContainerSource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
   reader_.read_points(first, n, xyz, nullptr);
+  // The reader maps the whole file; the copied records are not needed again, so drop
+  // their pages from this process's resident set (a read-only file mapping: they are
+  // read back from the file if anyone touches them again).
+  const std::span<const std::uint8_t> rec = reader_.point_records();
+  const std::size_t size = reader_.header().point_record_bytes();
+  const std::uintptr_t page = std::uintptr_t(::sysconf(_SC_PAGESIZE));
+  const std::uintptr_t b = std::uintptr_t(rec.data() + first * size), e = b + n * size;
+  const std::uintptr_t lo = (b + page - 1) / page * page, hi = e / page * page;
+  if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
 }
 void ContainerSource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
   reader_.read_frame(k, labels);
