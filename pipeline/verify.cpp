@@ -66,8 +66,9 @@ std::uint64_t VerifyReport::violations() const {
 
 std::string VerifyReport::summary() const {
   std::ostringstream s;
-  s << (ok() ? "VALID" : "INVALID") << (sampled ? " (sample " + std::to_string(sample) + ")" : std::string()) << ": "
-    << points << " points, " << tets << " tets";
+  s << (ok() ? "VALID" : "INVALID");
+  if (sampled) s << " (sample " << sample << ")";
+  s << ": " << points << " points, " << tets << " tets";
   if (ok() && !sampled) s << " are the Delaunay triangulation of the points";
   s << "\n";
   s << "  vertices " << vertices << ", facets " << facets << " (" << interior_facets << " interior, "

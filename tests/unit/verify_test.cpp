@@ -219,6 +219,8 @@ std::vector<Case> valid_cases() {
   c.push_back({"coplanar_layers", test::coplanar_layers(1500, 4, 6, 12)});
   c.push_back({"coarse", test::coarse(2000, 7, 5)});
   c.push_back({"duplicates", test::with_duplicates(800, 3, 8)});
+  c.push_back({"one_tet", {0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1}});
+  c.push_back({"cube_corners", test::grid(2)});  // 8 cospherical points, 6 coplanar hull faces
   return c;
 }
 
