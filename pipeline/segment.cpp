@@ -20,44 +20,18 @@ using core::VertexId;
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// A closed ball that contains the region in which a point would conflict with a tet:
-// the circumball for a finite tet; for an infinite tet (a hull facet of the window,
-// which is a facet of the global hull because the window holds the hull's vertices)
-// only points in the facet's plane, inside its circumcircle, can conflict, and a ball
-// through a, b, c and a point just outside the facet contains that disc.
+// A closed ball that contains every point that could conflict with a finite tet:
+// its circumball, enlarged by the rigorous error bounds of the computed centre and
+// radius.
 struct ConflictBall {
   double center[3];
-  double radius;  // rigorous upper bound of the true radius plus the centre error
-  bool valid;
+  double radius;
+  bool valid;  // false when the tet is too flat for a usable bound
 };
 
 ConflictBall conflict_ball(const core::Delaunay& dt, TetId t) {
   ConflictBall b{};
-  int inf = -1;
-  for (int i = 0; i < 4; ++i)
-    if (dt.vertex(t, i) == core::kInfiniteVertex) inf = i;
-  core::Circumsphere s;
-  if (inf < 0) {
-    s = dt.tet_circumsphere(t);
-  } else {
-    const double* p[3];
-    for (int m = 0; m < 3; ++m) p[m] = dt.point(dt.vertex(t, core::kFacetVertex[inf][m]));
-    // o: the centroid moved off the plane along the approximate outward normal by
-    // about the facet's size; (a, b, c, o) is then positively oriented (the outside
-    // is the positive side) unless the facet is too flat to tell, which the exact
-    // orient3d below catches.
-    double u[3], v[3], n[3], o[3];
-    for (int k = 0; k < 3; ++k) u[k] = p[1][k] - p[0][k], v[k] = p[2][k] - p[0][k];
-    n[0] = u[1] * v[2] - u[2] * v[1];
-    n[1] = u[2] * v[0] - u[0] * v[2];
-    n[2] = u[0] * v[1] - u[1] * v[0];
-    const double nn = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    const double size = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
-    if (!(nn > 0)) return b;
-    for (int k = 0; k < 3; ++k) o[k] = (p[0][k] + p[1][k] + p[2][k]) / 3 + n[k] / nn * size;
-    if (core::orient3d(p[0], p[1], p[2], o) <= 0) return b;
-    s = core::circumsphere(p[0], p[1], p[2], o);
-  }
+  const core::Circumsphere s = dt.tet_circumsphere(t);
   if (!s.valid) return b;
   for (int k = 0; k < 3; ++k) b.center[k] = s.center[k];
   // Every point of the true ball lies within radius + radius_error of the true
@@ -178,9 +152,6 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   ++stats_.queries;
   VertexId v[4];
   for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
-  int inf = -1;
-  for (int i = 0; i < 4; ++i)
-    if (v[i] == core::kInfiniteVertex) inf = i;
   const double r2 = ball.radius * ball.radius;
   std::uint64_t best = kNone;
   double best_depth = -std::numeric_limits<double>::infinity();
@@ -197,16 +168,9 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
     if (d2 > r2) return;  // outside the enclosing ball: cannot conflict
     if (std::binary_search(extra_.begin(), extra_.end(), label)) return;
     ++stats_.query_points;
-    bool conflict;
-    if (inf < 0) {
-      conflict = core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), p,
-                                    dt_.label(v[0]), dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]), label) > 0;
-    } else {
-      const VertexId a = v[core::kFacetVertex[inf][0]], b = v[core::kFacetVertex[inf][1]],
-                     c = v[core::kFacetVertex[inf][2]];
-      conflict = core::infinite_conflict_sos(dt_.point(a), dt_.point(b), dt_.point(c), p, dt_.label(a),
-                                             dt_.label(b), dt_.label(c), label) > 0;
-    }
+    const bool conflict = core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), p,
+                                             dt_.label(v[0]), dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]),
+                                             label) > 0;
     if (!conflict) return;
     ++found;
     if (r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
@@ -222,6 +186,12 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
 }
 
 bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
+  // An infinite tet (a hull facet of the window) needs no check: a point can conflict
+  // with it only by lying beyond the facet's plane, which no point does since the
+  // window's hull is the global hull, or on the plane, inside the facet's
+  // circumcircle. A point on that plane lies on the global hull's boundary, and
+  // every such point is in the window: hull_labels holds all of them (hull.hpp).
+  if (dt_.is_infinite(t)) return true;
   const ConflictBall ball = conflict_ball(dt_, t);
   double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
   if (ball.valid) {
