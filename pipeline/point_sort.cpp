@@ -1,6 +1,7 @@
 #include "pipeline/point_sort.hpp"
 
 #include "core/error.hpp"
+#include "pipeline/external_sort.hpp"
 #include "pipeline/hull.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/temp_files.hpp"
@@ -11,7 +12,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <queue>
 #include <unordered_set>
 
 namespace tetstream::pipeline {
@@ -22,30 +22,6 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 constexpr std::size_t kReadChunk = 1 << 16;  // points per read() call
-constexpr std::size_t kMergeBlockBytes = std::size_t(1) << 20;
-
-// Sequential reader of SortedPoint records from one run file, one block at a time.
-class RunCursor {
- public:
-  RunCursor(const std::string& path, std::size_t block_records)
-      : file_(path, "rb"), block_(block_records) {
-    refill();
-  }
-  bool done() const { return pos_ == end_; }
-  const SortedPoint& head() const { return block_[pos_]; }
-  void pop() {
-    if (++pos_ == end_) refill();
-  }
-
- private:
-  void refill() {
-    end_ = file_.read(block_.data(), sizeof(SortedPoint), block_.size());
-    pos_ = 0;
-  }
-  BinaryFile file_;
-  std::vector<SortedPoint> block_;
-  std::size_t pos_ = 0, end_ = 0;
-};
 
 }  // namespace
 
@@ -100,7 +76,11 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   const std::size_t run_points =
       std::max<std::size_t>(kReadChunk, options.memory_bytes / 3 / (sizeof(SortedPoint) + 3 * sizeof(double)));
   const std::size_t hull_piece = std::max<std::size_t>(4096, options.memory_bytes / 4 / 320);
-  std::vector<std::string> run_paths;
+  ExternalSortOptions sorter_options;
+  sorter_options.memory_bytes = options.memory_bytes / 3;
+  sorter_options.dir = tmp.dir();
+  sorter_options.name = "points";
+  ExternalSorter<SortedPoint, decltype(before)> sorter(sorter_options, before);
   std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
   std::vector<SortedPoint> run;
   run.reserve(std::min<std::uint64_t>(run_points, result.input_count));
@@ -111,7 +91,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
     std::vector<double> run_xyz;
     auto flush_run = [&] {
       if (run.empty()) return;
-      std::sort(run.begin(), run.end(), before);
+      parallel_sort(run.data(), run.data() + run.size(), before);
       run_xyz.resize(3 * run.size());
       for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
       // Hull candidates piece by piece, so the kernel's memory stays a fraction of
@@ -121,11 +101,8 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
         for (std::uint32_t i : hull_vertex_candidates(&run_xyz[3 * first], n))
           hull_originals.insert(run[first + i].original);
       }
-      const std::string path = tmp.path("run-" + std::to_string(run_paths.size()));
-      BinaryFile out(path, "wb");
-      out.write(run.data(), sizeof(SortedPoint), run.size());
-      out.close();
-      run_paths.push_back(path);
+      sorter.push_sorted_run(std::span<SortedPoint>(run));
+      ++result.runs;
       run.clear();
     };
     while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
@@ -145,58 +122,43 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
                        " points, then " + std::to_string(next_original) + ")");
   }
   std::vector<SortedPoint>().swap(run);
-  result.runs = run_paths.size();
   result.seconds_runs = since(t0);
 
   // ---- merge, dropping exact duplicates ----
   t0 = Clock::now();
   result.path = tmp.path("sorted.points");
   {
-    const std::size_t block_records =
-        std::max<std::size_t>(256, std::min(kMergeBlockBytes, options.memory_bytes / 4 / std::max<std::size_t>(1, run_paths.size())) /
-                                       sizeof(SortedPoint));
-    std::vector<std::unique_ptr<RunCursor>> cursors;
-    for (const auto& p : run_paths) cursors.push_back(std::make_unique<RunCursor>(p, block_records));
-    auto later = [&](std::size_t a, std::size_t b) { return before(cursors[b]->head(), cursors[a]->head()); };
-    std::priority_queue<std::size_t, std::vector<std::size_t>, decltype(later)> heap(later);
-    for (std::size_t i = 0; i < cursors.size(); ++i)
-      if (!cursors[i]->done()) heap.push(i);
-
     BinaryFile out(result.path, "wb");
     std::vector<SortedPoint> block;
-    block.reserve(block_records);
+    block.reserve(std::size_t(1) << 15);
     SortedPoint last{};
     bool have_last = false;
     std::vector<std::uint64_t> hull_labels;
     Progress progress("merging", "points", result.input_count, options.progress);
-    while (!heap.empty()) {
-      const std::size_t i = heap.top();
-      heap.pop();
-      const SortedPoint p = cursors[i]->head();
-      cursors[i]->pop();
-      if (!cursors[i]->done()) heap.push(i);
-      const bool candidate = hull_originals.count(p.original) != 0;
-      // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
-      if (have_last && p.xyz[0] == last.xyz[0] && p.xyz[1] == last.xyz[1] && p.xyz[2] == last.xyz[2]) {
-        ++result.duplicates;  // the first occurrence (smallest original index) stays
-        if (candidate) hull_labels.push_back(result.count - 1);
-        continue;
+    sorter.merge([&](std::span<const SortedPoint> batch) {
+      for (const SortedPoint& p : batch) {
+        const bool candidate = hull_originals.count(p.original) != 0;
+        // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
+        if (have_last && p.xyz[0] == last.xyz[0] && p.xyz[1] == last.xyz[1] && p.xyz[2] == last.xyz[2]) {
+          ++result.duplicates;  // the first occurrence (smallest original index) stays
+          if (candidate) hull_labels.push_back(result.count - 1);
+          continue;
+        }
+        if (candidate) hull_labels.push_back(result.count);
+        block.push_back(p);
+        last = p;
+        have_last = true;
+        ++result.count;
+        if (block.size() == block.capacity()) {
+          out.write(block.data(), sizeof(SortedPoint), block.size());
+          progress.add(block.size());
+          block.clear();
+        }
       }
-      if (candidate) hull_labels.push_back(result.count);
-      block.push_back(p);
-      last = p;
-      have_last = true;
-      ++result.count;
-      if (block.size() == block_records) {
-        out.write(block.data(), sizeof(SortedPoint), block.size());
-        progress.add(block.size());
-        block.clear();
-      }
-    }
+    });
     out.write(block.data(), sizeof(SortedPoint), block.size());
     out.close();
     progress.finish();
-    for (const auto& p : run_paths) remove_file(p);
     std::sort(hull_labels.begin(), hull_labels.end());
     hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
     result.hull_labels = std::move(hull_labels);

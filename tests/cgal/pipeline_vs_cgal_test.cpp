@@ -5,6 +5,7 @@
 #include "io/point_writer.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/run.hpp"
+#include "../unit/tet_sets.hpp"
 
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -24,7 +25,7 @@ using K = CGAL::Exact_predicates_inexact_constructions_kernel;
 using Vb = CGAL::Triangulation_vertex_base_with_info_3<std::uint64_t, K>;
 using Tds = CGAL::Triangulation_data_structure_3<Vb>;
 using CgalDT = CGAL::Delaunay_triangulation_3<K, Tds>;
-using Quad = std::array<std::uint64_t, 4>;
+using testing_util::Quad;
 
 struct Case {
   io::Distribution dist;
@@ -70,23 +71,12 @@ TEST_P(PipelineVsCgal, SameTets) {
   const CgalDT dt(pts.begin(), pts.end());
   std::vector<Quad> ref;
   for (auto cell = dt.finite_cells_begin(); cell != dt.finite_cells_end(); ++cell) {
-    Quad q{cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(), cell->vertex(3)->info()};
-    std::sort(q.begin(), q.end());
-    ref.push_back(q);
+    testing_util::add_quad(ref, cell->vertex(0)->info(), cell->vertex(1)->info(), cell->vertex(2)->info(),
+                           cell->vertex(3)->info());
   }
   std::sort(ref.begin(), ref.end());
 
-  std::vector<Quad> ours;
-  std::vector<std::uint64_t> labels;
-  for (std::uint64_t k = 0; k < reader.frame_count(); ++k) {
-    reader.read_frame(k, labels);
-    for (std::size_t i = 0; i < labels.size(); i += 4) {
-      Quad q{labels[i], labels[i + 1], labels[i + 2], labels[i + 3]};
-      std::sort(q.begin(), q.end());
-      ours.push_back(q);
-    }
-  }
-  std::sort(ours.begin(), ours.end());
+  const std::vector<Quad> ours = testing_util::container_quads(output);
   std::filesystem::remove_all(dir);
   EXPECT_TRUE(std::adjacent_find(ours.begin(), ours.end()) == ours.end()) << "a tet written twice";
   std::vector<Quad> missing, extra;

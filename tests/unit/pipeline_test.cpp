@@ -5,6 +5,7 @@
 #include "io/point_writer.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/run.hpp"
+#include "tet_sets.hpp"
 
 #include <gtest/gtest.h>
 
@@ -19,7 +20,7 @@
 namespace tetstream {
 namespace {
 
-using Quad = std::array<std::uint64_t, 4>;
+using testing_util::Quad;
 
 class PipelineTest : public ::testing::Test {
  protected:
@@ -56,21 +57,7 @@ class PipelineTest : public ::testing::Test {
 
   // The container's tets as sorted quadruples, and, from its own sorted points, the
   // in-core kernel's tets (labels = positions in the container's point order).
-  static std::vector<Quad> container_tets(const std::string& path) {
-    io::TetReader reader(path);
-    std::vector<Quad> out;
-    std::vector<std::uint64_t> labels;
-    for (std::uint64_t k = 0; k < reader.frame_count(); ++k) {
-      reader.read_frame(k, labels);
-      for (std::size_t i = 0; i < labels.size(); i += 4) {
-        Quad q{labels[i], labels[i + 1], labels[i + 2], labels[i + 3]};
-        std::sort(q.begin(), q.end());
-        out.push_back(q);
-      }
-    }
-    std::sort(out.begin(), out.end());
-    return out;
-  }
+  static std::vector<Quad> container_tets(const std::string& path) { return testing_util::container_quads(path); }
   static std::vector<Quad> incore_tets(const std::string& path) {
     io::TetReader reader(path);
     const std::size_t n = std::size_t(reader.point_count());
@@ -80,11 +67,7 @@ class PipelineTest : public ::testing::Test {
     core::Delaunay dt;
     EXPECT_EQ(dt.build(xyz.data(), nullptr, n), core::BuildStatus::kOk);
     std::vector<Quad> out;
-    dt.for_each_finite_tet([&](const core::VertexId* v) {
-      Quad q{v[0], v[1], v[2], v[3]};
-      std::sort(q.begin(), q.end());
-      out.push_back(q);
-    });
+    dt.for_each_finite_tet([&](const core::VertexId* v) { testing_util::add_quad(out, v[0], v[1], v[2], v[3]); });
     std::sort(out.begin(), out.end());
     return out;
   }
