@@ -33,7 +33,7 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 // Bytes per window point at the kernel's peak: tets (~6.7 x 33 bytes), vertex arrays,
 // coordinates, labels, the mapped sorted record and the spatial index, with headroom
 // for the allocator; measured with /usr/bin/time on uniform data.
-constexpr double kWindowBytesPerPoint = 400;
+constexpr double kWindowBytesPerPoint = 480;
 // Bytes per zone point for the emitted tets (4 x 8-byte labels, ~6.7 tets).
 constexpr double kOutputBytesPerPoint = 220;
 // What the budget keeps for everything else: writer buffers, encoders, the runtime.
@@ -187,7 +187,9 @@ RunSummary run_job(const RunOptions& options) {
   std::uint64_t zone_points = options.zone_points;
   if (zone_points == 0) {
     // Each of the `threads` segments in flight gets an equal share of the budget.
-    const double avail = (double(options.memory_bytes) - kFixedOverheadBytes) / threads -
+    // 10% of the budget is kept back for allocator slack and the pages of the sorted
+    // file that a window's queries touch (released after each segment).
+    const double avail = (0.9 * double(options.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / threads -
                          kWindowBytesPerPoint * (buffer_points + double(view.hull_labels.size()));
     const double z = avail / (kWindowBytesPerPoint + kOutputBytesPerPoint);
     if (z < 1000)
