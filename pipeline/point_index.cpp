@@ -1,12 +1,14 @@
 #include "pipeline/point_index.hpp"
 
+#include "pipeline/temp_files.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
 namespace tetstream::pipeline {
 
-void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis) {
+void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis, bool release_file_pages) {
   offsets_.assign(count, 0);
   cells_.clear();
   blocks_.clear();
@@ -49,6 +51,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis)
       ++block.cells;
     }
     blocks_.push_back(block);
+    if (release_file_pages) release_mapped_pages(points + base, n * sizeof(SortedPoint));
   }
 }
 

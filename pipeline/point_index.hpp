@@ -25,8 +25,11 @@ class PointIndex {
   static constexpr std::uint32_t kGrid = 12;           // cells per side of a block's grid
 
   PointIndex() = default;
-  // Builds the index over points[0, count) sorted along `axis`.
-  void build(const SortedPoint* points, std::uint64_t count, int axis);
+  // Builds the index over points[0, count) sorted along `axis`. When the points are
+  // a read-only file mapping, release_file_pages hands each block's pages back to
+  // the page cache once it is indexed (one pass, bounded resident set); never set it
+  // for anonymous memory, whose pages MADV_DONTNEED would zero.
+  void build(const SortedPoint* points, std::uint64_t count, int axis, bool release_file_pages = false);
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
   // closed ball (center, radius); points certainly outside are skipped. Stops early,

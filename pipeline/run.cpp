@@ -21,7 +21,6 @@
 #include <exception>
 #include <malloc.h>
 #include <omp.h>
-#include <sys/mman.h>
 
 namespace tetstream::pipeline {
 
@@ -39,14 +38,6 @@ constexpr double kOutputBytesPerPoint = 220;
 // What the budget keeps for everything else: writer buffers, encoders, the runtime.
 constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
 
-// Returns pages of the mapping to the page cache, so that resident memory stays that
-// of the current window however much of the file the job has read.
-void release_pages(const void* data, std::size_t bytes) {
-  const std::size_t page = 4096;
-  const auto begin = reinterpret_cast<std::uintptr_t>(data);
-  const std::uintptr_t aligned = begin & ~(page - 1);
-  madvise(reinterpret_cast<void*>(aligned), bytes + (begin - aligned), MADV_DONTNEED);
-}
 
 // Tets per frame, about: a frame is cut at the first change of minimum label after
 // this many tets. The segments emit their tets grouped by minimum label and the
@@ -160,7 +151,7 @@ RunSummary run_job(const RunOptions& options) {
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
   PointIndex index;
-  index.build(view.points, view.count, view.axis);
+  index.build(view.points, view.count, view.axis, /*release_file_pages=*/true);
   view.index = &index;
 
   // The global hull: the hull of the runs' candidates.
@@ -187,9 +178,9 @@ RunSummary run_job(const RunOptions& options) {
   std::uint64_t zone_points = options.zone_points;
   if (zone_points == 0) {
     // Each of the `threads` segments in flight gets an equal share of the budget.
-    // 10% of the budget is kept back for allocator slack and the pages of the sorted
+    // 20% of the budget is kept back for allocator slack and the pages of the sorted
     // file that a window's queries touch (released after each segment).
-    const double avail = (0.9 * double(options.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / threads -
+    const double avail = (0.8 * double(options.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / threads -
                          kWindowBytesPerPoint * (buffer_points + double(view.hull_labels.size()));
     const double z = avail / (kWindowBytesPerPoint + kOutputBytesPerPoint);
     if (z < 1000)
@@ -236,8 +227,9 @@ RunSummary run_job(const RunOptions& options) {
         ids[i] = p.original;
       }
       writer.add_points(xyz.data(), ids.data(), n);
+      release_mapped_pages(view.points + first, n * sizeof(SortedPoint));
     }
-    release_pages(mapping.data(), mapping.size());
+    release_mapped_pages(mapping.data(), mapping.size());
   }
 
   // ---- stages 2-5: segments, `threads` at a time, written in segment order ----
@@ -296,7 +288,7 @@ RunSummary run_job(const RunOptions& options) {
         progress.add(plan.zone_end - plan.zone_begin);
       }
       std::vector<std::uint64_t>().swap(tets);
-      release_pages(mapping.data(), mapping.size());
+      release_mapped_pages(mapping.data(), mapping.size());
       malloc_trim(0);  // hand the segment's freed heap back, so resident memory tracks the windows
     }
   }

@@ -3,10 +3,13 @@
 #include "core/error.hpp"
 
 #include <cerrno>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <vector>
+#include <sys/mman.h>
+#include <unistd.h>
 
 namespace tetstream::pipeline {
 
@@ -31,6 +34,14 @@ TempDir::~TempDir() {
 void remove_file(const std::string& path) {
   std::error_code ec;
   std::filesystem::remove(path, ec);
+}
+
+void release_mapped_pages(const void* data, std::size_t bytes) {
+  if (bytes == 0) return;
+  const std::uintptr_t page = std::uintptr_t(sysconf(_SC_PAGESIZE));
+  const auto begin = reinterpret_cast<std::uintptr_t>(data);
+  const std::uintptr_t aligned = begin & ~(page - 1);
+  madvise(reinterpret_cast<void*>(aligned), bytes + (begin - aligned), MADV_DONTNEED);
 }
 
 BinaryFile::BinaryFile(const std::string& path, const char* mode) : path_(path) {

@@ -24,6 +24,11 @@ class TempDir {
 
 void remove_file(const std::string& path);  // ignores a missing file
 
+// Hands the pages of [data, data + bytes) of a read-only file mapping back to the page
+// cache (madvise MADV_DONTNEED), so that a linear pass over a mapped file larger than
+// memory keeps a bounded resident set; a later access faults them back in.
+void release_mapped_pages(const void* data, std::size_t bytes);
+
 // A binary file with checked I/O: every failure (ENOSPC, EIO) throws IoError naming
 // the file, so no stage carries on with a short write.
 class BinaryFile {
