@@ -103,6 +103,47 @@ bool in_parallel();  // omp_in_parallel(): no nested teams
 int team_size();     // omp_get_num_threads()
 int thread_id();     // omp_get_thread_num()
 
+
+// The heap of a k-way merge: a binary min-heap of source indices, ordered by the
+// sources' current heads (`before(a, b)`: source a's head comes first; ties go to the
+// smaller index, so equal records leave in source order).
+template <class Before>
+class MergeHeap {
+ public:
+  MergeHeap(Before before, std::size_t capacity) : before_(std::move(before)) { heap_.reserve(capacity); }
+  void push(std::size_t source) { heap_.push_back(source); }
+  void build() {
+    for (std::size_t i = heap_.size(); i-- > 0;) sift_down(i);
+  }
+  bool empty() const { return heap_.empty(); }
+  std::size_t top() const { return heap_[0]; }
+  // After the top source advanced: `exhausted` drops it, otherwise it is re-placed.
+  void advance_top(bool exhausted) {
+    if (exhausted) {
+      heap_[0] = heap_.back();
+      heap_.pop_back();
+    }
+    if (!heap_.empty()) sift_down(0);
+  }
+
+ private:
+  bool first(std::size_t a, std::size_t b) const { return before_(a, b) || (!before_(b, a) && a < b); }
+  void sift_down(std::size_t i) {
+    const std::size_t n = heap_.size();
+    for (;;) {
+      std::size_t m = i;
+      const std::size_t l = 2 * i + 1, r = l + 1;
+      if (l < n && first(heap_[l], heap_[m])) m = l;
+      if (r < n && first(heap_[r], heap_[m])) m = r;
+      if (m == i) return;
+      std::swap(heap_[i], heap_[m]);
+      i = m;
+    }
+  }
+  Before before_;
+  std::vector<std::size_t> heap_;
+};
+
 }  // namespace detail
 
 // Sorts in place with all OpenMP threads (not stable; no extra memory beyond the stack).
@@ -354,41 +395,17 @@ class ExternalSorter {
     std::vector<std::unique_ptr<Cursor>> cur;
     cur.reserve(k);
     for (const Run& r : runs) cur.push_back(std::make_unique<Cursor>(r.path, block));
-    // Binary min-heap of run indices by (head, run index).
-    std::vector<std::size_t> heap;
-    heap.reserve(k);
-    auto before = [&](std::size_t a, std::size_t b) {
-      const T& x = cur[a]->head();
-      const T& y = cur[b]->head();
-      if (less_(x, y)) return true;
-      if (less_(y, x)) return false;
-      return a < b;
-    };
-    auto sift_down = [&](std::size_t i) {
-      const std::size_t n = heap.size();
-      for (;;) {
-        std::size_t m = i, l = 2 * i + 1, r = l + 1;
-        if (l < n && before(heap[l], heap[m])) m = l;
-        if (r < n && before(heap[r], heap[m])) m = r;
-        if (m == i) return;
-        std::swap(heap[i], heap[m]);
-        i = m;
-      }
-    };
+    detail::MergeHeap heap([&](std::size_t a, std::size_t b) { return less_(cur[a]->head(), cur[b]->head()); }, k);
     for (std::size_t i = 0; i < k; ++i)
-      if (!cur[i]->done()) heap.push_back(i);
-    for (std::size_t i = heap.size(); i-- > 0;) sift_down(i);
+      if (!cur[i]->done()) heap.push(i);
+    heap.build();
     std::vector<T> out;
     out.reserve(out_records);
     while (!heap.empty()) {
-      Cursor& c = *cur[heap[0]];
+      Cursor& c = *cur[heap.top()];
       out.push_back(c.head());
       c.pop();
-      if (c.done()) {
-        heap[0] = heap.back();
-        heap.pop_back();
-      }
-      if (!heap.empty()) sift_down(0);
+      heap.advance_top(c.done());
       if (out.size() == out_records) {
         emit(std::span<const T>(out));
         out.clear();

@@ -347,33 +347,13 @@ void multiway_merge(std::vector<std::pair<const T*, const T*>>& rs, T* out, cons
     std::merge(rs[0].first, rs[0].second, rs[1].first, rs[1].second, out, less);
     return;
   }
-  std::vector<std::size_t> heap(rs.size());
-  std::iota(heap.begin(), heap.end(), std::size_t(0));
-  auto before = [&](std::size_t a, std::size_t b) {
-    if (less(*rs[a].first, *rs[b].first)) return true;
-    if (less(*rs[b].first, *rs[a].first)) return false;
-    return a < b;
-  };
-  auto sift_down = [&](std::size_t i) {
-    const std::size_t n = heap.size();
-    for (;;) {
-      std::size_t m = i, l = 2 * i + 1, r = l + 1;
-      if (l < n && before(heap[l], heap[m])) m = l;
-      if (r < n && before(heap[r], heap[m])) m = r;
-      if (m == i) return;
-      std::swap(heap[i], heap[m]);
-      i = m;
-    }
-  };
-  for (std::size_t i = heap.size(); i-- > 0;) sift_down(i);
+  detail::MergeHeap heap([&](std::size_t a, std::size_t b) { return less(*rs[a].first, *rs[b].first); }, rs.size());
+  for (std::size_t i = 0; i < rs.size(); ++i) heap.push(i);
+  heap.build();
   while (!heap.empty()) {
-    auto& r = rs[heap[0]];
+    auto& r = rs[heap.top()];
     *out++ = *r.first++;
-    if (r.first == r.second) {
-      heap[0] = heap.back();
-      heap.pop_back();
-    }
-    if (!heap.empty()) sift_down(0);
+    heap.advance_top(r.first == r.second);
   }
 }
 
