@@ -22,8 +22,9 @@ struct RunOptions {
   std::string tmpdir;       // empty: the output's directory
   int threads = 0;          // 0: all cores
   // Buffer thickness in mean point spacings. The paper uses about 3; since hull facets
-  // need no query here, 2 is faster (scripts/bench-pipeline, 10^6 uniform and shell at
-  // --memory 256M: 9.8-10.1 s against 12.1-12.9 s with 3).
+  // need no query here, 2 is faster: `tetstream run P.f64 --memory 256M --buffer B` on
+  // 10^6 uniform points took 9.5-10.1 s with B = 2 and 11.2-12.9 s with B = 3 (two
+  // cores, same session), and 17.9 s against 19.0 s on the ellipsoid shell.
   double buffer_spacings = 2.0;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
   bool progress = true;
