@@ -13,6 +13,7 @@ enum class ExitCode : int {
   kBadInput = 1,   // malformed, truncated, non-finite or degenerate input
   kUsage = 2,      // bad command line or options
   kIoFailure = 3,  // I/O or resource failure (disk full, unreadable file, out of memory)
+  kInterrupted = 130,  // stopped by SIGINT/SIGTERM (128 + 2, the shell's convention)
 };
 
 class Error : public std::runtime_error {

@@ -3,6 +3,7 @@
 #include "core/error.hpp"
 #include "pipeline/external_sort.hpp"
 #include "pipeline/hull.hpp"
+#include "pipeline/interrupt.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/temp_files.hpp"
 
@@ -54,6 +55,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
           hi[k] = std::max(hi[k], chunk[3 * i + k]);
         }
       if (spool_file) spool_file->write(chunk.data(), 3 * sizeof(double), n);
+      check_interrupted();
       result.input_count += n;
       progress.add(n);
     }
@@ -114,6 +116,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
         if (run.size() == run_points) flush_run();
       }
       progress.add(n);
+      check_interrupted();
     }
     flush_run();
     progress.finish();
@@ -136,6 +139,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
     std::vector<std::uint64_t> hull_labels;
     Progress progress("merging", "points", result.input_count, options.progress);
     sorter.merge([&](std::span<const SortedPoint> batch) {
+      check_interrupted();
       for (const SortedPoint& p : batch) {
         const bool candidate = hull_originals.count(p.original) != 0;
         // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.

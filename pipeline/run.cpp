@@ -4,6 +4,7 @@
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/hull.hpp"
+#include "pipeline/interrupt.hpp"
 #include "pipeline/point_sort.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/segment.hpp"
@@ -251,6 +252,7 @@ RunSummary run_job(const RunOptions& options) {
     SegmentStats s;
     if (!cancelled.load()) {
       try {
+        check_interrupted();
         s = triangulate_segment(view, plan, tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the

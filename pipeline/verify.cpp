@@ -1,5 +1,7 @@
 #include "pipeline/verify.hpp"
 
+#include "pipeline/interrupt.hpp"
+
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "io/tet_reader.hpp"
@@ -668,6 +670,7 @@ void Engine<L>::run() {
       throw;
     }
     progress.add(current.size() / 4);
+    check_interrupted();
   }
   progress.finish();
   current = {}, next = {};

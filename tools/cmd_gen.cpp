@@ -2,6 +2,7 @@
 #include "core/error.hpp"
 #include "io/point_generators.hpp"
 #include "io/point_writer.hpp"
+#include "pipeline/interrupt.hpp"
 #include "pipeline/progress.hpp"
 #include "tools/command.hpp"
 
@@ -64,6 +65,7 @@ void run_gen(const GenArgs& args, Context& ctx) {
     }
     writer->write(xyz.data(), n);
     progress.add(n);
+    pipeline::check_interrupted();
   }
   writer->commit();
   progress.finish();

@@ -1,5 +1,6 @@
 // tetstream: exact 3D Delaunay triangulation of point sets larger than memory.
 #include "core/error.hpp"
+#include "pipeline/interrupt.hpp"
 #include "tools/command.hpp"
 
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -25,7 +26,8 @@ constexpr const char* kExitCodes =
     "  0  success\n"
     "  1  bad input (malformed, truncated or non-finite data; a failed verification)\n"
     "  2  usage error (unknown option, bad value)\n"
-    "  3  I/O or resource failure (unreadable file, disk full, out of memory)\n";
+    "  3  I/O or resource failure (unreadable file, disk full, out of memory)\n"
+    "  130  interrupted (Ctrl-C, SIGTERM): temporary files are removed, no output is left\n";
 
 void configure_logging(const GlobalOptions& g) {
   // Logs go to stderr so stdout stays clean for data (`cat`) and the --json summary.
@@ -66,6 +68,7 @@ int main(int argc, char** argv) {
 
   app.parse_complete_callback([&ctx] {
     configure_logging(ctx.global);
+    pipeline::install_interrupt_handlers();
     if (ctx.global.threads > 0) omp_set_num_threads(ctx.global.threads);
   });
 

@@ -77,4 +77,14 @@ set +e
 set -e
 [ "$rc1 $rc2" = "3 3" ] || fail "I/O errors exit $rc1 $rc2"
 no_leftovers
+# Ctrl-C: exit 130, temporary files and the partial output removed.
+"$T" -q gen --n 2000000 --seed 3 -o big.f64
+"$T" -q run big.f64 -o big.tets --tmpdir tmp --memory 256M &
+pid=$!
+sleep 1
+kill -INT $pid
+set +e; wait $pid; rc=$?; set -e
+[ $rc = 130 ] || fail "interrupted run: exit $rc"
+[ ! -e big.tets ] || fail "interrupted run left big.tets"
+no_leftovers
 echo "run_cli: all checks passed"

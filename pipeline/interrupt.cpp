@@ -1,0 +1,37 @@
+#include "pipeline/interrupt.hpp"
+
+#include <atomic>
+#include <csignal>
+#include <string>
+
+namespace tetstream::pipeline {
+
+namespace {
+std::atomic<int> g_signal{0};
+
+extern "C" void on_signal(int sig) {
+  if (g_signal.exchange(sig) != 0) {
+    // Second signal: the user means it.
+    std::signal(sig, SIG_DFL);
+    std::raise(sig);
+  }
+}
+}  // namespace
+
+Interrupted::Interrupted(int signal)
+    : Error(ExitCode::kInterrupted, std::string("interrupted by signal ") + std::to_string(signal) +
+                                        "; temporary files removed, no output written") {}
+
+void install_interrupt_handlers() {
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+}
+
+void check_interrupted() {
+  if (const int sig = g_signal.load(std::memory_order_relaxed)) throw Interrupted(sig);
+}
+
+}  // namespace tetstream::pipeline
