@@ -65,7 +65,7 @@ void Delaunay::reserve(std::size_t points) {
   duplicate_of_.reserve(points);
 }
 
-void Delaunay::reset(std::size_t n) {
+void Delaunay::reset() {
   tet_vertex_.clear();
   tet_neighbor_.clear();
   tet_flags_.clear();
@@ -82,11 +82,10 @@ void Delaunay::reset(std::size_t n) {
   new_tets_.reserve(256);
   new_slots_.reserve(256);
   edge_table_.assign(64 * 64, kNoTet);
-  (void)n;
 }
 
 BuildStatus Delaunay::build(const double* xyz, const std::uint64_t* labels, std::size_t n) {
-  reset(n);
+  reset();
   // The order is computed before the tet arrays are reserved, so its temporary
   // keys never coexist with them: peak memory stays that of the tets.
   std::vector<std::uint32_t> order = brio_order(xyz, n);
@@ -95,7 +94,7 @@ BuildStatus Delaunay::build(const double* xyz, const std::uint64_t* labels, std:
 
   std::uint32_t used[4];
   if (!make_initial_tet(order, used)) {
-    reset(n);
+    reset();
     set_points(xyz, labels, n);
     return BuildStatus::kTooFewPoints;
   }

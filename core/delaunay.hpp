@@ -146,7 +146,7 @@ class Delaunay {
     std::uint32_t facet;  // position of the new point in v
   };
 
-  void reset(std::size_t n);
+  void reset();
   bool make_initial_tet(const std::vector<std::uint32_t>& order, std::uint32_t used[4]);
   TetId locate(const double* p, TetId start);
   bool in_conflict(TetId t, const double* p, std::uint64_t label) const;

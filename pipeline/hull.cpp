@@ -4,6 +4,7 @@
 #include "core/predicates.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 
 namespace tetstream::pipeline {
@@ -33,20 +34,24 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   std::iota(all.begin(), all.end(), 0u);
   if (n < 4) return all;
 
-  // The extreme point in each of the 26 directions of {-1,0,1}^3 \ {0}.
-  std::vector<std::uint32_t> extreme;
+  // The extreme point in each of the 26 directions of {-1,0,1}^3 \ {0}, in one pass.
+  int dir[26][3];
+  int nd = 0;
   for (int dx = -1; dx <= 1; ++dx)
     for (int dy = -1; dy <= 1; ++dy)
-      for (int dz = -1; dz <= 1; ++dz) {
-        if (dx == 0 && dy == 0 && dz == 0) continue;
-        std::uint32_t best = 0;
-        double best_dot = -1e308;
-        for (std::size_t i = 0; i < n; ++i) {
-          const double dot = dx * xyz[3 * i] + dy * xyz[3 * i + 1] + dz * xyz[3 * i + 2];
-          if (dot > best_dot) best_dot = dot, best = std::uint32_t(i);
-        }
-        extreme.push_back(best);
-      }
+      for (int dz = -1; dz <= 1; ++dz)
+        if (dx != 0 || dy != 0 || dz != 0) dir[nd][0] = dx, dir[nd][1] = dy, dir[nd][2] = dz, ++nd;
+  std::uint32_t best[26] = {};
+  double best_dot[26];
+  std::fill(best_dot, best_dot + 26, -std::numeric_limits<double>::infinity());
+  for (std::size_t i = 0; i < n; ++i) {
+    const double* p = xyz + 3 * i;
+    for (int d = 0; d < 26; ++d) {
+      const double dot = dir[d][0] * p[0] + dir[d][1] * p[1] + dir[d][2] * p[2];
+      if (dot > best_dot[d]) best_dot[d] = dot, best[d] = std::uint32_t(i);
+    }
+  }
+  std::vector<std::uint32_t> extreme(best, best + 26);
   std::sort(extreme.begin(), extreme.end());
   extreme.erase(std::unique(extreme.begin(), extreme.end()), extreme.end());
 

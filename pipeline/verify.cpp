@@ -467,6 +467,9 @@ class Engine {
   // Folds runs of equal keys in place (returns the new size); new pairs go to chunk_checks_.
   std::size_t fold(Facet* first, Facet* last);
   void combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks);
+  // Combines each run of equal keys in [first, first + n) into its first record,
+  // packed at the front; returns how many records remain.
+  std::size_t fold_equal_keys(Facet* first, std::size_t n, std::vector<PairCheck>& checks);
   void check_pairs();  // the pairs fold() found
   void check_pairs(const std::vector<PairCheck>& checks);  // on this thread
   void retire_facets(std::uint64_t threshold);
@@ -818,14 +821,7 @@ void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::siz
         in, merged_, less, key_less, chunk_sizes_, [&](std::size_t r, Facet* first, std::size_t m) {
           auto& cc = chunk_checks_[r];
           cc.clear();
-          std::size_t w = 0, g = 0;
-          while (g < m) {
-            Facet st = first[g];
-            std::size_t e = g + 1;
-            for (; e < m && same_key(first[e], st); ++e) combine(st, first[e], cc);
-            first[w++] = st;
-            g = e;
-          }
+          const std::size_t w = fold_equal_keys(first, m, cc);
           check_pairs(cc);
           return w;
         });
@@ -915,6 +911,19 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
   part.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), part.e.begin()), part.e.end());
 }
 
+template <class L>
+std::size_t Engine<L>::fold_equal_keys(Facet* first, std::size_t n, std::vector<PairCheck>& checks) {
+  std::size_t w = 0, g = 0;
+  while (g < n) {
+    Facet s = first[g];
+    std::size_t e = g + 1;
+    for (; e < n && same_key(first[e], s); ++e) combine(s, first[e], checks);
+    first[w++] = s;
+    g = e;
+  }
+  return w;
+}
+
 // Folds runs of records with equal keys (sorted input) in place; returns the new size.
 template <class L>
 std::size_t Engine<L>::fold(Facet* first, Facet* last) {
@@ -927,16 +936,7 @@ std::size_t Engine<L>::fold(Facet* first, Facet* last) {
       [&](std::size_t p, std::size_t lo, std::size_t hi) {
         auto& cc = chunk_checks_[p];
         cc.clear();
-        std::size_t w = lo;
-        std::size_t g = lo;
-        while (g < hi) {
-          Facet s = first[g];
-          std::size_t e = g + 1;
-          for (; e < hi && same_key(first[e], s); ++e) combine(s, first[e], cc);
-          first[w++] = s;
-          g = e;
-        }
-        chunk_sizes_[p] = w - lo;
+        chunk_sizes_[p] = fold_equal_keys(first + lo, hi - lo, cc);
       },
       bounds_);
   // Close the gaps between the compacted chunks.

@@ -40,7 +40,9 @@ TEST(Generators, ReproducibleBySeedAndIndependentOfChunking) {
       SCOPED_TRACE(std::string(to_string(d)) + " duplicates " + std::to_string(dup) + " seed " + std::to_string(kSeed));
       const auto a = gen(d, 5000, kSeed, dup);
       EXPECT_EQ(a, gen(d, 5000, kSeed, dup));
-      if (d != Distribution::kGrid) EXPECT_NE(a, gen(d, 5000, kSeed + 1, dup));
+      if (d != Distribution::kGrid) {
+        EXPECT_NE(a, gen(d, 5000, kSeed + 1, dup));
+      }
       // Uneven chunks, generated back to front: same points.
       GeneratorOptions o;
       o.dist = d, o.n = 5000, o.seed = kSeed, o.duplicates = dup;

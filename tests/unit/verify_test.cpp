@@ -86,6 +86,18 @@ std::vector<std::uint64_t> triangulate_labels(const std::vector<double>& xyz, co
   return tets;
 }
 
+// The points of `raw` (sorted, distinct), triangulated without label `left_out`: an
+// output in which one point of the container is missing from the tets.
+Output triangulate_without(const test::Points& raw, std::uint64_t left_out) {
+  Output o;
+  o.xyz = sorted_distinct(raw);
+  std::vector<std::uint64_t> keep;
+  for (std::uint64_t l = 0; l < o.count(); ++l)
+    if (l != left_out) keep.push_back(l);
+  o.tets = triangulate_labels(o.xyz, keep);
+  return o;
+}
+
 Output triangulate(const test::Points& raw) {
   Output o;
   o.xyz = sorted_distinct(raw);
@@ -469,13 +481,8 @@ TEST(Verify, FlatHullFacesFollowThePerturbation) {
 }
 
 TEST(Verify, MissingPoint) {
-  Output o;
-  o.xyz = sorted_distinct(test::uniform_cube(1500, 41));
   // Label 700 is in the container but not triangulated.
-  std::vector<std::uint64_t> keep;
-  for (std::uint64_t l = 0; l < o.count(); ++l)
-    if (l != 700) keep.push_back(l);
-  o.tets = triangulate_labels(o.xyz, keep);
+  const Output o = triangulate_without(test::uniform_cube(1500, 41), 700);
   const VerifyReport r = verify_output(o, "missing_point.tets");
   EXPECT_FALSE(r.ok());
   EXPECT_EQ(count(r, Violation::kMissingPoint), 1u) << r.summary();
@@ -556,12 +563,7 @@ TEST(Verify, SampleChecksAFraction) {
 }
 
 TEST(Verify, SampleStillSeesEveryPoint) {
-  Output o;
-  o.xyz = sorted_distinct(test::uniform_cube(800, 43));
-  std::vector<std::uint64_t> keep;
-  for (std::uint64_t l = 0; l < o.count(); ++l)
-    if (l != 123) keep.push_back(l);
-  o.tets = triangulate_labels(o.xyz, keep);
+  const Output o = triangulate_without(test::uniform_cube(800, 43), 123);
   VerifyOptions v = quiet_options();
   v.sample = 0.01;
   const VerifyReport r = verify_output(o, "sample_missing.tets", v);
