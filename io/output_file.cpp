@@ -56,7 +56,7 @@ std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t k
 
 OutputFile::~OutputFile() {
   if (fd_ >= 0) ::close(fd_);
-  if (!committed_) ::unlink(partial_.c_str());
+  if (!committed_ && !keep_on_failure_) ::unlink(partial_.c_str());
 }
 
 void OutputFile::flush() {
@@ -95,6 +95,12 @@ void OutputFile::write(const void* data, std::size_t n) {
 
 char* OutputFile::reserve(std::size_t n) {
   if (used_ + n > cap_) flush();
+  if (n > cap_) {
+    // Larger than the buffer (a writer's fixed-size chunk with a small buffer_bytes):
+    // grow it, now that it is empty, rather than hand out memory past its end.
+    buf_.reset(new char[n]);
+    cap_ = n;
+  }
   return buf_.get() + used_;
 }
 

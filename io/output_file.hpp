@@ -3,6 +3,12 @@
 // to "PATH.partial", commit() flushes, syncs and renames it to PATH, and an OutputFile
 // destroyed without commit() removes the partial file. Used by the container writer
 // and the mesh converters. Not thread-safe: one writer thread.
+//
+// A resumable job sets keep_on_failure(true): then the destructor without commit()
+// only closes the file, and PATH.partial stays for a later reopen(). It does not flush
+// the buffer first (a failed job may have a full disk; a destructor must not throw):
+// what was written after the last flush()/sync() may be missing or torn, which is why
+// a resumed writer cuts the file back to a checkpoint it synced.
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -25,10 +31,12 @@ class OutputFile {
 
   void write(const void* data, std::size_t n);
   void write(std::string_view s) { write(s.data(), s.size()); }
-  // Room for n bytes in the buffer (n <= buffer size), to fill and then advance(n).
+  // Room for n bytes in the buffer, to fill and then advance(n). The buffer grows to n
+  // bytes when n is larger.
   char* reserve(std::size_t n);
   void advance(std::size_t n) { used_ += n; }
 
+  std::size_t buffer_bytes() const { return cap_; }
   // Bytes written so far (buffered ones included): the offset of the next byte.
   std::uint64_t offset() const { return flushed_ + used_; }
   void flush();
@@ -37,6 +45,9 @@ class OutputFile {
   void read_at(std::uint64_t offset, void* data, std::size_t n) const;
   // Flushes, syncs (if asked), closes and renames PATH.partial to PATH.
   void commit(bool sync = true);
+  // Whether a destructor without commit() leaves PATH.partial in place (true) or
+  // removes it (false, the default).
+  void keep_on_failure(bool keep) { keep_on_failure_ = keep; }
 
   const std::string& path() const { return path_; }
   const std::string& partial_path() const { return partial_; }
@@ -47,6 +58,7 @@ class OutputFile {
   std::string path_, partial_;
   int fd_ = -1;
   bool committed_ = false;
+  bool keep_on_failure_ = false;
   std::unique_ptr<char[]> buf_;
   std::size_t cap_ = 0, used_ = 0;
   std::uint64_t flushed_ = 0;

@@ -52,6 +52,7 @@ TetWriter::TetWriter(std::string path, TetFileHeader header, TetWriterOptions op
   header_.resolve_and_validate();
   validate_options(options_);
   out_ = std::make_unique<OutputFile>(path_, options_.buffer_bytes);
+  out_->keep_on_failure(options_.keep_partial);
   const std::vector<std::uint8_t> lead = leading_bytes(header_);
   out_->write(lead.data(), lead.size());
   const std::uint64_t head_len = lead.size() - kPreambleSize - 2 * kSectionHeaderSize - kSectionTrailerSize;
@@ -81,6 +82,8 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
     throw InputError::at_byte(partial, committed, "cannot resume before the points are complete");
   }
   w->out_ = OutputFile::reopen(w->path_, committed, options.buffer_bytes);
+  // Before the checks below: a resume that fails them must not delete the job's file.
+  w->out_->keep_on_failure(options.keep_partial);
   OutputFile& f = *w->out_;
 
   std::vector<std::uint8_t> have(lead.size());
@@ -117,7 +120,7 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
   return w;
 }
 
-TetWriter::~TetWriter() = default;  // out_'s destructor removes the partial file unless finished
+TetWriter::~TetWriter() = default;  // out_'s destructor removes the partial file unless finished or kept
 
 std::uint64_t TetWriter::bytes_written() const { return out_ ? out_->offset() : 0; }
 
@@ -134,7 +137,9 @@ void TetWriter::add_points_impl(const F* xyz, const std::uint64_t* ids, std::siz
   }
   const std::size_t cb = coord_bytes(header_.coord_type), ib = header_.id_width / 8;
   const std::size_t rec = 3 * cb + ib;
-  const std::size_t chunk = std::max<std::size_t>(1, (std::size_t(1) << 20) / rec);
+  // Chunks of at most 1 MiB that fit the write buffer (a small options.buffer_bytes
+  // must not make reserve() grow it); the bytes do not depend on the chunk size.
+  const std::size_t chunk = std::max<std::size_t>(1, std::min(std::size_t(1) << 20, out_->buffer_bytes()) / rec);
   const std::uint64_t id_limit = std::max(header_.input_count, header_.point_count);
   for (std::size_t first = 0; first < n; first += chunk) {
     const std::size_t k = std::min(chunk, n - first);

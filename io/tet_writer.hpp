@@ -10,7 +10,9 @@
 // Lifecycle: the file is "out.tets.partial" until finish() renames it; a writer
 // destroyed without finish() (an exception, a cancelled job) removes it, so a file
 // named out.tets is always complete. For a resumable job, checkpoint() returns a byte
-// count to persist, and TetWriter::resume() reopens the partial file at it.
+// count to persist, and TetWriter::resume() reopens the partial file at it; with
+// options.keep_partial the partial file also survives a failure (disk full, a
+// cancelled job), so that the job can be resumed from its last checkpoint.
 //
 // Frames: add_tets() splits a batch into frames of at most options.frame_tets and
 // encodes them on up to options.threads OpenMP threads (1 by default, so a writer stage
@@ -40,6 +42,11 @@ struct TetWriterOptions {
   int threads = 1;                               // add_tets() encoders (OpenMP); 0: omp_get_max_threads()
   bool sync = true;                              // fsync before the rename (and in checkpoint())
   std::size_t buffer_bytes = std::size_t(8) << 20;
+  // Destroyed without finish(): leave PATH.partial in place (closed, not flushed: only
+  // what checkpoint() returned is certain) instead of removing it. For resumable jobs.
+  // resume() honours it too: a resume refused by its checks leaves the file in place
+  // (already cut back to `committed` bytes).
+  bool keep_partial = false;
 };
 
 class TetWriter {

@@ -53,6 +53,10 @@ struct ExternalSortOptions {
   bool parallel = true;        // sort runs on all OpenMP threads
   std::size_t min_block_bytes = std::size_t(1) << 20;   // smallest read block in a merge
   std::size_t batch_records = std::size_t(1) << 16;     // records per merge() callback (most)
+  // For a resumable job: run files are fsynced when written, and never removed by the
+  // sorter (not after a merge, not in the destructor): a checkpoint may still name
+  // them, so their owner removes them once it no longer does.
+  bool keep_files = false;
 };
 
 struct ExternalSortStats {
@@ -257,6 +261,18 @@ class ExternalSorter {
     write_run(rs.data(), n);
   }
 
+  // A run file left by an earlier process of the same job (sorted, reduced, made by
+  // push_sorted_run() with the same options): it joins the runs as if just written.
+  // Adopt runs before pushing anything, in their original order.
+  void adopt_run(std::string path, std::uint64_t records) {
+    runs_.push_back({std::move(path), records});
+    next_run_id_ = std::max<std::uint64_t>(next_run_id_, runs_.size());
+    stats_.records_pushed += records;
+  }
+  // The run file written last (by push_sorted_run() or a spill): path and records.
+  const std::string& last_run_path() const { return runs_.back().path; }
+  std::uint64_t last_run_records() const { return runs_.back().records; }
+
   std::uint64_t records_pushed() const { return stats_.records_pushed; }
   bool spilled() const { return !runs_.empty(); }
   const ExternalSortStats& stats() const { return stats_; }
@@ -302,7 +318,8 @@ class ExternalSorter {
         }
         stats_.bytes_written += out.records * sizeof(T);
         ++stats_.runs_written;
-        for (const Run& r : group) remove_file(r.path);
+        if (!opt_.keep_files)
+          for (const Run& r : group) remove_file(r.path);
         next.push_back(out);
       }
       runs_ = std::move(next);
@@ -373,7 +390,7 @@ class ExternalSorter {
     Run r{run_path(next_run_id_++), n};
     BinaryFile f(r.path, "wb");
     f.write(data, sizeof(T), n);
-    f.close();
+    f.close(/*sync=*/opt_.keep_files);
     stats_.bytes_written += n * sizeof(T);
     ++stats_.runs_written;
     runs_.push_back(std::move(r));
@@ -415,7 +432,8 @@ class ExternalSorter {
   }
 
   void remove_runs() {
-    for (const Run& r : runs_) remove_file(r.path);
+    if (!opt_.keep_files)
+      for (const Run& r : runs_) remove_file(r.path);
     runs_.clear();
   }
 

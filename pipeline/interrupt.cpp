@@ -20,7 +20,7 @@ extern "C" void on_signal(int sig) {
 
 Interrupted::Interrupted(int signal)
     : Error(ExitCode::kInterrupted, std::string("interrupted by signal ") + std::to_string(signal) +
-                                        "; temporary files removed, no output written") {}
+                                        "; no output written") {}
 
 void install_interrupt_handlers() {
   struct sigaction sa {};
@@ -28,6 +28,10 @@ void install_interrupt_handlers() {
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // Past a file-size limit (ulimit -f), write() then fails with EFBIG and the job
+  // reports it like any write failure (and keeps its checkpoint), instead of being
+  // killed by SIGXFSZ half-way through a write.
+  std::signal(SIGXFSZ, SIG_IGN);
 }
 
 void check_interrupted() {

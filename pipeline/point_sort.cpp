@@ -1,7 +1,9 @@
 #include "pipeline/point_sort.hpp"
 
 #include "core/error.hpp"
+#include "pipeline/checkpoint.hpp"
 #include "pipeline/external_sort.hpp"
+#include "pipeline/fault.hpp"
 #include "pipeline/hull.hpp"
 #include "pipeline/interrupt.hpp"
 #include "pipeline/progress.hpp"
@@ -13,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <unordered_set>
 
 namespace tetstream::pipeline {
@@ -27,27 +30,31 @@ constexpr std::size_t kReadChunk = 1 << 16;  // points per read() call
 }  // namespace
 
 SortedPoints sort_points(const std::string& input, const io::PointReadOptions& read_options,
-                         const PointSortOptions& options, TempDir& tmp) {
+                         const PointSortOptions& options, const std::string& dir) {
   SortedPoints result;
   std::vector<double> chunk(3 * kReadChunk);
+  SortProgress fresh;
+  SortProgress& done = options.resume ? *options.resume : fresh;
+  const bool resumable = options.resume != nullptr;
 
   // ---- pass 1: bounding box and count (stdin is spooled so it can be read again) ----
   auto t0 = Clock::now();
   std::string source = input;
   io::PointReadOptions source_options = read_options;
-  {
+  if (io::is_std_stream(input)) {
+    if (resumable) throw std::logic_error("sort_points: stdin cannot be resumed");
+    source = dir + "/stdin.f64";
+    source_options = io::PointReadOptions{};
+    source_options.format = io::PointFormat::kRaw;
+    source_options.type = io::ScalarType::kFloat64;
+  }
+  if (!done.scanned) {
     auto reader = io::open_points(input, read_options);
-    const bool spool = io::is_std_stream(input);
     std::unique_ptr<BinaryFile> spool_file;
-    if (spool) {
-      source = tmp.path("stdin.f64");
-      spool_file = std::make_unique<BinaryFile>(source, "wb");
-      source_options = io::PointReadOptions{};
-      source_options.format = io::PointFormat::kRaw;
-      source_options.type = io::ScalarType::kFloat64;
-    }
+    if (source != input) spool_file = std::make_unique<BinaryFile>(source, "wb");
     Progress progress("reading", "points", reader->count().value_or(0), options.progress);
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    std::uint64_t count = 0;
     while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
       for (std::size_t i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
@@ -56,17 +63,25 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
         }
       if (spool_file) spool_file->write(chunk.data(), 3 * sizeof(double), n);
       check_interrupted();
-      result.input_count += n;
+      count += n;
       progress.add(n);
     }
     if (spool_file) spool_file->close();
     progress.finish();
-    if (result.input_count == 0) throw InputError(reader->source_name() + ": no points");
-    for (int k = 0; k < 3; ++k) result.bbox_min[k] = lo[k], result.bbox_max[k] = hi[k];
+    if (count == 0) throw InputError(reader->source_name() + ": no points");
+    double extent[3];
+    for (int k = 0; k < 3; ++k) {
+      done.bbox_min[k] = lo[k], done.bbox_max[k] = hi[k];
+      extent[k] = hi[k] - lo[k];
+    }
+    done.input_count = count;
+    done.axis = int(std::max_element(extent, extent + 3) - extent);
+    done.scanned = true;
+    if (options.on_step) options.on_step(done);
   }
-  double extent[3];
-  for (int k = 0; k < 3; ++k) extent[k] = result.bbox_max[k] - result.bbox_min[k];
-  result.axis = int(std::max_element(extent, extent + 3) - extent);
+  result.input_count = done.input_count;
+  result.axis = done.axis;
+  for (int k = 0; k < 3; ++k) result.bbox_min[k] = done.bbox_min[k], result.bbox_max[k] = done.bbox_max[k];
   result.seconds_scan = since(t0);
 
   // ---- pass 2: sorted runs, each with its hull vertex candidates ----
@@ -76,21 +91,34 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   // The run buffer takes half the budget: sorting in place needs nothing more, and
   // the hull candidates of a run need about as much again in the worst case (a shell).
   const std::size_t run_points =
-      std::max<std::size_t>(kReadChunk, options.memory_bytes / 3 / (sizeof(SortedPoint) + 3 * sizeof(double)));
+      options.run_points ? options.run_points
+                         : std::max<std::size_t>(kReadChunk, options.memory_bytes / 3 / (sizeof(SortedPoint) + 3 * sizeof(double)));
   const std::size_t hull_piece = std::max<std::size_t>(4096, options.memory_bytes / 4 / 320);
   ExternalSortOptions sorter_options;
   sorter_options.memory_bytes = options.memory_bytes / 3;
-  sorter_options.dir = tmp.dir();
+  sorter_options.dir = dir;
   sorter_options.name = "points";
+  sorter_options.keep_files = resumable;
   ExternalSorter<SortedPoint, decltype(before)> sorter(sorter_options, before);
   std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
+  // Runs an earlier process finished: adopted as they are, their points skipped below.
+  std::uint64_t skip = 0;
+  for (const SortRunFile& r : done.runs) {
+    sorter.adopt_run(r.path, r.records);
+    std::vector<std::uint64_t> hull(r.hull_count);
+    read_file_exactly(r.hull_path, hull.data(), hull.size() * sizeof(std::uint64_t));
+    hull_originals.insert(hull.begin(), hull.end());
+    skip += r.records;
+  }
+  result.runs = done.runs.size();
   std::vector<SortedPoint> run;
-  run.reserve(std::min<std::uint64_t>(run_points, result.input_count));
+  run.reserve(std::min<std::uint64_t>(run_points, result.input_count - std::min(skip, result.input_count)));
   {
     auto reader = io::open_points(source, source_options);
     Progress progress("sorting", "points", result.input_count, options.progress);
     std::uint64_t next_original = 0;
     std::vector<double> run_xyz;
+    std::vector<std::uint64_t> run_hull;
     auto flush_run = [&] {
       if (run.empty()) return;
       parallel_sort(run.data(), run.data() + run.size(), before);
@@ -98,17 +126,34 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
       for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
       // Hull candidates piece by piece, so the kernel's memory stays a fraction of
       // the budget even when most points are on the hull (a thin shell).
+      run_hull.clear();
       for (std::size_t first = 0; first < run.size(); first += hull_piece) {
         const std::size_t n = std::min(hull_piece, run.size() - first);
-        for (std::uint32_t i : hull_vertex_candidates(&run_xyz[3 * first], n))
-          hull_originals.insert(run[first + i].original);
+        for (std::uint32_t i : hull_vertex_candidates(&run_xyz[3 * first], n)) run_hull.push_back(run[first + i].original);
       }
+      hull_originals.insert(run_hull.begin(), run_hull.end());
+      maybe_inject_fault("sort-run", result.runs);
       sorter.push_sorted_run(std::span<SortedPoint>(run));
       ++result.runs;
+      if (resumable) {
+        SortRunFile r;
+        r.path = sorter.last_run_path();
+        r.records = sorter.last_run_records();
+        r.hull_path = r.path + ".hull";
+        r.hull_count = run_hull.size();
+        const std::string name = std::filesystem::path(r.hull_path).filename().string();
+        write_file_atomically(dir, name, run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
+        done.runs.push_back(r);
+        if (options.on_step) options.on_step(done);
+      }
       run.clear();
     };
     while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
       for (std::size_t i = 0; i < n; ++i) {
+        if (next_original < skip) {  // in a run an earlier process finished
+          ++next_original;
+          continue;
+        }
         SortedPoint p;
         std::memcpy(p.xyz, &chunk[3 * i], sizeof p.xyz);
         p.original = next_original++;
@@ -129,7 +174,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
 
   // ---- merge, dropping exact duplicates ----
   t0 = Clock::now();
-  result.path = tmp.path("sorted.points");
+  result.path = dir + "/sorted.points";
   {
     BinaryFile out(result.path, "wb");
     std::vector<SortedPoint> block;
@@ -161,7 +206,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
       }
     });
     out.write(block.data(), sizeof(SortedPoint), block.size());
-    out.close();
+    out.close(/*sync=*/resumable);
     progress.finish();
     std::sort(hull_labels.begin(), hull_labels.end());
     hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());

@@ -16,6 +16,7 @@
 #include "pipeline/temp_files.hpp"
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -28,9 +29,33 @@ struct SortedPoint {
 };
 static_assert(sizeof(SortedPoint) == 32);
 
+// One finished run of pass 2 and its hull vertex candidates (original indices).
+struct SortRunFile {
+  std::string path;
+  std::uint64_t records = 0;
+  std::string hull_path;  // hull_count uint64 original indices
+  std::uint64_t hull_count = 0;
+};
+
+// How far the sort of a resumable job got: the caller persists it (pipeline/checkpoint)
+// after each step and hands it back to a resumed sort, which skips those steps.
+struct SortProgress {
+  bool scanned = false;  // pass 1 done: the fields below are set
+  std::uint64_t input_count = 0;
+  double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
+  int axis = 0;
+  std::vector<SortRunFile> runs;  // pass 2's finished runs, in order
+};
+
 struct PointSortOptions {
   std::size_t memory_bytes = std::size_t(1) << 30;  // for run buffers and merge blocks
+  std::size_t run_points = 0;  // points per sorted run; 0: from memory_bytes
   bool progress = true;
+  // A resumable sort: run files are fsynced and kept (the caller removes them once it
+  // has the merged file), `resume` holds (in) what an earlier process finished and
+  // (out) what this one did, and `on_step` sees it after pass 1 and after each run.
+  SortProgress* resume = nullptr;
+  std::function<void(const SortProgress&)> on_step;
 };
 
 struct SortedPoints {
@@ -45,11 +70,12 @@ struct SortedPoints {
   double seconds_scan = 0, seconds_runs = 0, seconds_merge = 0;
 };
 
-// Sorts the points of `input` into a new file in `tmp`. Throws InputError for bad
-// input (from the reader) and IoError for I/O failures; `tmp` removes the temporary
-// files when it goes out of scope, on success or failure.
+// Sorts the points of `input` into a new file in `dir` (with its runs and, for stdin,
+// a spool of the input beside it). Throws InputError for bad input (from the reader)
+// and IoError for I/O failures; the caller owns `dir` and removes it (a TempDir, or a
+// checkpoint's directory).
 SortedPoints sort_points(const std::string& input, const io::PointReadOptions& read_options,
-                         const PointSortOptions& options, TempDir& tmp);
+                         const PointSortOptions& options, const std::string& dir);
 
 // Strict weak order of the sorted file along `axis`.
 inline bool sorted_before(const SortedPoint& a, const SortedPoint& b, int axis) {

@@ -1,8 +1,11 @@
 #include "pipeline/run.hpp"
 
 #include "core/error.hpp"
+#include "io/point_format.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
+#include "pipeline/checkpoint.hpp"
+#include "pipeline/fault.hpp"
 #include "pipeline/hull.hpp"
 #include "pipeline/interrupt.hpp"
 #include "pipeline/point_sort.hpp"
@@ -69,6 +72,10 @@ class FrameCutter {
     if (!pending_.empty()) write(0, pending_.size() / 4);
     pending_.clear();
   }
+  // The tets of the frame being filled: a checkpoint saves them, a resumed job
+  // restores them, and its frames come out as an uninterrupted job's.
+  const std::vector<std::uint64_t>& pending() const { return pending_; }
+  void restore(std::vector<std::uint64_t> pending) { pending_ = std::move(pending); }
 
  private:
   std::uint64_t min_label(std::size_t t) const {
@@ -114,30 +121,172 @@ void RunOptions::validate() const {
   read.validate();
 }
 
-RunSummary run_job(const RunOptions& options) {
-  options.validate();
-  const auto start = Clock::now();
-  RunSummary summary;
-  std::string tmpdir = options.tmpdir;
-  if (tmpdir.empty()) {
-    tmpdir = std::filesystem::path(options.output).parent_path().string();
-    if (tmpdir.empty()) tmpdir = ".";
+
+using nlohmann::json;
+
+namespace {
+
+json bbox_json(const double* v) { return json::array({v[0], v[1], v[2]}); }
+void bbox_from(const json& j, double* v) {
+  for (int k = 0; k < 3; ++k) v[k] = j.at(k).get<double>();
+}
+std::string base_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
+
+json to_json(const SortProgress& p, const std::string&) {
+  json runs = json::array();
+  for (const SortRunFile& r : p.runs)
+    runs.push_back({{"file", base_name(r.path)}, {"records", r.records}, {"hull_file", base_name(r.hull_path)},
+                    {"hull_count", r.hull_count}});
+  return {{"scanned", p.scanned}, {"input_count", p.input_count}, {"bbox_min", bbox_json(p.bbox_min)},
+          {"bbox_max", bbox_json(p.bbox_max)}, {"axis", p.axis}, {"runs", runs}};
+}
+SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
+  SortProgress p;
+  p.scanned = j.at("scanned").get<bool>();
+  p.input_count = j.at("input_count").get<std::uint64_t>();
+  bbox_from(j.at("bbox_min"), p.bbox_min);
+  bbox_from(j.at("bbox_max"), p.bbox_max);
+  p.axis = j.at("axis").get<int>();
+  for (const json& r : j.at("runs"))
+    p.runs.push_back({ckpt.path(r.at("file").get<std::string>()), r.at("records").get<std::uint64_t>(),
+                      ckpt.path(r.at("hull_file").get<std::string>()), r.at("hull_count").get<std::uint64_t>()});
+  return p;
+}
+
+constexpr const char* kHullFile = "hull.labels";
+
+json to_json(const SortedPoints& s) {
+  return {{"file", base_name(s.path)}, {"count", s.count},       {"input_count", s.input_count},
+          {"duplicates", s.duplicates}, {"axis", s.axis},        {"bbox_min", bbox_json(s.bbox_min)},
+          {"bbox_max", bbox_json(s.bbox_max)}, {"runs", s.runs}, {"hull_count", s.hull_labels.size()}};
+}
+SortedPoints sorted_from(const json& j, const Checkpoint& ckpt) {
+  SortedPoints s;
+  s.path = ckpt.path(j.at("file").get<std::string>());
+  s.count = j.at("count").get<std::uint64_t>();
+  s.input_count = j.at("input_count").get<std::uint64_t>();
+  s.duplicates = j.at("duplicates").get<std::uint64_t>();
+  s.axis = j.at("axis").get<int>();
+  bbox_from(j.at("bbox_min"), s.bbox_min);
+  bbox_from(j.at("bbox_max"), s.bbox_max);
+  s.runs = j.at("runs").get<std::size_t>();
+  s.hull_labels.resize(j.at("hull_count").get<std::size_t>());
+  read_file_exactly(ckpt.path(kHullFile), s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t));
+  std::error_code ec;
+  if (std::filesystem::file_size(s.path, ec) != s.count * sizeof(SortedPoint))
+    throw DamagedCheckpoint(s.path + ": damaged checkpoint (the sorted file is not " + std::to_string(s.count) + " records)");
+  return s;
+}
+
+// The segment counters of the summary, carried across a resume so that the final
+// summary describes the whole job.
+json counters_json(const RunSummary& s) {
+  return {{"zone_points", s.zone_points}, {"window_points", s.window_points}, {"repair_points", s.repair_points},
+          {"range_failures", s.range_failures}, {"queries", s.queries},   {"rounds_max", s.rounds_max},
+          {"tets", s.tets},                     {"seconds_segments", s.seconds_segments}};
+}
+void counters_from(const json& j, RunSummary& s) {
+  s.zone_points = j.at("zone_points").get<std::uint64_t>();
+  s.window_points = j.at("window_points").get<std::uint64_t>();
+  s.repair_points = j.at("repair_points").get<std::uint64_t>();
+  s.range_failures = j.at("range_failures").get<std::uint64_t>();
+  s.queries = j.at("queries").get<std::uint64_t>();
+  s.rounds_max = j.at("rounds_max").get<std::uint64_t>();
+  s.tets = j.at("tets").get<std::uint64_t>();
+  s.seconds_segments = j.at("seconds_segments").get<double>();
+}
+
+// What makes two processes the same job: the input (its fingerprint) and every option
+// that changes the output's bytes. The thread count and zone size are not among
+// them: the bytes do not depend on them.
+json job_identity(const RunOptions& o) {
+  return {{"input", o.input},
+          {"input_fingerprint", fingerprint_file(o.input)},
+          {"output", std::filesystem::absolute(o.output).lexically_normal().string()},
+          {"memory", o.memory_bytes},
+          {"buffer_spacings", o.buffer_spacings},
+          {"sort_run_points", o.sort_run_points},
+          {"read", {{"format", int(o.read.format)},
+                    {"type", int(o.read.type)},
+                    {"stride", o.read.stride},
+                    {"offset", o.read.offset},
+                    {"byte_order", int(o.read.byte_order)}}}};
+}
+
+// One line naming what differs between a checkpoint's job and this one.
+std::string identity_difference(const json& saved, const json& now) {
+  if (saved.at("input") != now.at("input"))
+    return "the input was " + saved.at("input").get<std::string>() + ", now " + now.at("input").get<std::string>();
+  if (saved.at("input_fingerprint") != now.at("input_fingerprint"))
+    return "the input " + now.at("input").get<std::string>() + " changed (size, time or contents) since the checkpoint";
+  for (const char* key : {"output", "memory", "buffer_spacings", "sort_run_points", "read"})
+    if (saved.at(key) != now.at(key)) return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
+  return "";
+}
+
+class Job {
+ public:
+  Job(const RunOptions& options, std::string dir, Checkpoint* checkpoint, json state)
+      : options_(options), dir_(std::move(dir)), checkpoint_(checkpoint), state_(std::move(state)) {}
+  RunSummary run();
+
+ private:
+  SortedPoints sort();
+  void save() {
+    if (checkpoint_) checkpoint_->save(state_);
   }
-  TempDir tmp(tmpdir, "tetstream-run");
+
+  const RunOptions& options_;
+  std::string dir_;
+  Checkpoint* checkpoint_;  // null: not resumable
+  json state_;              // what the checkpoint holds (maintained even without one)
+  RunSummary summary_;
+  Clock::time_point start_ = Clock::now();
+};
+
+// Stage 1, or what a checkpoint kept of it.
+SortedPoints Job::sort() {
+  if (state_.contains("sorted")) return sorted_from(state_["sorted"], *checkpoint_);
+  PointSortOptions sort_options;
+  sort_options.memory_bytes = std::size_t(options_.memory_bytes);
+  sort_options.run_points = std::size_t(options_.sort_run_points);
+  sort_options.progress = options_.progress;
+  SortProgress progress;
+  if (checkpoint_) {
+    if (state_.contains("sort")) progress = sort_progress_from(state_["sort"], *checkpoint_);
+    sort_options.resume = &progress;
+    sort_options.on_step = [this](const SortProgress& p) {
+      state_["sort"] = to_json(p, dir_);
+      save();
+    };
+  }
+  SortedPoints sorted = sort_points(options_.input, options_.read, sort_options, dir_);
+  if (checkpoint_) {
+    write_file_atomically(dir_, kHullFile, sorted.hull_labels.data(), sorted.hull_labels.size() * sizeof(std::uint64_t));
+    state_["sorted"] = to_json(sorted);
+    state_.erase("sort");
+    save();
+    // The runs are merged into the sorted file, and the state no longer names them.
+    for (const SortRunFile& r : progress.runs) remove_file(r.path), remove_file(r.hull_path);
+  }
+  return sorted;
+}
+
+RunSummary Job::run() {
+  RunSummary& summary = summary_;
+  const bool resumed = state_.contains("sort") || state_.contains("sorted");
+  summary.resumed = resumed;
 
   // ---- stage 1: external sort ----
-  PointSortOptions sort_options;
-  sort_options.memory_bytes = std::size_t(options.memory_bytes);
-  sort_options.progress = options.progress;
-  SortedPoints sorted = sort_points(options.input, options.read, sort_options, tmp);
+  SortedPoints sorted = sort();
   summary.input_points = sorted.input_count;
   summary.points = sorted.count;
   summary.duplicates = sorted.duplicates;
   summary.axis = sorted.axis;
-  summary.seconds_sort = since(start);
+  summary.seconds_sort = since(start_);
   spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs, {:.1f}s", sorted.count,
                sorted.duplicates, "xyz"[sorted.axis], sorted.runs, summary.seconds_sort);
-  if (sorted.count < 4) throw InputError(options.input + ": fewer than 4 distinct points");
+  if (sorted.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
 
   boost::iostreams::mapped_file_source mapping;
   try {
@@ -172,51 +321,73 @@ RunSummary run_job(const RunOptions& options) {
     volume *= std::max(extent[k], 1e-300);
   }
   const double spacing = std::cbrt(volume / double(view.count));
-  const double buffer_width = options.buffer_spacings * spacing;
+  const double buffer_width = options_.buffer_spacings * spacing;
   const double points_per_length = double(view.count) / std::max(extent[view.axis], 1e-300);
   const double buffer_points = std::min(double(view.count), 2 * buffer_width * points_per_length);
-  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
-  std::uint64_t zone_points = options.zone_points;
+  const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
+  std::uint64_t zone_points = options_.zone_points;
   if (zone_points == 0) {
     // Each of the `threads` segments in flight gets an equal share of the budget.
     // 20% of the budget is kept back for allocator slack and the pages of the sorted
     // file that a window's queries touch (released after each segment).
-    const double avail = (0.8 * double(options.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / threads -
+    const double avail = (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / threads -
                          kWindowBytesPerPoint * (buffer_points + double(view.hull_labels.size()));
     const double z = avail / (kWindowBytesPerPoint + kOutputBytesPerPoint);
     if (z < 1000)
-      throw UsageError("--memory " + std::to_string(options.memory_bytes >> 20) +
+      throw UsageError("--memory " + std::to_string(options_.memory_bytes >> 20) +
                        "M is too small for this input: each window needs about " +
                        std::to_string(std::uint64_t((buffer_points + view.hull_labels.size()) * kWindowBytesPerPoint) >> 20) +
                        "M for its buffers and hull alone");
     zone_points = std::uint64_t(z);
   }
-  const auto plans = plan_segments(view, zone_points, buffer_width);
-  summary.segments = plans.size();
-  spdlog::info("{} segments of ~{} points, buffer {:.3g} ({} spacings, ~{:.0f} points), {} hull vertices", plans.size(),
-               plans.empty() ? 0 : plans[0].zone_end - plans[0].zone_begin, buffer_width, options.buffer_spacings,
-               buffer_points, view.hull_labels.size());
 
-  // ---- writer: header and points ----
+  // ---- writer: header and points (or the checkpoint's partial output) ----
   io::TetFileHeader header;
   header.point_count = view.count;
   header.input_count = sorted.input_count;
   header.coord_type = io::CoordType::kFloat64;
   for (int k = 0; k < 3; ++k) header.bbox_min[k] = view.bbox_min[k], header.bbox_max[k] = view.bbox_max[k];
   header.tool = "tetstream 0.1.0";
-  header.options = nlohmann::json{{"command", "run"},
-                                  {"input", options.input},
-                                  {"memory", options.memory_bytes},
-                                  {"buffer_spacings", options.buffer_spacings},
-                                  {"axis", std::string(1, "xyz"[view.axis])},
-                                  {"duplicates_merged", sorted.duplicates}}
+  header.options = json{{"command", "run"},
+                        {"input", options_.input},
+                        {"memory", options_.memory_bytes},
+                        {"buffer_spacings", options_.buffer_spacings},
+                        {"axis", std::string(1, "xyz"[view.axis])},
+                        {"duplicates_merged", sorted.duplicates}}
                        .dump();
   io::TetWriterOptions writer_options;
-  writer_options.threads = options.threads;
+  writer_options.threads = options_.threads;
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
   writer_options.frame_tets = 2 * kFrameTets;
-  io::TetWriter writer(options.output, header, writer_options);
-  {
+  writer_options.keep_partial = checkpoint_ != nullptr;
+  std::unique_ptr<io::TetWriter> writer_holder;
+  std::uint64_t first_label = 0;
+  std::vector<std::uint64_t> pending;
+  if (state_.contains("output")) {
+    const json& out = state_["output"];
+    const std::uint64_t committed = out.at("committed").get<std::uint64_t>();
+    std::error_code ec;
+    const std::string partial = options_.output + ".partial";
+    const std::uintmax_t have = std::filesystem::file_size(partial, ec);
+    if (ec || have < committed)
+      throw DamagedCheckpoint(partial + ": " + (ec ? std::string("missing") : std::to_string(have) + " bytes") +
+                              ", but the checkpoint committed " + std::to_string(committed) + " (damaged checkpoint)");
+    try {
+      writer_holder = io::TetWriter::resume(options_.output, header, committed, writer_options);
+    } catch (const InputError& e) {
+      throw DamagedCheckpoint(std::string(e.what()) + " (damaged checkpoint)");
+    }
+    first_label = out.at("next_label").get<std::uint64_t>();
+    pending.resize(4 * out.at("pending_tets").get<std::size_t>());
+    if (!pending.empty())
+      read_file_exactly(checkpoint_->path(out.at("pending_file").get<std::string>()), pending.data(),
+                        pending.size() * sizeof(std::uint64_t));
+    counters_from(out.at("counters"), summary);
+    summary.segments_resumed = out.at("segments").get<std::uint64_t>();
+    spdlog::info("resuming after {} segments: labels from {} of {}, {} tets written", summary.segments_resumed,
+                 first_label, view.count, summary.tets);
+  } else {
+    writer_holder = std::make_unique<io::TetWriter>(options_.output, header, writer_options);
     constexpr std::size_t kChunk = 1 << 16;
     std::vector<double> xyz(3 * kChunk);
     std::vector<std::uint64_t> ids(kChunk);
@@ -227,20 +398,47 @@ RunSummary run_job(const RunOptions& options) {
         xyz[3 * i] = p.xyz[0], xyz[3 * i + 1] = p.xyz[1], xyz[3 * i + 2] = p.xyz[2];
         ids[i] = p.original;
       }
-      writer.add_points(xyz.data(), ids.data(), n);
+      writer_holder->add_points(xyz.data(), ids.data(), n);
       release_mapped_pages(view.points + first, n * sizeof(SortedPoint));
+      check_interrupted();
     }
     release_mapped_pages(mapping.data(), mapping.size());
   }
+  io::TetWriter& writer = *writer_holder;
+  FrameCutter cutter(writer);
+  cutter.restore(std::move(pending));
+  std::uint64_t segments_done = summary.segments_resumed;
+  // Records that the output holds every tet of the labels below `next_label`: the
+  // writer's committed bytes, the tets of the frame being filled, the counters.
+  auto commit = [&](std::uint64_t next_label) {
+    if (!checkpoint_) return;
+    const std::uint64_t committed = writer.checkpoint();
+    const std::string pending_file = "pending-" + std::to_string(segments_done) + ".tets";
+    const auto& p = cutter.pending();
+    if (!p.empty()) write_file_atomically(dir_, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
+    const std::string old_pending = state_.contains("output") ? state_["output"].value("pending_file", "") : "";
+    state_["output"] = {{"committed", committed},  {"next_label", next_label}, {"pending_file", pending_file},
+                        {"pending_tets", p.size() / 4}, {"segments", segments_done}, {"counters", counters_json(summary)}};
+    save();
+    if (!old_pending.empty() && old_pending != pending_file) remove_file(checkpoint_->path(old_pending));
+  };
+  if (!state_.contains("output")) commit(0);
+
+  const auto plans = plan_segments(view, zone_points, buffer_width, first_label);
+  summary.segments = segments_done + plans.size();
+  spdlog::info("{} segments of ~{} points, buffer {:.3g} ({} spacings, ~{:.0f} points), {} hull vertices", plans.size(),
+               plans.empty() ? 0 : plans[0].zone_end - plans[0].zone_begin, buffer_width, options_.buffer_spacings,
+               buffer_points, view.hull_labels.size());
 
   // ---- stages 2-5: segments, `threads` at a time, written in segment order ----
   // Each thread triangulates whole segments (they are independent given the sorted
   // file); the ordered region hands their tets to the writer in plan order, so the
   // bytes do not depend on the thread count, and a finished segment waits there for
   // its predecessors: at most `threads` segments are in memory at once, which is
-  // what the zone size above was planned for.
-  Progress progress("triangulating", "points", view.count, options.progress);
-  FrameCutter cutter(writer);
+  // what the zone size above was planned for. After each segment the checkpoint
+  // records the output so far: a crash loses at most the segments in flight.
+  Progress progress("triangulating", "points", view.count, options_.progress);
+  progress.add(first_label);
   std::exception_ptr failure;
   std::atomic<bool> cancelled{false};
   const auto stage_start = Clock::now();
@@ -253,6 +451,7 @@ RunSummary run_job(const RunOptions& options) {
     if (!cancelled.load()) {
       try {
         check_interrupted();
+        maybe_inject_fault("segment", segments_done + std::uint64_t(i));
         s = triangulate_segment(view, plan, tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
@@ -268,21 +467,24 @@ RunSummary run_job(const RunOptions& options) {
       if (!cancelled.load()) {
         try {
           const auto t0 = Clock::now();
+          maybe_inject_fault("write", segments_done);
           cutter.add(tets);
+          summary.seconds_segments += s.seconds_build + s.seconds_check;
+          summary.zone_points += plan.zone_end - plan.zone_begin;
+          summary.window_points += s.window_points;
+          summary.repair_points += s.repair_points;
+          summary.range_failures += s.range_failures;
+          summary.queries += s.queries;
+          summary.rounds_max = std::max(summary.rounds_max, s.rounds);
+          summary.tets += s.tets;
+          ++segments_done;
+          commit(plan.zone_end);
           summary.seconds_write += since(t0);
         } catch (...) {
 #pragma omp critical(tetstream_run_failure)
           if (!failure) failure = std::current_exception();
           cancelled = true;
         }
-        summary.seconds_segments += s.seconds_build + s.seconds_check;
-        summary.zone_points += plan.zone_end - plan.zone_begin;
-        summary.window_points += s.window_points;
-        summary.repair_points += s.repair_points;
-        summary.range_failures += s.range_failures;
-        summary.queries += s.queries;
-        summary.rounds_max = std::max(summary.rounds_max, s.rounds);
-        summary.tets += s.tets;
         spdlog::debug("segment [{}, {}): window {} (+{} repairs), {} range failures, {} queries, {} rounds, {} tets, "
                       "build {:.2f}s check {:.2f}s, kernel {}",
                       plan.zone_begin, plan.zone_end, s.window_points, s.repair_points, s.range_failures, s.queries,
@@ -298,6 +500,14 @@ RunSummary run_job(const RunOptions& options) {
   {
     const auto t0 = Clock::now();
     cutter.flush();
+    // Every tet is in the partial output; what is left is its index and footer and
+    // the rename. A crash after the rename but before the checkpoint is removed
+    // leaves this mark, and a resumed job then finds the output complete.
+    commit(view.count);
+    if (checkpoint_) {
+      state_["output"]["finishing"] = true;
+      save();
+    }
     summary.seconds_write += since(t0);
   }
   summary.seconds_triangulate = since(stage_start) - summary.seconds_write;
@@ -306,9 +516,107 @@ RunSummary run_job(const RunOptions& options) {
   writer.finish();
   summary.seconds_write += since(t0);
   summary.output_bytes = writer.bytes_written();
-  summary.tet_bytes = io::TetReader(options.output).tet_bytes();
-  summary.seconds_total = since(start);
+  summary.tet_bytes = io::TetReader(options_.output).tet_bytes();
+  summary.seconds_total = since(start_);
   return summary;
+}
+
+}  // namespace
+
+std::string checkpoint_directory(const RunOptions& options) {
+  if (!options.checkpoint_dir.empty()) return options.checkpoint_dir;
+  std::string dir = options.tmpdir;
+  if (dir.empty()) dir = std::filesystem::path(options.output).parent_path().string();
+  if (dir.empty()) dir = ".";
+  return dir + "/" + base_name(options.output) + ".ckpt";
+}
+
+RunSummary run_job(const RunOptions& options) {
+  options.validate();
+  if (!options.checkpoint || io::is_std_stream(options.input)) {
+    if (options.checkpoint) spdlog::info("the input is stdin: this job keeps no checkpoint (it cannot be resumed)");
+    std::string tmpdir = options.tmpdir;
+    if (tmpdir.empty()) tmpdir = std::filesystem::path(options.output).parent_path().string();
+    if (tmpdir.empty()) tmpdir = ".";
+    TempDir tmp(tmpdir, "tetstream-run");
+    return Job(options, tmp.dir(), nullptr, json::object()).run();
+  }
+
+  Checkpoint checkpoint(checkpoint_directory(options));
+  const json identity = job_identity(options);
+  json state = json::object();
+  const std::string how_to_restart = "rerun with --force to discard it and start over";
+  if (checkpoint.exists()) {
+    if (options.force) {
+      spdlog::info("--force: discarding the checkpoint in {}", checkpoint.dir());
+      checkpoint.remove();
+    } else if (!options.resume) {
+      throw UsageError(checkpoint.dir() + " holds the checkpoint of an unfinished job: rerun with --resume to continue "
+                       "it, or with --force to discard it and start over");
+    } else {
+      try {
+        state = checkpoint.load();
+        const std::string difference = identity_difference(state.at("job"), identity);
+        if (!difference.empty())
+          throw UsageError("cannot resume from " + checkpoint.dir() + ": " + difference + "; " + how_to_restart);
+      } catch (const json::exception& e) {
+        throw DamagedCheckpoint(checkpoint.dir() + "/state.json: damaged checkpoint (" + e.what() + "); " + how_to_restart);
+      } catch (const DamagedCheckpoint& e) {
+        throw DamagedCheckpoint(std::string(e.what()) + "; " + how_to_restart);
+      }
+      spdlog::info("resuming the job checkpointed in {}", checkpoint.dir());
+    }
+  } else if (options.resume) {
+    spdlog::warn("no checkpoint in {}: starting from the beginning", checkpoint.dir());
+  }
+  if (state.contains("output") && state["output"].value("finishing", false) &&
+      !std::filesystem::exists(options.output + ".partial") && std::filesystem::exists(options.output)) {
+    // The job had finished; only the removal of its checkpoint was cut short.
+    const io::TetReader finished(options.output);  // throws unless complete
+    spdlog::info("the checkpointed job had finished: {} is complete", options.output);
+    RunSummary summary;
+    counters_from(state["output"].at("counters"), summary);
+    summary.resumed = true;
+    summary.segments = summary.segments_resumed = state["output"].at("segments").get<std::uint64_t>();
+    summary.points = finished.point_count();
+    summary.input_points = finished.header().input_count;
+    summary.duplicates = summary.input_points - summary.points;
+    summary.output_bytes = finished.file_bytes();
+    summary.tet_bytes = finished.tet_bytes();
+    checkpoint.remove();
+    return summary;
+  }
+  if (!state.contains("job")) {
+    checkpoint.create();
+    state = {{"job", identity}};
+    checkpoint.save(state);
+  }
+  try {
+    RunSummary summary;
+    try {
+      summary = Job(options, checkpoint.dir(), &checkpoint, state).run();
+    } catch (const json::exception& e) {
+      throw DamagedCheckpoint(checkpoint.dir() + "/state.json: damaged checkpoint (" + e.what() + "); " + how_to_restart);
+    } catch (const DamagedCheckpoint& e) {
+      throw DamagedCheckpoint(std::string(e.what()) + "; " + how_to_restart);
+    }
+    checkpoint.remove();
+    return summary;
+  } catch (const DamagedCheckpoint&) {
+    throw;  // left for the user to inspect or --force away
+  } catch (const InputError&) {
+    // Bad input or a damaged checkpoint: nothing to resume.
+    checkpoint.remove();
+    remove_file(options.output + ".partial");
+    throw;
+  } catch (const UsageError&) {
+    checkpoint.remove();
+    remove_file(options.output + ".partial");
+    throw;
+  } catch (...) {
+    spdlog::warn("the job's progress is kept in {}: run the same command with --resume to continue", checkpoint.dir());
+    throw;
+  }
 }
 
 }  // namespace tetstream::pipeline

@@ -27,7 +27,17 @@ struct RunOptions {
   // cores, same session), and 17.9 s against 19.0 s on the ellipsoid shell.
   double buffer_spacings = 2.0;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
+  std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
   bool progress = true;
+  // Checkpoints (pipeline/checkpoint.hpp): the job keeps its working files and its
+  // progress in `checkpoint_dir` (default: OUTPUT's file name + ".ckpt" in tmpdir) and
+  // can be resumed after a crash, kill -9, Ctrl-C or a full disk. An existing
+  // checkpoint is continued with `resume`, discarded with `force`, and otherwise
+  // refused. Off (or stdin input): a private temporary directory, removed at the end.
+  bool checkpoint = true;
+  std::string checkpoint_dir;
+  bool resume = false;
+  bool force = false;
 
   void validate() const;  // throws UsageError
 };
@@ -39,6 +49,8 @@ struct RunSummary {
   std::uint64_t tets = 0, output_bytes = 0;
   std::uint64_t tet_bytes = 0;  // of the tet frames alone (the file also holds the points)
   int axis = 0;
+  bool resumed = false;                // continued an earlier process's checkpoint
+  std::uint64_t segments_resumed = 0;  // segments that process had written
   double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;  // wall clock
   double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
   double redundant_ratio() const {  // points inserted beyond one per point, per point
@@ -47,6 +59,9 @@ struct RunSummary {
 };
 
 RunSummary run_job(const RunOptions& options);
+
+// Where `options` keeps its checkpoint (whether or not one exists).
+std::string checkpoint_directory(const RunOptions& options);
 
 // Parses "4G", "512M", "1.5G", "100000" (bytes). Throws UsageError.
 std::uint64_t parse_memory_size(const std::string& text);

@@ -348,15 +348,18 @@ std::uint64_t SortedView::upper_bound(double x) const {
   return lo;
 }
 
-std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width) {
+std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width,
+                                       std::uint64_t first_label) {
   std::vector<SegmentPlan> plans;
+  if (first_label >= view.count) return plans;
   zone_points = std::max<std::uint64_t>(zone_points, 1);
-  const std::uint64_t segments = std::max<std::uint64_t>(1, (view.count + zone_points - 1) / zone_points);
+  const std::uint64_t todo = view.count - first_label;
+  const std::uint64_t segments = std::max<std::uint64_t>(1, (todo + zone_points - 1) / zone_points);
   for (std::uint64_t s = 0; s < segments; ++s) {
     SegmentPlan p;
     // Even split, so the last segment is not a sliver.
-    p.zone_begin = view.count * s / segments;
-    p.zone_end = view.count * (s + 1) / segments;
+    p.zone_begin = first_label + todo * s / segments;
+    p.zone_end = first_label + todo * (s + 1) / segments;
     if (p.zone_begin == p.zone_end) continue;
     p.window_begin = view.lower_bound(view.key(p.zone_begin) - buffer_width);
     p.window_end = view.upper_bound(view.key(p.zone_end - 1) + buffer_width);

@@ -47,9 +47,11 @@ struct SegmentPlan {
   std::uint64_t window_begin = 0, window_end = 0;  // labels in its window (zone + buffers)
 };
 
-// Splits [0, count) into zones of about `zone_points` labels and gives each a window
-// extended by `buffer_width` along the axis on each side.
-std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width);
+// Splits [first_label, count) into zones of about `zone_points` labels and gives each
+// a window extended by `buffer_width` along the axis on each side. (A resumed job
+// plans the labels it has not written yet; the output does not depend on the plan.)
+std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width,
+                                       std::uint64_t first_label = 0);
 
 struct SegmentStats {
   std::uint64_t window_points = 0;  // zone + buffers + hull vertices, before repairs

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <vector>
+#include <fcntl.h>
 #include <sys/mman.h>
 #include <unistd.h>
 
@@ -34,6 +35,18 @@ TempDir::~TempDir() {
 void remove_file(const std::string& path) {
   std::error_code ec;
   std::filesystem::remove(path, ec);
+}
+
+void sync_directory(const std::string& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0) throw IoError(dir + ": cannot open: " + errno_text());
+  const bool failed = ::fsync(fd) != 0;
+  const int err = errno;
+  ::close(fd);
+  if (failed) {
+    errno = err;
+    throw IoError(dir + ": fsync failed: " + errno_text());
+  }
 }
 
 void release_mapped_pages(const void* data, std::size_t bytes) {
@@ -65,9 +78,9 @@ std::size_t BinaryFile::read(void* data, std::size_t size, std::size_t count) {
   return n;
 }
 
-void BinaryFile::close() {
+void BinaryFile::close(bool sync) {
   if (!f_) return;
-  const bool failed = std::fflush(f_) != 0 || std::ferror(f_);
+  const bool failed = std::fflush(f_) != 0 || std::ferror(f_) || (sync && ::fsync(fileno(f_)) != 0);
   const int err = errno;
   const bool close_failed = std::fclose(f_) != 0;
   f_ = nullptr;

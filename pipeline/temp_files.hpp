@@ -23,6 +23,8 @@ class TempDir {
 };
 
 void remove_file(const std::string& path);  // ignores a missing file
+// fsync of a directory, so that a rename or a new file in it survives a crash.
+void sync_directory(const std::string& dir);
 
 // Hands the pages of [data, data + bytes) of a read-only file mapping back to the page
 // cache (madvise MADV_DONTNEED), so that a linear pass over a mapped file larger than
@@ -41,7 +43,9 @@ class BinaryFile {
   void write(const void* data, std::size_t size, std::size_t count);
   // Reads up to `count` items; returns how many (fewer only at the end of the file).
   std::size_t read(void* data, std::size_t size, std::size_t count);
-  void close();  // flushes; throws IoError when the data did not reach the file
+  // Flushes (and with `sync`, fsyncs: the data survives a crash of the machine);
+  // throws IoError when the data did not reach the file.
+  void close(bool sync = false);
 
  private:
   std::string path_;

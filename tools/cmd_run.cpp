@@ -52,7 +52,9 @@ void run_run(RunArgs& args, Context& ctx) {
                               {"triangulate", s.seconds_triangulate},
                               {"write", s.seconds_write},
                               {"total", s.seconds_total}}},
-                 {"tets_per_second", tets_per_s}};
+                 {"tets_per_second", tets_per_s},
+                 {"resumed", s.resumed},
+                 {"segments_resumed", s.segments_resumed}};
 }
 
 void setup_run(CLI::App& app, Context& ctx) {
@@ -68,6 +70,18 @@ void setup_run(CLI::App& app, Context& ctx) {
       ->capture_default_str();
   cmd->add_option("--zone-points", args->options.zone_points,
                   "Points per segment (default: from --memory; small values force many segments)");
+  cmd->add_option("--sort-run-points", args->options.sort_run_points,
+                  "Points per sorted run (default: from --memory; tests force many runs)")
+      ->group("");  // hidden: a testing knob
+  cmd->add_option("--checkpoint", args->options.checkpoint_dir,
+                  "Checkpoint directory (default: OUTPUT.ckpt in --tmpdir): the job's working files and progress, "
+                  "removed when it succeeds");
+  cmd->add_flag("!--no-checkpoint", args->options.checkpoint,
+                "Keep no checkpoint (temporary files in a private directory; the job cannot be resumed)");
+  cmd->add_flag("--resume", args->options.resume,
+                "Continue the job checkpointed for this output after a crash, kill, Ctrl-C or full disk");
+  cmd->add_flag("--force", args->options.force, "Discard an existing checkpoint for this output and start over")
+      ->excludes("--resume");
   add_point_input_options(cmd, args->options.read);
   cmd->callback([args, &ctx] { run_run(*args, ctx); });
 }

@@ -77,14 +77,27 @@ set +e
 set -e
 [ "$rc1 $rc2" = "3 3" ] || fail "I/O errors exit $rc1 $rc2"
 no_leftovers
-# Ctrl-C: exit 130, temporary files and the partial output removed.
-"$T" -q gen --n 2000000 --seed 3 -o big.f64
-"$T" -q run big.f64 -o big.tets --tmpdir tmp --memory 256M &
-pid=$!
-sleep 1
-kill -INT $pid
-set +e; wait $pid; rc=$?; set -e
-[ $rc = 130 ] || fail "interrupted run: exit $rc"
-[ ! -e big.tets ] || fail "interrupted run left big.tets"
+# Ctrl-C: exit 130 and no output under the final name. interrupt_run OUT [options]
+# starts a run into OUT, sends SIGINT after 0.7 s and checks that.
+"$T" -q gen --n 1000000 --seed 3 -o big.f64
+interrupt_run() {
+  local out=$1; shift
+  "$T" -q run big.f64 -o "$out" --tmpdir tmp --memory 256M "$@" 2>err.txt &
+  local pid=$!
+  sleep 0.7
+  kill -INT $pid
+  set +e; wait $pid; local rc=$?; set -e
+  [ $rc = 130 ] || fail "interrupted run $*: exit $rc"
+  [ ! -e "$out" ] || fail "interrupted run $* left $out"
+}
+# The checkpoint (and the partial output) are kept, and --resume finishes the job.
+interrupt_run big.tets
+[ -e tmp/big.tets.ckpt/state.json ] || fail "interrupted run kept no checkpoint"
+grep -q -- "--resume" err.txt || fail "interrupted run did not say how to resume: $(cat err.txt)"
+"$T" -q run big.f64 -o big.tets --tmpdir tmp --memory 256M --resume
+"$T" -q verify big.tets >/dev/null || fail "verify rejected the resumed output"
+no_leftovers
+# Without a checkpoint, Ctrl-C leaves nothing behind.
+interrupt_run big2.tets --no-checkpoint
 no_leftovers
 echo "run_cli: all checks passed"

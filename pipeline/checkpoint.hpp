@@ -1,0 +1,70 @@
+#pragma once
+// The checkpoint of a resumable `run` (docs/architecture.md, "Checkpoints").
+//
+// A checkpoint is a directory holding the job's working files (the sort's runs and
+// their hull candidates, the sorted point file, the tets of the frame being filled)
+// and `state.json`, which says how far the job got and names the files that carry
+// its progress. Invariants, which make a crash at any instant harmless:
+//   - state.json is only ever replaced atomically: written to state.json.tmp,
+//     fsynced, renamed over the old one, and the directory fsynced;
+//   - a file is complete and fsynced before any state.json names it;
+//   - a file that the current state.json names is never modified or removed (a new
+//     step writes new files; the old ones go after the state that named them).
+// So the directory always describes one consistent moment of the job, and a resumed
+// job continues from it. state.json carries a CRC32C of its own body: a damaged or
+// hand-edited state is refused, not trusted.
+//
+// The job's identity: a fingerprint of the input (size, modification time, and a
+// CRC32C over samples spread through the file) and the options that change the
+// output. A resumed job with a different input or options is refused.
+#include "core/error.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <string>
+
+namespace tetstream::pipeline {
+
+// A checkpoint that cannot be trusted (exit code of bad input): the job refuses it
+// and says how to start over; the directory is left for the user to inspect.
+class DamagedCheckpoint : public InputError {
+ public:
+  explicit DamagedCheckpoint(const std::string& message) : InputError(message) {}
+};
+
+// Size, modification time and a sampled CRC32C of a file: cheap (64 reads of 4 KiB)
+// and enough to notice a replaced, regenerated, truncated or appended file.
+nlohmann::json fingerprint_file(const std::string& path);
+
+class Checkpoint {
+ public:
+  static constexpr int kVersion = 1;
+
+  explicit Checkpoint(std::string dir) : dir_(std::move(dir)) {}
+
+  const std::string& dir() const { return dir_; }
+  std::string path(const std::string& name) const { return dir_ + "/" + name; }
+  bool exists() const;  // the directory holds a state.json
+
+  void create();  // makes the directory (its parent must exist); IoError when it cannot
+  // The saved state (without its CRC). Throws InputError naming the file when it is
+  // damaged: unreadable JSON, a CRC mismatch, another format or version.
+  nlohmann::json load() const;
+  // Replaces the state atomically (see above). Throws IoError.
+  void save(nlohmann::json state);
+  // Removes the directory and everything in it (ignores errors: used on the way out).
+  void remove() const;
+
+ private:
+  std::string dir_;
+};
+
+// Writes `bytes` bytes to DIR/NAME through NAME.tmp, fsync and rename, so the file is
+// complete whenever it exists. Throws IoError.
+void write_file_atomically(const std::string& dir, const std::string& name, const void* data, std::size_t bytes);
+// Reads a whole file written by write_file_atomically (InputError when it is not
+// `bytes` long: a damaged checkpoint).
+void read_file_exactly(const std::string& path, void* data, std::size_t bytes);
+
+}  // namespace tetstream::pipeline

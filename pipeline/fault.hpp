@@ -1,0 +1,14 @@
+#pragma once
+// Fault injection for tests: TETSTREAM_FAULT="SITE:N[,SITE:N...]" makes the N-th
+// (0-based) passage through SITE throw IoError, exactly as a real failure there would
+// (a full disk, a failing device). Sites: "sort-run" (a finished sort run),
+// "segment" (a worker triangulating segment N of the plan), "write" (the writer
+// taking segment N's tets). Unset, it costs one relaxed load per call.
+#include <cstdint>
+
+namespace tetstream::pipeline {
+
+// Throws IoError when TETSTREAM_FAULT names SITE:index.
+void maybe_inject_fault(const char* site, std::uint64_t index);
+
+}  // namespace tetstream::pipeline

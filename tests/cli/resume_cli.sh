@@ -1,0 +1,131 @@
+#!/usr/bin/env bash
+# Checkpoints and --resume (issue: resumable jobs): a job killed with SIGKILL at many
+# moments (in the sort's runs, at the merge, while writing the points, between and
+# inside segments), resumed each time, ends with the bytes of an uninterrupted run;
+# so does one that failed on a full disk (an injected write failure, and a real one
+# from a file-size limit). A damaged checkpoint, a changed input and changed options
+# are refused with a message that says how to start over; an existing checkpoint is
+# never overwritten without --resume or --force.
+# Usage: bash resume_cli.sh /path/to/tetstream
+set -euo pipefail
+T=$(realpath "${1:?usage: resume_cli.sh /path/to/tetstream}")
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+cd "$dir"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+state() { cat out.tets.ckpt/state.json 2>/dev/null || true; }
+segments_done() { state | python3 -c "import json,sys
+try: print(json.load(sys.stdin)['output']['segments'])
+except Exception: print(-1)"; }
+runs_done() { state | python3 -c "import json,sys
+try: print(len(json.load(sys.stdin)['sort']['runs']))
+except Exception: print(-1)"; }
+
+# 10^5 points; the sort writes 4 runs (--sort-run-points, a testing option) and the
+# job has 40 segments.
+"$T" -q gen --dist mixed --n 100000 --seed 11 -o points.f64
+opts=(-q run points.f64 -o out.tets --memory 64M --sort-run-points 25000 --zone-points 2500)
+"$T" "${opts[@]}" --no-checkpoint
+mv out.tets reference.tets
+"$T" -q verify reference.tets >/dev/null || fail "reference output invalid"
+
+# Starts the job (resuming), waits until CONDITION holds (a shell command), then
+# SIGKILLs it and counts the kill. The job may finish first on a fast machine: that
+# is fine (the final comparison still holds).
+kills=0
+kill_when() {
+  local condition=$1 threads=$2
+  "$T" --threads "$threads" "${opts[@]}" --resume 2>/dev/null &
+  local pid=$!
+  for _ in $(seq 1 3000); do
+    if ! kill -0 $pid 2>/dev/null; then break; fi
+    if eval "$condition"; then kill -9 $pid 2>/dev/null && kills=$((kills + 1)); break; fi
+    sleep 0.01
+  done
+  wait $pid 2>/dev/null || true
+}
+# At random moments first (seeded, so a failure can be replayed), then at chosen ones.
+RANDOM=20261121
+for _ in 1 2 3 4; do
+  kill_when "sleep $(printf '0.%02d' $((RANDOM % 60 + 5))); true" 2
+done
+kill_when '[ "$(runs_done)" -ge 1 ]' 2                                         # pass 2, after run 0
+kill_when '[ "$(runs_done)" -ge 3 ]' 1                                         # pass 2, after run 2
+kill_when '[ "$(runs_done)" -ge 4 ]' 2                                         # at the merge
+kill_when 'grep -q "\"sorted\"" out.tets.ckpt/state.json 2>/dev/null' 2     # writing the points
+for target in 3 11 12 29 36; do                                                # between segments
+  kill_when "[ \"\$(segments_done)\" -ge $target ]" $((1 + target % 2))
+done
+[ $kills -ge 8 ] || fail "only $kills of 13 kills landed before the job ended"
+# Finish the job (a kill may also have landed between the output's rename and the
+# checkpoint's removal: --resume then finds the output complete).
+if [ -e out.tets.ckpt ]; then "$T" "${opts[@]}" --resume; fi
+cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills kills"
+[ ! -e out.tets.ckpt ] || fail "checkpoint left after the job finished"
+echo "kill -9 at $kills moments: resumed output identical"
+rm out.tets
+
+# A checkpoint is not overwritten by accident.
+expect_refusal() {  # expected exit code, message pattern, command...
+  local want=$1 pattern=$2; shift 2
+  set +e; msg=$("$@" 2>&1); rc=$?; set -e
+  [ $rc = "$want" ] || fail "expected exit $want, got $rc: $msg"
+  echo "$msg" | grep -q -- "$pattern" || fail "message lacks '$pattern': $msg"
+  [ -e out.tets.ckpt/state.json ] || fail "a refusal removed the checkpoint: $msg"
+}
+kill_when '[ "$(segments_done)" -ge 5 ]' 2
+[ -e out.tets.ckpt/state.json ] || fail "no checkpoint after a kill"
+expect_refusal 2 "--resume" "$T" "${opts[@]}"
+expect_refusal 2 "option 'memory'" "$T" -q run points.f64 -o out.tets --memory 96M --sort-run-points 25000 --zone-points 2500 --resume
+expect_refusal 2 "option 'buffer_spacings'" "$T" "${opts[@]}" --buffer 3 --resume
+# A changed input (same size, other contents) is noticed.
+cp points.f64 saved.f64
+"$T" -q gen --dist mixed --n 500000 --seed 12 -o points.f64
+expect_refusal 2 "changed" "$T" "${opts[@]}" --resume
+mv saved.f64 points.f64
+touch -r reference.tets points.f64  # another modification time: still refused
+expect_refusal 2 "changed" "$T" "${opts[@]}" --resume
+# --force starts over and ends with the same bytes.
+"$T" "${opts[@]}" --force
+cmp reference.tets out.tets || fail "--force output differs"
+rm out.tets
+
+# A damaged checkpoint is refused (exit 1) and left in place; undamaged, it resumes.
+kill_when '[ "$(segments_done)" -ge 7 ]' 2
+cp out.tets.ckpt/state.json saved.json
+sed -i 's/"committed": \([0-9]\)/"committed": 9\1/' out.tets.ckpt/state.json
+expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
+cp saved.json out.tets.ckpt/state.json
+# A truncated partial output is damage too.
+cp out.tets.partial saved.partial
+truncate -s -100 out.tets.partial
+expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
+mv saved.partial out.tets.partial
+"$T" "${opts[@]}" --resume
+cmp reference.tets out.tets || fail "output resumed after the damage was undone differs"
+rm out.tets
+
+# Disk full: an injected failure (the error a full disk gives) in the sort, in a
+# segment and in the writer: exit 3, the checkpoint kept, and --resume (with space
+# again) ends with the same bytes.
+for fault in sort-run:1 segment:17 write:23; do
+  set +e; msg=$(TETSTREAM_FAULT=$fault "$T" "${opts[@]}" 2>&1); rc=$?; set -e
+  [ $rc = 3 ] || fail "injected $fault: exit $rc: $msg"
+  echo "$msg" | grep -q "No space left" || fail "injected $fault: message: $msg"
+  [ "$(echo "$msg" | grep -c "error")" = 1 ] || fail "injected $fault: the error is not reported once: $msg"
+  [ -e out.tets.ckpt/state.json ] && [ ! -e out.tets ] || fail "injected $fault: checkpoint not kept, or output left"
+  "$T" "${opts[@]}" --resume
+  cmp reference.tets out.tets || fail "resumed after injected $fault: output differs"
+  rm out.tets
+done
+# A real write failure: a file-size limit (ulimit -f, in 1 KiB blocks) that the
+# output reaches while the tets are written.
+# The limit lies between the sorted file (32 bytes per point) and the finished output.
+limit=$(( ($(stat -c %s reference.tets) - 200000) / 1024 ))
+[ $((limit * 1024)) -gt $((100000 * 32 + 100000)) ] || fail "test setup: the limit would stop the sort"
+set +e; msg=$(ulimit -f $limit; "$T" "${opts[@]}" 2>&1); rc=$?; set -e
+[ $rc = 3 ] || fail "file-size limit: exit $rc: $msg"
+[ -e out.tets.ckpt/state.json ] && [ -e out.tets.partial ] || fail "file-size limit: checkpoint or partial output not kept"
+"$T" "${opts[@]}" --resume
+cmp reference.tets out.tets || fail "resumed after a write failure: output differs"
+echo "resume_cli: all checks passed"
