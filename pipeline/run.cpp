@@ -443,6 +443,7 @@ RunSummary Job::run() {
   std::atomic<bool> cancelled{false};
   const auto stage_start = Clock::now();
   const std::int64_t segment_count = std::int64_t(plans.size());
+  const std::uint64_t first_segment = segments_done;  // segments_done changes in the loop
 #pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads)
   for (std::int64_t i = 0; i < segment_count; ++i) {
     const SegmentPlan& plan = plans[std::size_t(i)];
@@ -451,7 +452,7 @@ RunSummary Job::run() {
     if (!cancelled.load()) {
       try {
         check_interrupted();
-        maybe_inject_fault("segment", segments_done + std::uint64_t(i));
+        maybe_inject_fault("segment", first_segment + std::uint64_t(i));
         s = triangulate_segment(view, plan, tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the

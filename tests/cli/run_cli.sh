@@ -77,6 +77,23 @@ set +e
 set -e
 [ "$rc1 $rc2" = "3 3" ] || fail "I/O errors exit $rc1 $rc2"
 no_leftovers
+# A failing stage (an injected disk-full error in the sort, in a segment's worker, in
+# the writer) cancels the job cleanly at any thread count: exit 3, the error reported
+# once, no hang, nothing left behind.
+for fault in sort-run:0 segment:3 write:5; do
+  for threads in 1 3 8; do
+    set +e
+    msg=$(TETSTREAM_FAULT=$fault timeout 120 "$T" -q --threads $threads run points.f64 -o bad.tets --memory 64M \
+          --tmpdir tmp --zone-points 2000 --no-checkpoint 2>&1)
+    rc=$?
+    set -e
+    [ $rc = 3 ] || fail "injected $fault, $threads threads: exit $rc ($msg)"
+    [ "$(echo "$msg" | grep -c "error:")" = 1 ] || fail "injected $fault, $threads threads: not one error line: $msg"
+    [ ! -e bad.tets ] || fail "injected $fault left output"
+    no_leftovers
+  done
+done
+
 # Ctrl-C: exit 130 and no output under the final name. interrupt_run OUT [options]
 # starts a run into OUT, sends SIGINT after 0.7 s and checks that.
 "$T" -q gen --n 1000000 --seed 3 -o big.f64
