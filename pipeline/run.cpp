@@ -4,6 +4,7 @@
 #include "io/point_format.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
+#include "pipeline/async_tet_writer.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/fault.hpp"
 #include "pipeline/hull.hpp"
@@ -53,7 +54,7 @@ constexpr std::size_t kFrameTets = std::size_t(1) << 18;
 
 class FrameCutter {
  public:
-  explicit FrameCutter(io::TetWriter& writer) : writer_(writer) {}
+  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer) {}
 
   void add(const std::vector<std::uint64_t>& tets) {
     pending_.insert(pending_.end(), tets.begin(), tets.end());
@@ -86,7 +87,7 @@ class FrameCutter {
     writer_.add_tets(std::span<const std::uint64_t>(pending_.data() + 4 * begin, 4 * (end - begin)));
   }
 
-  io::TetWriter& writer_;
+  AsyncTetWriter& writer_;
   std::vector<std::uint64_t> pending_;
 };
 
@@ -326,13 +327,22 @@ RunSummary Job::run() {
   const double buffer_points = std::min(double(view.count), 2 * buffer_width * points_per_length);
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
   std::uint64_t zone_points = options_.zone_points;
+  const int zones = std::max(options_.zones, 1);
+  const int segments_in_flight = zones > 1 ? 1 : threads;
   if (zone_points == 0) {
-    // Each of the `threads` segments in flight gets an equal share of the budget.
-    // 20% of the budget is kept back for allocator slack and the pages of the sorted
-    // file that a window's queries touch (released after each segment).
-    const double avail = (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / threads -
-                         kWindowBytesPerPoint * (buffer_points + double(view.hull_labels.size()));
-    const double z = avail / (kWindowBytesPerPoint + kOutputBytesPerPoint);
+    // Each of the segments in flight gets an equal share of the budget. 20% of the
+    // budget is kept back for allocator slack and the pages of the sorted file that a
+    // window's queries touch (released after each segment). Zones add their strip
+    // buffers (two per cut) and each holds the hull.
+    const int other = extent[(view.axis + 1) % 3] >= extent[(view.axis + 2) % 3] ? (view.axis + 1) % 3 : (view.axis + 2) % 3;
+    const double strip_overhead = zones > 1 ? 2.0 * (zones - 1) * buffer_width / std::max(extent[other], 1e-300) : 0.0;
+    const double avail =
+        (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / segments_in_flight -
+        kWindowBytesPerPoint * (buffer_points * (1 + strip_overhead) + double(view.hull_labels.size()) * zones);
+    // With zones, the segment's tets exist twice for a moment (the zones' parts and
+    // their merge by minimum label).
+    const double output_bytes = kOutputBytesPerPoint * (zones > 1 ? 2 : 1);
+    const double z = avail / (kWindowBytesPerPoint * (1 + strip_overhead) + output_bytes);
     if (z < 1000)
       throw UsageError("--memory " + std::to_string(options_.memory_bytes >> 20) +
                        "M is too small for this input: each window needs about " +
@@ -356,7 +366,7 @@ RunSummary Job::run() {
                         {"duplicates_merged", sorted.duplicates}}
                        .dump();
   io::TetWriterOptions writer_options;
-  writer_options.threads = options_.threads;
+  writer_options.threads = 1;  // a frame is encoded by one thread: the writer stage's own
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
   writer_options.frame_tets = 2 * kFrameTets;
   writer_options.keep_partial = checkpoint_ != nullptr;
@@ -404,7 +414,10 @@ RunSummary Job::run() {
     }
     release_mapped_pages(mapping.data(), mapping.size());
   }
-  io::TetWriter& writer = *writer_holder;
+  // Stage 5 on its own thread behind a bounded queue of frames: compression and I/O
+  // overlap the segments. Declared after the writer, so destroyed (cancelled, joined)
+  // before it on the way out of a failure.
+  AsyncTetWriter writer(*writer_holder, /*capacity=*/4);
   FrameCutter cutter(writer);
   cutter.restore(std::move(pending));
   std::uint64_t segments_done = summary.segments_resumed;
@@ -444,7 +457,9 @@ RunSummary Job::run() {
   const auto stage_start = Clock::now();
   const std::int64_t segment_count = std::int64_t(plans.size());
   const std::uint64_t first_segment = segments_done;  // segments_done changes in the loop
-#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads)
+  // (With zones, one segment at a time: this team has one thread, which leaves the
+  // zones' team inside triangulate_segment the first active level of parallelism.)
+#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(segments_in_flight)
   for (std::int64_t i = 0; i < segment_count; ++i) {
     const SegmentPlan& plan = plans[std::size_t(i)];
     std::vector<std::uint64_t> tets;
@@ -453,7 +468,7 @@ RunSummary Job::run() {
       try {
         check_interrupted();
         maybe_inject_fault("segment", first_segment + std::uint64_t(i));
-        s = triangulate_segment(view, plan, tets);
+        s = triangulate_segment(view, plan, tets, zones, threads);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
         // process): the first failure is kept, the others stop, and it is rethrown
@@ -516,7 +531,8 @@ RunSummary Job::run() {
   auto t0 = Clock::now();
   writer.finish();
   summary.seconds_write += since(t0);
-  summary.output_bytes = writer.bytes_written();
+  summary.seconds_writer_busy = writer.busy_seconds();
+  summary.output_bytes = writer_holder->bytes_written();
   summary.tet_bytes = io::TetReader(options_.output).tet_bytes();
   summary.seconds_total = since(start_);
   return summary;

@@ -28,6 +28,11 @@ struct RunOptions {
   double buffer_spacings = 2.0;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
+  // Parallelism: 1 (segments): each thread triangulates whole segments, `threads` of
+  // them in flight, each with its share of the budget. N > 1 (zones): one segment at a
+  // time, with the whole budget, split into N zones triangulated `threads` at a time.
+  // The output's bytes depend on neither.
+  int zones = 1;
   bool progress = true;
   // Checkpoints (pipeline/checkpoint.hpp): the job keeps its working files and its
   // progress in `checkpoint_dir` (default: OUTPUT's file name + ".ckpt" in tmpdir) and
@@ -51,8 +56,11 @@ struct RunSummary {
   int axis = 0;
   bool resumed = false;                // continued an earlier process's checkpoint
   std::uint64_t segments_resumed = 0;  // segments that process had written
-  double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;  // wall clock
+  // Wall clock. seconds_write: the segment loop waiting on the writer stage (a full
+  // queue, checkpoints) and the writer's finish; its own work is seconds_writer_busy.
+  double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;
   double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
+  double seconds_writer_busy = 0;  // the writer thread compressing and writing (overlapped)
   double redundant_ratio() const {  // points inserted beyond one per point, per point
     return points ? double(window_points + repair_points) / double(points) - 1.0 : 0.0;
   }

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <array>
+#include <exception>
 #include <limits>
 #include <unordered_set>
 
@@ -44,10 +45,10 @@ ConflictBall conflict_ball(const core::Delaunay& dt, TetId t) {
 // The extent along `axis` of the ball clipped to the global bounding box in the two
 // other axes (points outside the box do not exist): [lo, hi], or lo > hi when the
 // clipped ball is empty. Conservative: rounding only widens it.
-void clipped_extent(const ConflictBall& b, const SortedView& view, double& lo, double& hi) {
+void clipped_extent(const ConflictBall& b, const SortedView& view, int axis, double& lo, double& hi) {
   double d2 = 0;
   for (int k = 0; k < 3; ++k) {
-    if (k == view.axis) continue;
+    if (k == axis) continue;
     double d = 0;
     if (b.center[k] < view.bbox_min[k]) d = view.bbox_min[k] - b.center[k];
     else if (b.center[k] > view.bbox_max[k]) d = b.center[k] - view.bbox_max[k];
@@ -60,7 +61,7 @@ void clipped_extent(const ConflictBall& b, const SortedView& view, double& lo, d
     return;
   }
   const double h = std::sqrt(r2 - d2) * (1 + 1e-12);
-  const double c = b.center[view.axis];
+  const double c = b.center[axis];
   lo = c - h;
   hi = c + h;
   lo -= std::fabs(lo) * 1e-15;
@@ -69,7 +70,8 @@ void clipped_extent(const ConflictBall& b, const SortedView& view, double& lo, d
 
 class SegmentWorker {
  public:
-  SegmentWorker(const SortedView& view, const SegmentPlan& plan) : view_(view), plan_(plan) {}
+  SegmentWorker(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& strip)
+      : view_(view), plan_(plan), strip_(strip) {}
 
   SegmentStats run(std::vector<std::uint64_t>& out);
 
@@ -82,22 +84,37 @@ class SegmentWorker {
   void emit(std::vector<std::uint64_t>& out);
   bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
   // Exact emptiness query of tet t's conflict region against the missing points
-  // whose axis coordinate lies in [lo, hi]; returns the deepest conflicting label,
-  // or kNone.
-  std::uint64_t deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi);
+  // whose axis coordinate lies in [lo, hi]: those outside the window's label range
+  // (unless `outside_clear`) and those inside it but outside the strip's window
+  // (unless `strip_clear`). Returns the deepest conflicting label, or kNone.
+  std::uint64_t deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi, bool outside_clear,
+                                         bool strip_clear);
+  // Whether the point with this label, inside the window's label range, is in the
+  // strip's window (always, without strips).
+  bool in_strip_window(std::uint64_t label) const {
+    const double c = view_.points[label].xyz[strip_.axis < 0 ? 0 : strip_.axis];
+    return strip_.axis < 0 || (c >= strip_.window_lo && c <= strip_.window_hi);
+  }
 
   static constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
 
   const SortedView& view_;
   const SegmentPlan& plan_;
+  const ZoneStrip strip_;
   core::Delaunay dt_;
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
   std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
-  // Zone index of local vertex v (its label minus zone_begin), or -1 outside the zone.
+  // Zone index of local vertex v (its label minus zone_begin), or -1 outside the zone
+  // (outside the segment's labels, or outside the strip this worker owns).
   std::int64_t zone_index(VertexId v) const {
     const std::uint64_t l = labels_[v];
-    return l >= plan_.zone_begin && l < plan_.zone_end ? std::int64_t(l - plan_.zone_begin) : -1;
+    if (l < plan_.zone_begin || l >= plan_.zone_end) return -1;
+    if (strip_.axis >= 0) {
+      const double c = view_.points[l].xyz[strip_.axis];
+      if (!(c >= strip_.lo && c < strip_.hi)) return -1;
+    }
+    return std::int64_t(l - plan_.zone_begin);
   }
   // Per zone vertex (by zone index): kPending until it is final and its tets
   // are emitted, then kDone.
@@ -117,22 +134,21 @@ class SegmentWorker {
 
 void SegmentWorker::load_window() {
   const std::uint64_t w0 = plan_.window_begin, w1 = plan_.window_end;
-  const std::size_t n = std::size_t(w1 - w0);
+  // extra_: labels held although outside the window proper (the label range, and the
+  // strip's window inside it): the hull's vertices, later the repair points.
   for (std::uint64_t h : view_.hull_labels)
-    if (h < w0 || h >= w1) extra_.push_back(h);
-  const std::size_t total = n + extra_.size();
-  xyz_.resize(3 * total);
-  labels_.resize(total);
-  for (std::size_t i = 0; i < n; ++i) {
-    const SortedPoint& p = view_.points[w0 + i];
-    xyz_[3 * i] = p.xyz[0], xyz_[3 * i + 1] = p.xyz[1], xyz_[3 * i + 2] = p.xyz[2];
-    labels_[i] = w0 + i;
-  }
-  for (std::size_t j = 0; j < extra_.size(); ++j) {
-    const SortedPoint& p = view_.points[extra_[j]];
-    for (int k = 0; k < 3; ++k) xyz_[3 * (n + j) + k] = p.xyz[k];
-    labels_[n + j] = extra_[j];
-  }
+    if (h < w0 || h >= w1 || !in_strip_window(h)) extra_.push_back(h);
+  xyz_.clear();
+  labels_.clear();
+  auto add = [&](std::uint64_t label) {
+    const SortedPoint& p = view_.points[label];
+    xyz_.insert(xyz_.end(), p.xyz, p.xyz + 3);
+    labels_.push_back(label);
+  };
+  for (std::uint64_t label = w0; label < w1; ++label)
+    if (in_strip_window(label)) add(label);
+  for (std::uint64_t label : extra_) add(label);
+  const std::size_t total = labels_.size();
   // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
   // spatially coherent numbering keeps those accesses in cache (the labels, not the
   // local ids, carry the order of the sorted file).
@@ -148,7 +164,8 @@ void SegmentWorker::load_window() {
   stats_.window_points = total;
 }
 
-std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi) {
+std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi,
+                                                      bool outside_clear, bool strip_clear) {
   ++stats_.queries;
   VertexId v[4];
   for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
@@ -176,12 +193,22 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
     if (r2 - d2 > best_depth) best_depth = r2 - d2, best = label;
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
-  // each side of the window, searched through the spatial index.
+  // each side of the window, searched through the spatial index; and, for a strip,
+  // the points of the window's range outside the strip's window.
   const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
   auto enough = [&] { return found >= kEnoughConflicts; };
-  view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_.window_begin), visit, enough);
-  if (!enough())
-    view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_end), last, visit, enough);
+  if (!outside_clear) {
+    view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_.window_begin), visit, enough);
+    if (!enough())
+      view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_end), last, visit, enough);
+  }
+  if (!strip_clear && !enough()) {
+    auto visit_outside_strip = [&](std::uint64_t label) {
+      if (!in_strip_window(label)) visit(label);
+    };
+    view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_begin),
+                                    std::min(last, plan_.window_end), visit_outside_strip, enough);
+  }
   return best;
 }
 
@@ -194,14 +221,23 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   if (dt_.is_infinite(t)) return true;
   const ConflictBall ball = conflict_ball(dt_, t);
   double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
+  bool outside_clear = false, strip_clear = strip_.axis < 0;
   if (ball.valid) {
-    clipped_extent(ball, view_, lo, hi);
+    clipped_extent(ball, view_, view_.axis, lo, hi);
     if (lo > hi) return true;
     // Missing points on the left have axis coordinates <= key(window_begin - 1), on
     // the right >= key(window_end).
     const bool left_clear = plan_.window_begin == 0 || lo > view_.key(plan_.window_begin - 1);
     const bool right_clear = plan_.window_end == view_.count || hi < view_.key(plan_.window_end);
-    if (left_clear && right_clear) return true;
+    outside_clear = left_clear && right_clear;
+    if (!strip_clear) {
+      // Missing points of the window's range lie outside [window_lo, window_hi]
+      // along the strip's axis.
+      double lo2, hi2;
+      clipped_extent(ball, view_, strip_.axis, lo2, hi2);
+      strip_clear = lo2 > hi2 || (lo2 >= strip_.window_lo && hi2 <= strip_.window_hi);
+    }
+    if (outside_clear && strip_clear) return true;
   }
   ++stats_.range_failures;
   // A tet proved empty stays empty for the rest of the segment: later repairs insert
@@ -216,7 +252,7 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
     query_ball.radius = std::numeric_limits<double>::infinity();
     query_ball.center[0] = query_ball.center[1] = query_ball.center[2] = 0;
   }
-  const std::uint64_t deepest = deepest_missing_conflict(t, query_ball, lo, hi);
+  const std::uint64_t deepest = deepest_missing_conflict(t, query_ball, lo, hi, outside_clear, strip_clear);
   if (deepest == kNone) {
     proved_empty_.insert(key);
     return true;
@@ -363,14 +399,88 @@ std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zon
     if (p.zone_begin == p.zone_end) continue;
     p.window_begin = view.lower_bound(view.key(p.zone_begin) - buffer_width);
     p.window_end = view.upper_bound(view.key(p.zone_end - 1) + buffer_width);
+    p.buffer_width = buffer_width;
     plans.push_back(p);
   }
   return plans;
 }
 
-SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out) {
-  SegmentWorker worker(view, plan);
-  return worker.run(out);
+SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out,
+                                 int zones, int threads) {
+  const std::uint64_t zone_points = plan.zone_end - plan.zone_begin;
+  zones = int(std::clamp<std::uint64_t>(std::uint64_t(std::max(zones, 1)), 1, std::max<std::uint64_t>(zone_points / 256, 1)));
+  if (zones == 1) return SegmentWorker(view, plan, ZoneStrip{}).run(out);
+
+  // Strips along the longer of the two other axes, cut at quantiles of the zone's
+  // points so that each holds about the same number.
+  const int a1 = (view.axis + 1) % 3, a2 = (view.axis + 2) % 3;
+  const int axis = view.bbox_max[a1] - view.bbox_min[a1] >= view.bbox_max[a2] - view.bbox_min[a2] ? a1 : a2;
+  std::vector<double> coords(zone_points);
+  for (std::uint64_t i = 0; i < zone_points; ++i) coords[i] = view.points[plan.zone_begin + i].xyz[axis];
+  std::vector<double> cuts;  // zones - 1 increasing cut values
+  for (int z = 1; z < zones; ++z) {
+    auto nth = coords.begin() + std::ptrdiff_t(zone_points * std::uint64_t(z) / std::uint64_t(zones));
+    std::nth_element(coords.begin(), nth, coords.end());
+    if (cuts.empty() || *nth > cuts.back()) cuts.push_back(*nth);
+  }
+  std::vector<double>().swap(coords);
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<ZoneStrip> strips(cuts.size() + 1);
+  for (std::size_t z = 0; z < strips.size(); ++z) {
+    ZoneStrip& st = strips[z];
+    st.axis = axis;
+    st.lo = z == 0 ? -inf : cuts[z - 1];
+    st.hi = z == cuts.size() ? inf : cuts[z];
+    st.window_lo = st.lo - plan.buffer_width;
+    st.window_hi = st.hi + plan.buffer_width;
+  }
+
+  // Each strip emits the tets whose minimum label is one of its zone vertices,
+  // grouped by that label; every label of the segment belongs to one strip, so the
+  // strips' outputs, merged by minimum label, are the segment's.
+  std::vector<std::vector<std::uint64_t>> parts(strips.size());
+  std::vector<SegmentStats> stats(strips.size());
+  std::exception_ptr failure;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(std::clamp(threads, 1, int(strips.size())))
+  for (std::int64_t z = 0; z < std::int64_t(strips.size()); ++z) {
+    try {
+      stats[std::size_t(z)] = SegmentWorker(view, plan, strips[std::size_t(z)]).run(parts[std::size_t(z)]);
+    } catch (...) {
+#pragma omp critical(tetstream_zone_failure)
+      if (!failure) failure = std::current_exception();
+    }
+  }
+  if (failure) std::rethrow_exception(failure);
+
+  SegmentStats total;
+  for (const SegmentStats& st : stats) {
+    total.window_points += st.window_points;
+    total.repair_points += st.repair_points;
+    total.range_failures += st.range_failures;
+    total.queries += st.queries;
+    total.query_points += st.query_points;
+    total.rounds = std::max(total.rounds, st.rounds);
+    total.tets += st.tets;
+    total.kernel_bytes += st.kernel_bytes;
+    total.seconds_build += st.seconds_build;
+    total.seconds_check += st.seconds_check;
+  }
+  // Merge by minimum label: a counting sort over the segment's labels.
+  std::vector<std::uint64_t> start(zone_points + 1, 0);
+  auto owner = [&](const std::uint64_t* q) {
+    return std::min(std::min(q[0], q[1]), std::min(q[2], q[3])) - plan.zone_begin;
+  };
+  for (const auto& part : parts)
+    for (std::size_t t = 0; t < part.size(); t += 4) ++start[owner(&part[t]) + 1];
+  const std::size_t base = out.size() / 4;
+  start[0] = base;
+  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
+  out.resize(4 * start.back());
+  for (auto& part : parts) {
+    for (std::size_t t = 0; t < part.size(); t += 4) std::copy_n(&part[t], 4, &out[4 * start[owner(&part[t])]++]);
+    std::vector<std::uint64_t>().swap(part);
+  }
+  return total;
 }
 
 }  // namespace tetstream::pipeline

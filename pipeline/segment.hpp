@@ -45,6 +45,20 @@ struct SortedView {
 struct SegmentPlan {
   std::uint64_t zone_begin = 0, zone_end = 0;      // labels this segment owns
   std::uint64_t window_begin = 0, window_end = 0;  // labels in its window (zone + buffers)
+  double buffer_width = 0;                         // of the buffers (and of its zones')
+};
+
+// One zone of a segment, for parallel zonal insertion (the paper's section 3): the
+// segment's zone points whose coordinate along `axis` lies in [lo, hi). It is
+// triangulated alone, in a window of the segment's window points whose coordinate lies
+// in [window_lo, window_hi] (the strip and a buffer on each side), plus the hull. Its
+// boundary is made exact as a segment's is (DESIGN.md section 3): the points of the
+// segment's label range outside the strip's window count as missing, for the range
+// test and the emptiness query alike. axis < 0: the whole segment, no strip.
+struct ZoneStrip {
+  int axis = -1;
+  double lo = 0, hi = 0;
+  double window_lo = 0, window_hi = 0;
 };
 
 // Splits [first_label, count) into zones of about `zone_points` labels and gives each
@@ -65,9 +79,13 @@ struct SegmentStats {
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
 };
 
-// Triangulates one segment and appends its tets (4 labels each, positively oriented)
-// to `out`. Throws InputError when the window has fewer than 4 affinely independent
-// points (only possible when the whole input has).
-SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out);
+// Triangulates one segment and appends its tets (4 labels each, positively oriented,
+// grouped by minimum label in increasing order) to `out`. With zones > 1 the segment
+// is split into that many strips along the longer of the two other axes (at quantiles
+// of its zone points, at least 256 points each), triangulated concurrently on up to
+// `threads` OpenMP threads; the tets are the same set, in the same grouping. Throws InputError when the window has fewer
+// than 4 affinely independent points (only possible when the whole input has).
+SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out,
+                                 int zones = 1, int threads = 1);
 
 }  // namespace tetstream::pipeline

@@ -51,6 +51,7 @@ void run_run(RunArgs& args, Context& ctx) {
                               {"segments_summed", s.seconds_segments},
                               {"triangulate", s.seconds_triangulate},
                               {"write", s.seconds_write},
+                              {"writer_thread_busy", s.seconds_writer_busy},
                               {"total", s.seconds_total}}},
                  {"tets_per_second", tets_per_s},
                  {"resumed", s.resumed},
@@ -70,6 +71,11 @@ void setup_run(CLI::App& app, Context& ctx) {
       ->capture_default_str();
   cmd->add_option("--zone-points", args->options.zone_points,
                   "Points per segment (default: from --memory; small values force many segments)");
+  cmd->add_option("--zones", args->options.zones,
+                  "Parallelism inside a segment: 1 runs --threads segments at once; N > 1 runs one segment at a "
+                  "time with the whole budget, split into zones on --threads threads")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4096));
   cmd->add_option("--sort-run-points", args->options.sort_run_points,
                   "Points per sorted run (default: from --memory; tests force many runs)")
       ->group("");  // hidden: a testing knob

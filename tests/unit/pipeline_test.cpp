@@ -44,9 +44,10 @@ class PipelineTest : public ::testing::Test {
   }
 
   pipeline::RunSummary run(const std::string& input, std::uint64_t zone_points, const std::string& name = "out.tets",
-                           int threads = 1) {
+                           int threads = 1, int zones = 1) {
     pipeline::RunOptions o;
     o.threads = threads;
+    o.zones = zones;
     o.input = input;
     o.output = (dir_ / name).string();
     o.zone_points = zone_points;
@@ -72,10 +73,12 @@ class PipelineTest : public ::testing::Test {
     return out;
   }
 
-  void expect_same_as_incore(const io::GeneratorOptions& g, std::uint64_t zone_points, std::uint64_t min_segments) {
-    SCOPED_TRACE(std::string(io::to_string(g.dist)) + " n=" + std::to_string(g.n) + " seed=" + std::to_string(g.seed));
+  void expect_same_as_incore(const io::GeneratorOptions& g, std::uint64_t zone_points, std::uint64_t min_segments,
+                             int zones = 1) {
+    SCOPED_TRACE(std::string(io::to_string(g.dist)) + " n=" + std::to_string(g.n) + " seed=" + std::to_string(g.seed) +
+                 " zones=" + std::to_string(zones));
     const std::string input = write_points(g);
-    const auto summary = run(input, zone_points);
+    const auto summary = run(input, zone_points, "out.tets", zones > 1 ? 2 : 1, zones);
     EXPECT_GE(summary.segments, min_segments);
     const std::string out = (dir_ / "out.tets").string();
     const auto ours = container_tets(out);
@@ -108,6 +111,18 @@ TEST_F(PipelineTest, Clusters) { expect_same_as_incore(dist(io::Distribution::kC
 TEST_F(PipelineTest, GridIsDegenerateButExact) { expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 600, 10); }
 TEST_F(PipelineTest, SphereCospherical) { expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 150, 10); }
 
+// Parallel zonal insertion: each segment split into 3 strips, whose boundaries are
+// made exact like the segments' (the strip's missing points go through the same range
+// test and emptiness query).
+TEST_F(PipelineTest, ZonesInsideSegments) {
+  expect_same_as_incore(dist(io::Distribution::kUniform, 20000), 5000, 4, 3);
+  expect_same_as_incore(dist(io::Distribution::kEllipsoidShell, 20000, 3), 5000, 4, 3);
+  expect_same_as_incore(dist(io::Distribution::kMixed, 20000, 4), 5000, 4, 3);
+  expect_same_as_incore(dist(io::Distribution::kClusters, 20000, 5), 5000, 4, 3);
+  expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 2000, 4, 3);
+  expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 800, 2, 3);
+}
+
 TEST_F(PipelineTest, DuplicatesAreMergedAndCounted) {
   auto g = dist(io::Distribution::kUniform, 10000, 7);
   g.duplicates = 0.1;
@@ -134,11 +149,22 @@ std::string file_bytes(const std::filesystem::path& p) {
 
 TEST_F(PipelineTest, BytesDoNotDependOnTheThreadCount) {
   const std::string input = write_points(dist(io::Distribution::kClusters, 12000, 9));
-  for (int threads : {1, 2, 3, 8}) run(input, 800, "t" + std::to_string(threads) + ".tets", threads);
+  // Segments in parallel, and zones inside segments (3 zones, or as many as threads).
+  for (int threads : {1, 2, 3, 8}) {
+    run(input, 800, "t" + std::to_string(threads) + ".tets", threads);
+    run(input, 3000, "z3-t" + std::to_string(threads) + ".tets", threads, 3);
+    run(input, 3000, "zt-t" + std::to_string(threads) + ".tets", threads, std::max(threads, 2));
+  }
   const std::string one = file_bytes(dir_ / "t1.tets");
   ASSERT_FALSE(one.empty());
-  for (int threads : {2, 3, 8})
-    EXPECT_TRUE(file_bytes(dir_ / ("t" + std::to_string(threads) + ".tets")) == one) << threads << " threads";
+  for (int threads : {1, 2, 3, 8}) {
+    const std::string t = std::to_string(threads);
+    if (threads > 1) {
+      EXPECT_TRUE(file_bytes(dir_ / ("t" + t + ".tets")) == one) << threads << " threads";
+    }
+    EXPECT_TRUE(file_bytes(dir_ / ("z3-t" + t + ".tets")) == one) << threads << " threads, 3 zones";
+    EXPECT_TRUE(file_bytes(dir_ / ("zt-t" + t + ".tets")) == one) << threads << " threads, zones = threads";
+  }
 }
 
 TEST_F(PipelineTest, StoredOrderDoesNotDependOnTheSegmentPlan) {
