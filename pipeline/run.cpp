@@ -179,22 +179,34 @@ SortedPoints sorted_from(const json& j, const Checkpoint& ckpt) {
   return s;
 }
 
-// The segment counters of the summary, carried across a resume so that the final
-// summary describes the whole job.
-json counters_json(const RunSummary& s) {
-  return {{"zone_points", s.zone_points}, {"window_points", s.window_points}, {"repair_points", s.repair_points},
-          {"range_failures", s.range_failures}, {"queries", s.queries},   {"rounds_max", s.rounds_max},
-          {"tets", s.tets},                     {"seconds_segments", s.seconds_segments}};
+// The work of the segments written so far, carried across a resume so that the
+// final summary describes the whole job.
+json counters_json(const SegmentStats& w, std::uint64_t zone_points) {
+  return {{"zone_points", zone_points}, {"window_points", w.window_points}, {"repair_points", w.repair_points},
+          {"range_failures", w.range_failures}, {"queries", w.queries}, {"query_points", w.query_points},
+          {"rounds", w.rounds}, {"tets", w.tets}, {"seconds_build", w.seconds_build}, {"seconds_check", w.seconds_check}};
 }
-void counters_from(const json& j, RunSummary& s) {
-  s.zone_points = j.at("zone_points").get<std::uint64_t>();
-  s.window_points = j.at("window_points").get<std::uint64_t>();
-  s.repair_points = j.at("repair_points").get<std::uint64_t>();
-  s.range_failures = j.at("range_failures").get<std::uint64_t>();
-  s.queries = j.at("queries").get<std::uint64_t>();
-  s.rounds_max = j.at("rounds_max").get<std::uint64_t>();
-  s.tets = j.at("tets").get<std::uint64_t>();
-  s.seconds_segments = j.at("seconds_segments").get<double>();
+void counters_from(const json& j, SegmentStats& w, std::uint64_t& zone_points) {
+  zone_points = j.at("zone_points").get<std::uint64_t>();
+  w.window_points = j.at("window_points").get<std::uint64_t>();
+  w.repair_points = j.at("repair_points").get<std::uint64_t>();
+  w.range_failures = j.at("range_failures").get<std::uint64_t>();
+  w.queries = j.at("queries").get<std::uint64_t>();
+  w.query_points = j.at("query_points").get<std::uint64_t>();
+  w.rounds = j.at("rounds").get<std::uint64_t>();
+  w.tets = j.at("tets").get<std::uint64_t>();
+  w.seconds_build = j.at("seconds_build").get<double>();
+  w.seconds_check = j.at("seconds_check").get<double>();
+}
+void record_work(const SegmentStats& w, std::uint64_t zone_points, RunSummary& s) {
+  s.zone_points = zone_points;
+  s.window_points = w.window_points;
+  s.repair_points = w.repair_points;
+  s.range_failures = w.range_failures;
+  s.queries = w.queries;
+  s.rounds_max = w.rounds;
+  s.tets = w.tets;
+  s.seconds_segments = w.seconds_build + w.seconds_check;
 }
 
 // What makes two processes the same job: the input (its fingerprint) and every option
@@ -371,6 +383,8 @@ RunSummary Job::run() {
   writer_options.frame_tets = 2 * kFrameTets;
   writer_options.keep_partial = checkpoint_ != nullptr;
   std::unique_ptr<io::TetWriter> writer_holder;
+  SegmentStats work;                  // of the segments written, this process's and earlier ones'
+  std::uint64_t zone_points_done = 0;
   std::uint64_t first_label = 0;
   std::vector<std::uint64_t> pending;
   if (state_.contains("output")) {
@@ -392,7 +406,8 @@ RunSummary Job::run() {
     if (!pending.empty())
       read_file_exactly(checkpoint_->path(out.at("pending_file").get<std::string>()), pending.data(),
                         pending.size() * sizeof(std::uint64_t));
-    counters_from(out.at("counters"), summary);
+    counters_from(out.at("counters"), work, zone_points_done);
+    record_work(work, zone_points_done, summary);
     summary.segments_resumed = out.at("segments").get<std::uint64_t>();
     spdlog::info("resuming after {} segments: labels from {} of {}, {} tets written", summary.segments_resumed,
                  first_label, view.count, summary.tets);
@@ -431,7 +446,7 @@ RunSummary Job::run() {
     if (!p.empty()) write_file_atomically(dir_, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
     const std::string old_pending = state_.contains("output") ? state_["output"].value("pending_file", "") : "";
     state_["output"] = {{"committed", committed},  {"next_label", next_label}, {"pending_file", pending_file},
-                        {"pending_tets", p.size() / 4}, {"segments", segments_done}, {"counters", counters_json(summary)}};
+                        {"pending_tets", p.size() / 4}, {"segments", segments_done}, {"counters", counters_json(work, zone_points_done)}};
     save();
     if (!old_pending.empty() && old_pending != pending_file) remove_file(checkpoint_->path(old_pending));
   };
@@ -485,14 +500,9 @@ RunSummary Job::run() {
           const auto t0 = Clock::now();
           maybe_inject_fault("write", segments_done);
           cutter.add(tets);
-          summary.seconds_segments += s.seconds_build + s.seconds_check;
-          summary.zone_points += plan.zone_end - plan.zone_begin;
-          summary.window_points += s.window_points;
-          summary.repair_points += s.repair_points;
-          summary.range_failures += s.range_failures;
-          summary.queries += s.queries;
-          summary.rounds_max = std::max(summary.rounds_max, s.rounds);
-          summary.tets += s.tets;
+          work += s;
+          zone_points_done += plan.zone_end - plan.zone_begin;
+          record_work(work, zone_points_done, summary);
           ++segments_done;
           commit(plan.zone_end);
           summary.seconds_write += since(t0);
@@ -592,7 +602,10 @@ RunSummary run_job(const RunOptions& options) {
     const io::TetReader finished(options.output);  // throws unless complete
     spdlog::info("the checkpointed job had finished: {} is complete", options.output);
     RunSummary summary;
-    counters_from(state["output"].at("counters"), summary);
+    SegmentStats work;
+    std::uint64_t zone_points = 0;
+    counters_from(state["output"].at("counters"), work, zone_points);
+    record_work(work, zone_points, summary);
     summary.resumed = true;
     summary.segments = summary.segments_resumed = state["output"].at("segments").get<std::uint64_t>();
     summary.points = finished.point_count();

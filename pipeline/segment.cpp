@@ -453,18 +453,7 @@ SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan
   if (failure) std::rethrow_exception(failure);
 
   SegmentStats total;
-  for (const SegmentStats& st : stats) {
-    total.window_points += st.window_points;
-    total.repair_points += st.repair_points;
-    total.range_failures += st.range_failures;
-    total.queries += st.queries;
-    total.query_points += st.query_points;
-    total.rounds = std::max(total.rounds, st.rounds);
-    total.tets += st.tets;
-    total.kernel_bytes += st.kernel_bytes;
-    total.seconds_build += st.seconds_build;
-    total.seconds_check += st.seconds_check;
-  }
+  for (const SegmentStats& st : stats) total += st;
   // Merge by minimum label: a counting sort over the segment's labels.
   std::vector<std::uint64_t> start(zone_points + 1, 0);
   auto owner = [&](const std::uint64_t* q) {

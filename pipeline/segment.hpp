@@ -20,6 +20,7 @@
 #include "pipeline/point_index.hpp"
 #include "pipeline/point_sort.hpp"
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -77,6 +78,14 @@ struct SegmentStats {
   std::uint64_t tets = 0;           // tets emitted
   std::uint64_t kernel_bytes = 0;   // the kernel's arrays at the end
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
+
+  // Sums another worker's counters into these (rounds: the larger).
+  SegmentStats& operator+=(const SegmentStats& o) {
+    window_points += o.window_points, repair_points += o.repair_points, range_failures += o.range_failures;
+    queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
+    kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
+    return *this;
+  }
 };
 
 // Triangulates one segment and appends its tets (4 labels each, positively oriented,
