@@ -11,6 +11,7 @@
 #include <sstream>
 #include <vector>
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -67,10 +68,32 @@ bool Checkpoint::exists() const {
   return std::filesystem::exists(path(kStateFile), ec);
 }
 
-void Checkpoint::create() {
+Checkpoint::~Checkpoint() {
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+}
+
+void Checkpoint::create_and_lock() {
   std::error_code ec;
   std::filesystem::create_directory(dir_, ec);  // not its parents: a mistyped --tmpdir is an error
   if (ec) throw IoError(dir_ + ": cannot create the checkpoint directory: " + ec.message());
+  if (lock_fd_ >= 0) return;
+  const std::string lock = path("lock");
+  lock_fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (lock_fd_ < 0) throw IoError(lock + ": cannot open: " + errno_text());
+  if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(lock_fd_);
+    lock_fd_ = -1;
+    if (err == EWOULDBLOCK) throw UsageError(dir_ + " is in use: another tetstream process is running this job");
+    errno = err;
+    throw IoError(lock + ": cannot lock: " + errno_text());
+  }
+}
+
+void Checkpoint::clear() const {
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir_, ec))
+    if (entry.path().filename() != "lock") std::filesystem::remove_all(entry.path(), ec);
 }
 
 nlohmann::json Checkpoint::load() const {

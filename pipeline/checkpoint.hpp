@@ -42,22 +42,31 @@ class Checkpoint {
   static constexpr int kVersion = 1;
 
   explicit Checkpoint(std::string dir) : dir_(std::move(dir)) {}
+  ~Checkpoint();  // releases the lock
+  Checkpoint(const Checkpoint&) = delete;
+  Checkpoint& operator=(const Checkpoint&) = delete;
 
   const std::string& dir() const { return dir_; }
   std::string path(const std::string& name) const { return dir_ + "/" + name; }
   bool exists() const;  // the directory holds a state.json
 
-  void create();  // makes the directory (its parent must exist); IoError when it cannot
+  // Makes the directory if needed (its parent must exist; IoError otherwise) and
+  // takes its lock (flock on DIR/lock, released by the kernel if the process dies):
+  // UsageError when another process holds it, i.e. runs the same job right now.
+  void create_and_lock();
   // The saved state (without its CRC). Throws InputError naming the file when it is
   // damaged: unreadable JSON, a CRC mismatch, another format or version.
   nlohmann::json load() const;
   // Replaces the state atomically (see above). Throws IoError.
   void save(nlohmann::json state);
+  // Removes everything in the directory but the lock: --force starting over.
+  void clear() const;
   // Removes the directory and everything in it (ignores errors: used on the way out).
   void remove() const;
 
  private:
   std::string dir_;
+  int lock_fd_ = -1;
 };
 
 // Writes `bytes` bytes to DIR/NAME through NAME.tmp, fsync and rename, so the file is

@@ -573,10 +573,12 @@ RunSummary run_job(const RunOptions& options) {
   const json identity = job_identity(options);
   json state = json::object();
   const std::string how_to_restart = "rerun with --force to discard it and start over";
+  checkpoint.create_and_lock();
   if (checkpoint.exists()) {
     if (options.force) {
       spdlog::info("--force: discarding the checkpoint in {}", checkpoint.dir());
-      checkpoint.remove();
+      checkpoint.clear();
+      remove_file(options.output + ".partial");
     } else if (!options.resume) {
       throw UsageError(checkpoint.dir() + " holds the checkpoint of an unfinished job: rerun with --resume to continue "
                        "it, or with --force to discard it and start over");
@@ -617,7 +619,6 @@ RunSummary run_job(const RunOptions& options) {
     return summary;
   }
   if (!state.contains("job")) {
-    checkpoint.create();
     state = {{"job", identity}};
     checkpoint.save(state);
   }
