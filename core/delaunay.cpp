@@ -4,6 +4,7 @@
 #include "core/spatial_sort.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <numeric>
 
@@ -41,36 +42,47 @@ TS_FORCE_INLINE bool same_point(const double* a, const double* b) {
 
 }  // namespace
 
-bool Delaunay::is_infinite(TetId t) const { return has_infinite_vertex(&tet_vertex_[4 * std::size_t(t)]); }
+bool Delaunay::is_infinite(TetId t) const { return has_infinite_vertex(tets_[t].v); }
 
 void Delaunay::set_points(const double* xyz, const std::uint64_t* labels, std::size_t n) {
   assert(n >= num_points_ && "points can be appended, never removed");
+  assert(n < (std::size_t(1) << 31) && "caller ids must leave the top bit free");
   xyz_ = xyz;
   labels_ = labels;
-  const std::size_t old = num_points_;
   num_points_ = n;
   vertex_tet_.resize(n, kNoTet);
-  duplicate_of_.resize(n);
-  for (std::size_t i = old; i < n; ++i) duplicate_of_[i] = VertexId(i);
+}
+
+// The caller's point v gets the next internal id (and its coordinates are copied)
+// when it is handed to the insertion loop. (A point handed in twice gets two ids;
+// the second copy is then found as a duplicate of the first, as any duplicate is.)
+VertexId Delaunay::assign_internal(VertexId v) {
+  const VertexId x = VertexId(order_.size());
+  order_.push_back(v);
+  const double* p = point(v);
+  pts_.insert(pts_.end(), p, p + 3);
+  return x;
 }
 
 void Delaunay::reserve(std::size_t points) {
-  // Tet ids stay below 2^31: link_new_tets() borrows the top bit of vertex_tet_.
-  assert(double(points) * kTetsPerPointEstimate < double(1u << 31));
+  // Tet ids stay below 2^30 (facet handles are 4t + f in 32 bits); caller ids below
+  // 2^31 (link_new_tets() borrows their top bit).
+  assert(double(points) * kTetsPerPointEstimate < double(1u << 30));
   const std::size_t tets = std::size_t(double(points) * kTetsPerPointEstimate) + 64;
-  tet_vertex_.reserve(4 * tets);
-  tet_neighbor_.reserve(4 * tets);
-  tet_flags_.reserve(tets);
+  tets_.reserve(tets);
+  marks_.grow(tets);
+  pts_.reserve(3 * points);
+  order_.reserve(points);
   vertex_tet_.reserve(points);
-  duplicate_of_.reserve(points);
 }
 
 void Delaunay::reset() {
-  tet_vertex_.clear();
-  tet_neighbor_.clear();
-  tet_flags_.clear();
+  tets_.clear();
   free_head_ = kNoTet;
   num_alive_ = num_infinite_ = 0;
+  marks_.bits.clear();
+  pts_.clear();
+  order_.clear();
   vertex_tet_.clear();
   duplicate_of_.clear();
   num_points_ = 0;
@@ -81,44 +93,55 @@ void Delaunay::reset() {
   rejected_.reserve(256);
   new_tets_.reserve(256);
   new_slots_.reserve(256);
+  local_ids_.reserve(256);
+  local_vertex_.reserve(256);
+  local_internal_.reserve(256);
+  local_tet_.reserve(256);
   edge_table_.assign(64 * 64, kNoTet);
 }
 
 BuildStatus Delaunay::build(const double* xyz, const std::uint64_t* labels, std::size_t n) {
   reset();
   // The order is computed before the tet arrays are reserved, so its temporary
-  // keys never coexist with them: peak memory stays that of the tets.
-  std::vector<std::uint32_t> order = brio_order(xyz, n);
+  // keys never coexist with them: peak memory stays that of the tets. It becomes
+  // order_ (internal id = position in it), and the coordinates are copied in it.
+  order_ = brio_order(xyz, n);
   reserve(n);
   set_points(xyz, labels, n);
+  pts_.resize(3 * n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const double* p = xyz + 3 * std::size_t(order_[k]);
+    double* q = &pts_[3 * k];
+    q[0] = p[0], q[1] = p[1], q[2] = p[2];
+  }
 
   std::uint32_t used[4];
-  if (!make_initial_tet(order, used)) {
+  if (!make_initial_tet(used)) {
     reset();
     set_points(xyz, labels, n);
     return BuildStatus::kTooFewPoints;
   }
   TetId hint = last_tet_;
-  for (std::uint32_t v : order) {
-    if (v == used[0] || v == used[1] || v == used[2] || v == used[3]) continue;
-    insert(v, hint);
+  for (VertexId x = 0; x < VertexId(n); ++x) {
+    if (x == used[0] || x == used[1] || x == used[2] || x == used[3]) continue;
+    insert_internal(x, hint);
     hint = last_tet_;
   }
   return BuildStatus::kOk;
 }
 
-// Finds four affinely independent points early in the insertion order and builds
-// the first finite tet and its four infinite neighbours.
-bool Delaunay::make_initial_tet(const std::vector<std::uint32_t>& order, std::uint32_t used[4]) {
-  const std::size_t n = order.size();
+// Finds four affinely independent points early in the insertion order (internal
+// ids 0, 1, ...) and builds the first finite tet and its four infinite neighbours.
+bool Delaunay::make_initial_tet(std::uint32_t used[4]) {
+  const std::size_t n = order_.size();
   if (n < 4) return false;
-  const VertexId a = order[0];
-  const double* pa = point(a);
+  const VertexId a = 0;
+  const double* pa = ipoint(a);
   std::size_t i = 1;
-  while (i < n && same_point(point(order[i]), pa)) ++i;
+  while (i < n && same_point(ipoint(VertexId(i)), pa)) ++i;
   if (i == n) return false;
-  const VertexId b = order[i];
-  const double* pb = point(b);
+  const VertexId b = VertexId(i);
+  const double* pb = ipoint(b);
   // a, b, c are collinear iff orient3d(a, b, c, q) = 0 for the three points q made
   // by moving a along each axis: the plane through a, b, c (if any) has a non-zero
   // normal component along some axis, and the q on that axis is off it.
@@ -133,14 +156,14 @@ bool Delaunay::make_initial_tet(const std::vector<std::uint32_t>& order, std::ui
     return true;
   };
   std::size_t j = i + 1;
-  while (j < n && collinear(point(order[j]))) ++j;
+  while (j < n && collinear(ipoint(VertexId(j)))) ++j;
   if (j >= n) return false;
-  VertexId c = order[j];
+  VertexId c = VertexId(j);
   std::size_t k = j + 1;
   int sign = 0;
-  while (k < n && (sign = orient3d(pa, pb, point(c), point(order[k]))) == 0) ++k;
+  while (k < n && (sign = orient3d(pa, pb, ipoint(c), ipoint(VertexId(k)))) == 0) ++k;
   if (k >= n) return false;
-  VertexId d = order[k];
+  VertexId d = VertexId(k);
   VertexId bb = b;
   if (sign < 0) std::swap(bb, c);  // make (a, bb, c, d) positively oriented
 
@@ -148,17 +171,14 @@ bool Delaunay::make_initial_tet(const std::vector<std::uint32_t>& order, std::ui
   // made of facet f's vertices in reverse order (so the hull's interior is on the
   // negative side of it, as the anatomy requires) and the infinite vertex last.
   const VertexId fin[4] = {a, bb, c, d};
-  tet_vertex_.assign(fin, fin + 4);
-  tet_neighbor_.assign(4, 0);
-  tet_flags_.assign(1, kAlive);
+  tets_.assign(5, Tet{});
+  for (int m = 0; m < 4; ++m) tets_[0].v[m] = fin[m];
   for (int f = 0; f < 4; ++f) {
-    const VertexId inf[4] = {fin[kFacetVertex[f][0]], fin[kFacetVertex[f][2]], fin[kFacetVertex[f][1]],
-                             kInfiniteVertex};
-    tet_vertex_.insert(tet_vertex_.end(), inf, inf + 4);
-    tet_neighbor_.insert(tet_neighbor_.end(), 4, 0);
-    tet_flags_.push_back(kAlive);
-    tet_neighbor_[f] = 4 * (1 + f) + 3;
-    tet_neighbor_[4 * (1 + f) + 3] = f;
+    Tet& inf = tets_[1 + f];
+    inf.v[0] = fin[kFacetVertex[f][0]], inf.v[1] = fin[kFacetVertex[f][2]], inf.v[2] = fin[kFacetVertex[f][1]];
+    inf.v[3] = kInfiniteVertex;
+    tets_[0].n[f] = 4 * (1 + f) + 3;
+    inf.n[3] = FacetHandle(f);
   }
   // The infinite tets meet each other along the facets that hold the infinite
   // vertex: match them by their vertex sets (16 facets, once).
@@ -168,19 +188,20 @@ bool Delaunay::make_initial_tet(const std::vector<std::uint32_t>& order, std::ui
         for (int f2 = 0; f2 < 3; ++f2) {
           VertexId x[3], y[3];
           for (int m = 0; m < 3; ++m) {
-            x[m] = tet_vertex_[4 * s + kFacetVertex[f][m]];
-            y[m] = tet_vertex_[4 * s2 + kFacetVertex[f2][m]];
+            x[m] = tets_[s].v[kFacetVertex[f][m]];
+            y[m] = tets_[s2].v[kFacetVertex[f2][m]];
           }
           std::sort(x, x + 3);
           std::sort(y, y + 3);
           if (std::equal(x, x + 3, y)) {
-            tet_neighbor_[4 * s + f] = 4 * s2 + f2;
-            tet_neighbor_[4 * s2 + f2] = 4 * s + f;
+            tets_[s].n[f] = 4 * s2 + f2;
+            tets_[s2].n[f2] = 4 * s + f;
           }
         }
+  marks_.grow(tets_.size());
   num_alive_ = 5;
   num_infinite_ = 4;
-  for (VertexId v : fin) vertex_tet_[v] = 0;
+  for (VertexId v : fin) vertex_tet_[order_[v]] = 0;
   num_vertices_ = 4;
   stats_.inserted = 4;
   last_tet_ = 0;
@@ -193,16 +214,16 @@ bool Delaunay::make_initial_tet(const std::vector<std::uint32_t>& order, std::ui
 // the finite tet that contains p (closed), or at the infinite tet whose hull facet
 // p lies strictly beyond. A Delaunay triangulation makes this walk terminate.
 TetId Delaunay::locate(const double* p, TetId t) {
-  if (t == kNoTet || tet_flags_[t] == kFreeFlag) t = last_tet_;
+  if (t == kNoTet || !is_alive(t)) t = last_tet_;
   {
-    const VertexId* v = &tet_vertex_[4 * std::size_t(t)];
-    const int i = infinite_position(v);
-    if (i >= 0) t = tet_neighbor_[4 * t + i] >> 2;  // the finite tet behind the hull facet
+    const int i = infinite_position(tets_[t].v);
+    if (i >= 0) t = tets_[t].n[i] >> 2;  // the finite tet behind the hull facet
   }
   int came_from = -1;
   for (;;) {
     ++stats_.walk_steps;
-    const VertexId* v = &tet_vertex_[4 * std::size_t(t)];
+    const Tet& tet = tets_[t];
+    const VertexId* v = tet.v;
     if (has_infinite_vertex(v)) return t;
     walk_rng_ ^= walk_rng_ << 13, walk_rng_ ^= walk_rng_ >> 7, walk_rng_ ^= walk_rng_ << 17;
     const int r = int(walk_rng_ >> 62);
@@ -211,8 +232,8 @@ TetId Delaunay::locate(const double* p, TetId t) {
       const int f = (r + k) & 3;
       if (f == came_from) continue;
       const int* fv = kFacetVertex[f];
-      if (orient3d(point(v[fv[0]]), point(v[fv[1]]), point(v[fv[2]]), p) < 0) {
-        const FacetHandle h = tet_neighbor_[4 * t + f];
+      if (orient3d(ipoint(v[fv[0]]), ipoint(v[fv[1]]), ipoint(v[fv[2]]), p) < 0) {
+        const FacetHandle h = tet.n[f];
         t = h >> 2;
         came_from = int(h & 3);
         moved = true;
@@ -223,48 +244,61 @@ TetId Delaunay::locate(const double* p, TetId t) {
   }
 }
 
-bool Delaunay::in_conflict(TetId t, const double* p, std::uint64_t lp) const {
-  const VertexId* v = &tet_vertex_[4 * std::size_t(t)];
+// The perturbed conflict test of the point with internal id x (coordinates p).
+// Exactly insphere_sos / infinite_conflict_sos, with the labels looked up only
+// when the unperturbed sign is 0 (they cost a dependent load each).
+TS_FORCE_INLINE bool Delaunay::in_conflict(const Tet& t, const double* p, VertexId x) const {
+  const VertexId* v = t.v;
   const int i = infinite_position(v);
   if (i < 0) {
-    return insphere_sos(point(v[0]), point(v[1]), point(v[2]), point(v[3]), p, label(v[0]), label(v[1]),
-                        label(v[2]), label(v[3]), lp) > 0;
+    const double *a = ipoint(v[0]), *b = ipoint(v[1]), *c = ipoint(v[2]), *d = ipoint(v[3]);
+    const int s = insphere(a, b, c, d, p);
+    if (TS_LIKELY(s != 0)) return s > 0;
+    return detail::insphere_sos_tiebreak(a, b, c, d, p, ilabel(v[0]), ilabel(v[1]), ilabel(v[2]), ilabel(v[3]),
+                                         ilabel(x)) > 0;
   }
   const VertexId a = v[kFacetVertex[i][0]], b = v[kFacetVertex[i][1]], c = v[kFacetVertex[i][2]];
-  return infinite_conflict_sos(point(a), point(b), point(c), p, label(a), label(b), label(c), lp) > 0;
+  const int s = orient3d(ipoint(a), ipoint(b), ipoint(c), p);
+  if (TS_LIKELY(s != 0)) return s > 0;
+  return detail::infinite_conflict_coplanar(ipoint(a), ipoint(b), ipoint(c), p, ilabel(a), ilabel(b), ilabel(c),
+                                            ilabel(x)) > 0;
 }
 
 TetId Delaunay::new_tet_slot() {
   if (free_head_ != kNoTet) {
     const TetId t = free_head_;
-    free_head_ = tet_neighbor_[4 * std::size_t(t)];
+    free_head_ = tets_[t].n[0];
     return t;
   }
-  const TetId t = TetId(tet_flags_.size());
-  tet_vertex_.resize(tet_vertex_.size() + 4);
-  tet_neighbor_.resize(tet_neighbor_.size() + 4);
-  tet_flags_.push_back(kFreeFlag);
+  const TetId t = TetId(tets_.size());
+  tets_.emplace_back();
+  marks_.grow(tets_.size());
   return t;
 }
 
 void Delaunay::free_tet_slot(TetId t) {
-  tet_flags_[t] = kFreeFlag;
-  tet_neighbor_[4 * std::size_t(t)] = free_head_;
+  tets_[t].v[0] = kNoVertex;
+  tets_[t].n[0] = free_head_;
   free_head_ = t;
 }
 
 InsertOutcome Delaunay::insert(VertexId v, TetId hint) {
-  const double* p = point(v);
-  const std::uint64_t lp = label(v);
+  assert(v < num_points_);
+  return insert_internal(assign_internal(v), hint);
+}
+
+InsertOutcome Delaunay::insert_internal(VertexId x, TetId hint) {
+  const double* p = ipoint(x);
   const TetId start = locate(p, hint);
 
   // A point inside (or on) a finite tet that equals one of its vertices is a duplicate.
   {
-    const VertexId* tv = &tet_vertex_[4 * std::size_t(start)];
+    const VertexId* tv = tets_[start].v;
     if (!has_infinite_vertex(tv)) {
       for (int i = 0; i < 4; ++i)
-        if (same_point(point(tv[i]), p)) {
-          duplicate_of_[v] = tv[i];
+        if (same_point(ipoint(tv[i]), p)) {
+          const VertexId self = order_[x], first = order_[tv[i]];
+          if (first != self) duplicate_of_[self] = first;
           ++stats_.duplicates;
           return InsertOutcome::kDuplicate;
         }
@@ -275,163 +309,202 @@ InsertOutcome Delaunay::insert(VertexId v, TetId hint) {
   // located tet, which always is one (p lies in its closed tet, hence strictly in
   // its ball, or strictly beyond its hull facet). The cavity is connected and
   // star-shaped from p, so a breadth-first search over neighbours finds it.
+  // kInCavity marks its tets, kVisited the tets tested and found not in conflict.
   cavity_.clear();
   rejected_.clear();
   new_tets_.clear();
-  tet_flags_[start] = kInCavity;
+  // Each tet that joins the cavity gets its neighbours prefetched: they are tested
+  // a few steps later, and their slots are scattered (the conflict test used to
+  // wait on that load more than on the arithmetic).
+  const auto prefetch_neighbors = [this](const Tet& t) {
+    for (int f = 0; f < 4; ++f) TS_PREFETCH(&tets_[t.n[f] >> 2]);
+  };
+  marks_.set(start, kInCavity);
   cavity_.push_back(start);
+  prefetch_neighbors(tets_[start]);
   for (std::size_t i = 0; i < cavity_.size(); ++i) {
     const TetId c = cavity_[i];
+    const Tet& ct = tets_[c];
     for (int f = 0; f < 4; ++f) {
-      const FacetHandle h = tet_neighbor_[4 * std::size_t(c) + f];
+      const FacetHandle h = ct.n[f];
       const TetId n = h >> 2;
-      const std::uint8_t flag = tet_flags_[n];
-      if (flag == kInCavity) continue;
-      if (flag == kAlive && in_conflict(n, p, lp)) {
-        tet_flags_[n] = kInCavity;
-        cavity_.push_back(n);
-        continue;
-      }
-      if (flag == kAlive) {
-        tet_flags_[n] = kNotInConflict;
+      const std::uint64_t mark = marks_.get(n);
+      if (mark == kInCavity) continue;
+      if (mark == 0) {
+        const Tet& nt = tets_[n];
+        if (in_conflict(nt, p, x)) {
+          marks_.set(n, kInCavity);
+          cavity_.push_back(n);
+          prefetch_neighbors(nt);
+          continue;
+        }
+        marks_.set(n, kVisited);
         rejected_.push_back(n);
       }
-      // Boundary facet: the new tet is c with its vertex f replaced by v, which
-      // keeps the orientation because v sees this facet from c's side.
-      NewTet nt;
-      const VertexId* cv = &tet_vertex_[4 * std::size_t(c)];
-      nt.v[0] = cv[0], nt.v[1] = cv[1], nt.v[2] = cv[2], nt.v[3] = cv[3];
-      nt.v[f] = v;
+      // Boundary facet: the new tet is c with its vertex f replaced by x, which
+      // keeps the orientation because x sees this facet from c's side.
+      // (Element by element: a whole copy followed by a store into the middle made
+      // the next load of the record stall on store forwarding.)
+      NewTet& nt = new_tets_.emplace_back();
+      for (int m = 0; m < 4; ++m) nt.v[m] = m == f ? x : ct.v[m];
       nt.outer = h;
       nt.facet = std::uint32_t(f);
-      new_tets_.push_back(nt);
     }
   }
-  for (TetId t : rejected_) tet_flags_[t] = kAlive;
+  for (TetId t : rejected_) marks_.clear(t);
   stats_.cavity_tets += cavity_.size();
 
   // Release the cavity's slots (they are reused first by the new tets).
   for (TetId t : cavity_) {
-    if (has_infinite_vertex(&tet_vertex_[4 * std::size_t(t)])) --num_infinite_;
+    if (has_infinite_vertex(tets_[t].v)) --num_infinite_;
+    marks_.clear(t);
     free_tet_slot(t);
   }
   num_alive_ -= cavity_.size();
 
   new_slots_.clear();
+  if (local_ids_.size() < new_tets_.size()) local_ids_.resize(new_tets_.size());
   for (const NewTet& nt : new_tets_) {
     const TetId t = new_tet_slot();
     new_slots_.push_back(t);
-    VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
-    tv[0] = nt.v[0], tv[1] = nt.v[1], tv[2] = nt.v[2], tv[3] = nt.v[3];
-    tet_flags_[t] = kAlive;
+    Tet& tet = tets_[t];
+    tet.v[0] = nt.v[0], tet.v[1] = nt.v[1], tet.v[2] = nt.v[2], tet.v[3] = nt.v[3];
     const FacetHandle self = 4 * t + nt.facet;
-    tet_neighbor_[self] = nt.outer;
-    tet_neighbor_[nt.outer] = self;
-    num_infinite_ += has_infinite_vertex(tv);
+    tet.n[nt.facet] = nt.outer;
+    tets_[nt.outer >> 2].n[nt.outer & 3] = self;
+    num_infinite_ += has_infinite_vertex(tet.v);
   }
   num_alive_ += new_tets_.size();
   link_new_tets(new_tets_.size());
 
   last_tet_ = new_slots_.back();
+  vertex_tet_[order_[x]] = last_tet_;
   ++num_vertices_;
   ++stats_.inserted;
   return InsertOutcome::kInserted;
 }
 
 // The new tets meet each other across the facets that hold the new point. Such a
-// facet is the new point plus one edge of the cavity boundary, and each boundary
-// edge belongs to exactly two boundary facets. The boundary's vertices get small
-// local numbers (kept for the moment in vertex_tet_, tagged by the top bit, which
-// no tet id uses), so an edge indexes a small square table directly: the first
-// facet to see an edge parks its handle there, the second links the two and clears
-// the entry, which leaves the table empty for the next insertion.
+// facet is the new point plus one edge of the cavity boundary. The boundary is a
+// closed surface, and its triangles (facet f of each new tet, in kFacetVertex[f]
+// order) are all oriented alike (the new point on their positive side), so each
+// boundary edge appears exactly twice, once in each direction. The boundary's
+// vertices get small local numbers, so a directed edge (a, b) indexes a small square
+// table directly: pass 1 parks in (a, b) the handle of the new facet over that edge,
+// pass 2 reads its partner from (b, a). No branches, and no clearing: every entry
+// read was written by this insertion.
+//
+// The local numbers live for the moment in order_ (indexed by internal id, so the
+// boundary's entries are close together), tagged by the top bit, which no caller id
+// uses (n < 2^31); local_vertex_ keeps the caller ids they replace and restores them.
 void Delaunay::link_new_tets(std::size_t count) {
-  constexpr TetId kLocalTag = 0x80000000u;
-  std::uint32_t num_local = 0;
-  auto local_id = [&](VertexId x) -> std::uint32_t {
-    if (x == kInfiniteVertex) return 0;  // local 0 is the infinite vertex
-    TetId& slot = vertex_tet_[x];
-    if (!(slot & kLocalTag)) slot = kLocalTag | ++num_local;
-    return slot & ~kLocalTag;
-  };
+  constexpr VertexId kLocalTag = 0x80000000u;
   // The boundary is a triangulated sphere: count = 2 V - 4 triangles on V vertices,
   // so V = count / 2 + 2 bounds the local ids (plus 0 for the infinite vertex).
-  const std::size_t side = count / 2 + 3;
-  if (edge_table_.size() < side * side) edge_table_.assign(side * side, kNoTet);
-  for (std::size_t k = 0; k < count; ++k) {
-    const TetId t = new_slots_[k];
-    const int f = int(new_tets_[k].facet);
-    const VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
-    std::uint32_t id[4];
-    for (int m = 0; m < 4; ++m) id[m] = m == f ? 0 : local_id(tv[m]);
-    for (int g = 0; g < 4; ++g) {
-      if (g == f) continue;
-      // The edge is made of the two positions other than f and g.
-      const int a = kOtherPositions[f][g][0], b = kOtherPositions[f][g][1];
-      const std::uint32_t lo = std::min(id[a], id[b]), hi = std::max(id[a], id[b]);
-      FacetHandle& entry = edge_table_[lo * side + hi];
-      const FacetHandle self = 4 * t + std::uint32_t(g);
-      if (entry == kNoTet) {
-        entry = self;
-      } else {
-        tet_neighbor_[self] = entry;
-        tet_neighbor_[entry] = self;
-        entry = kNoTet;
-      }
-    }
+  const std::size_t max_local = count / 2 + 2;
+  const std::size_t side = max_local + 1;
+  if (edge_table_.size() < side * side) edge_table_.resize(side * side);
+  if (local_tet_.size() < side + 1) {
+    local_tet_.resize(side + 1);
+    local_vertex_.resize(side + 1);
+    local_internal_.resize(side + 1);
   }
-  // Give vertex_tet_ back its meaning: one incident tet per vertex.
+  VertexId* local_vertex = local_vertex_.data();
+  VertexId* local_internal = local_internal_.data();
+  VertexId* order = order_.data();
+  std::uint32_t num_local = 0;
+  // Without branches (whether a vertex is new is a coin flip for the predictor):
+  // the next local id's entries are written speculatively and kept only if new.
+  auto local_id = [&](VertexId x) -> std::uint32_t {
+    if (x == kInfiniteVertex) return 0;  // local 0 is the infinite vertex
+    const VertexId slot = order[x];
+    const bool fresh = !(slot & kLocalTag);
+    const std::uint32_t next = num_local + 1;
+    local_vertex[next] = slot;
+    local_internal[next] = x;
+    order[x] = fresh ? (kLocalTag | next) : slot;
+    num_local += fresh;
+    return fresh ? next : (slot & ~kLocalTag);
+  };
+  FacetHandle* table = edge_table_.data();
   for (std::size_t k = 0; k < count; ++k) {
     const TetId t = new_slots_[k];
-    const VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
-    for (int m = 0; m < 4; ++m)
-      if (tv[m] != kInfiniteVertex) vertex_tet_[tv[m]] = t;
+    const int* fv = kFacetVertex[new_tets_[k].facet];
+    const VertexId* tv = tets_[t].v;
+    const std::uint32_t a = local_id(tv[fv[0]]), b = local_id(tv[fv[1]]), c = local_id(tv[fv[2]]);
+    // Edge (a, b) lies in the new facet opposite c's position, and so on around.
+    table[a * side + b] = 4 * t + std::uint32_t(fv[2]);
+    table[b * side + c] = 4 * t + std::uint32_t(fv[0]);
+    table[c * side + a] = 4 * t + std::uint32_t(fv[1]);
+    local_tet_[a] = t, local_tet_[b] = t, local_tet_[c] = t;
+    local_ids_[k] = {a, b, c};
+  }
+  for (std::size_t k = 0; k < count; ++k) {
+    Tet& tet = tets_[new_slots_[k]];
+    const int* fv = kFacetVertex[new_tets_[k].facet];
+    const auto [a, b, c] = local_ids_[k];
+    tet.n[fv[2]] = table[b * side + a];
+    tet.n[fv[0]] = table[c * side + b];
+    tet.n[fv[1]] = table[a * side + c];
+  }
+  // Restore order_, and give each boundary vertex one incident tet.
+  for (std::uint32_t i = 1; i <= num_local; ++i) {
+    order[local_internal[i]] = local_vertex[i];
+    vertex_tet_[local_vertex[i]] = local_tet_[i];
   }
 }
 
 void Delaunay::insert_range(VertexId first, VertexId last) {
   const std::size_t n = last - first;
-  std::vector<std::uint32_t> order = hilbert_order(point(first), n);
+  const std::vector<std::uint32_t> order = hilbert_order(point(first), n);
+  // Internal ids in Hilbert order (coordinates copied in that order), then insert.
+  pts_.reserve(pts_.size() + 3 * n);
+  order_.reserve(order_.size() + n);
   TetId hint = last_tet_;
   for (std::uint32_t i : order) {
-    insert(first + i, hint);
+    insert_internal(assign_internal(first + i), hint);
     hint = last_tet_;
   }
 }
 
 void Delaunay::star(VertexId v, std::vector<TetId>& out) const {
-  const TetId start = vertex_tet_[v];
+  const TetId start = v < vertex_tet_.size() ? vertex_tet_[v] : kNoTet;
   if (start == kNoTet) return;
+  VertexId x = kNoVertex;  // v's internal id
+  for (int i = 0; i < 4; ++i)
+    if (to_caller(tets_[start].v[i]) == v) x = tets_[start].v[i];
   const std::size_t first = out.size();
-  // Breadth-first over the tets around v, marked in tet_flags_ while the search runs
-  // (every alive tet is kAlive between insertions) and unmarked before returning.
-  tet_flags_[start] = kStarMark;
+  // Breadth-first over the tets around v, marked kVisited while the search runs
+  // (no mark is set between insertions) and unmarked before returning.
+  marks_.set(start, kVisited);
   out.push_back(start);
   for (std::size_t i = first; i < out.size(); ++i) {
-    const TetId t = out[i];
-    const VertexId* tv = &tet_vertex_[4 * std::size_t(t)];
+    const Tet& t = tets_[out[i]];
     for (int f = 0; f < 4; ++f) {
-      if (tv[f] == v) continue;  // the facet opposite v does not hold v
-      const TetId n = tet_neighbor_[4 * std::size_t(t) + f] >> 2;
-      if (tet_flags_[n] == kStarMark) continue;
-      tet_flags_[n] = kStarMark;
+      if (t.v[f] == x) continue;  // the facet opposite v does not hold v
+      const TetId n = t.n[f] >> 2;
+      if (marks_.get(n)) continue;
+      marks_.set(n, kVisited);
       out.push_back(n);
     }
   }
-  for (std::size_t i = first; i < out.size(); ++i) tet_flags_[out[i]] = kAlive;
+  for (std::size_t i = first; i < out.size(); ++i) marks_.clear(out[i]);
 }
 
 Circumsphere Delaunay::tet_circumsphere(TetId t) const {
-  const VertexId* v = &tet_vertex_[4 * std::size_t(t)];
-  return circumsphere(point(v[0]), point(v[1]), point(v[2]), point(v[3]));
+  const VertexId* v = tets_[t].v;
+  return circumsphere(ipoint(v[0]), ipoint(v[1]), ipoint(v[2]), ipoint(v[3]));
 }
 
 std::size_t Delaunay::memory_bytes() const {
-  return tet_vertex_.capacity() * sizeof(VertexId) + tet_neighbor_.capacity() * sizeof(FacetHandle) +
-         tet_flags_.capacity() + vertex_tet_.capacity() * sizeof(TetId) +
-         duplicate_of_.capacity() * sizeof(VertexId) + cavity_.capacity() * sizeof(TetId) +
+  return tets_.capacity() * sizeof(Tet) + marks_.bits.capacity() * 8 +
+         pts_.capacity() * sizeof(double) + order_.capacity() * sizeof(VertexId) +
+         local_internal_.capacity() * sizeof(VertexId) + vertex_tet_.capacity() * sizeof(TetId) +
+         duplicate_of_.size() * (2 * sizeof(VertexId) + 2 * sizeof(void*)) +
+         duplicate_of_.bucket_count() * sizeof(void*) + cavity_.capacity() * sizeof(TetId) +
          rejected_.capacity() * sizeof(TetId) + new_tets_.capacity() * sizeof(NewTet) +
-         new_slots_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(FacetHandle);
+         new_slots_.capacity() * sizeof(TetId) + local_ids_.capacity() * sizeof(local_ids_[0]) +
+         local_vertex_.capacity() * sizeof(VertexId) + local_tet_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(FacetHandle);
 }
 
 }  // namespace tetstream::core

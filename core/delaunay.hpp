@@ -6,12 +6,12 @@
 //
 // Anatomy of a tetrahedron t (the one picture every index trick points back to):
 //
-//   vertices   vertex(t, 0..3) = tet_vertex_[4t + i], positively oriented:
+//   vertices   vertex(t, 0..3) = tets_[t].v[i] (as caller ids), positively oriented:
 //              orient3d(v0, v1, v2, v3) > 0 for a finite tet.
 //   facets     facet f is the triangle opposite vertex f; its vertices, in the
 //              order kFacetVertex[f], see v[f] on their positive side:
 //              orient3d(v[kFacetVertex[f][0]], v[kFacetVertex[f][1]], v[kFacetVertex[f][2]], v[f]) > 0.
-//   neighbours tet_neighbor_[4t + f] = 4t' + f': the tet t' across facet f, and the
+//   neighbours tets_[t].n[f] = 4t' + f': the tet t' across facet f, and the
 //              index f' of the same facet in t' (a "facet handle"), so crossing a
 //              facet and knowing where you came from is one load. Invariant:
 //              neighbor(neighbor(h)) == h.
@@ -30,13 +30,30 @@
 //            v1
 //
 // Vertices are local indices into the caller's point array (uint32: a window holds
-// fewer than 4 G points). Each point also has a 64-bit global label that drives the
+// fewer than 2^31 points; link_new_tets() borrows the top bit). Each point also has a 64-bit global label that drives the
 // symbolic perturbation, so two windows that share points agree on degenerate cases.
+//
+// Two numberings (translated at the API boundary, never inside the insertion loop):
+//   caller ids    positions in the caller's xyz/labels arrays; everything public
+//                 (vertex(), point(), label(), star(), incident_tet(), ...) speaks them.
+//   internal ids  the order in which points were handed to the insertion loop (BRIO
+//                 + Hilbert in build(), Hilbert in insert_range()); the kernel keeps
+//                 its own copy of the coordinates in that order (pts_), so points that
+//                 are close in space are close in memory and the walk, the conflict
+//                 tests and the linking touch few cache lines. order_[internal] is the
+//                 caller id; per-point arrays the API needs (vertex_tet_) stay indexed
+//                 by caller id.
+//   Predicates see the same doubles and the same labels (labels_[order_[x]]) as a
+//   kernel working on caller ids would, so every answer, hence the triangulation, is
+//   identical.
 #include "core/predicates.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <unordered_map>
 #include <vector>
 
 namespace tetstream::core {
@@ -76,7 +93,9 @@ class Delaunay {
 
   // Triangulates points [0, n) of xyz (3 doubles per point). labels[i] is point i's
   // global label (distinct); null means label i. The arrays are referenced, not
-  // copied: they must outlive the kernel or be re-pointed with set_points().
+  // copied: they must outlive the kernel or be re-pointed with set_points(). (The
+  // kernel keeps a private copy of the coordinates of the points it inserts, in
+  // insertion order, for locality; point() still answers from the caller's array.)
   // Insertion order: biased randomized rounds, Hilbert order inside each round.
   BuildStatus build(const double* xyz, const std::uint64_t* labels, std::size_t n);
 
@@ -95,28 +114,33 @@ class Delaunay {
   std::size_t num_vertices() const { return num_vertices_; }  // distinct points inserted
   std::size_t num_finite_tets() const { return num_alive_ - num_infinite_; }
   std::size_t num_infinite_tets() const { return num_infinite_; }
-  std::size_t num_tet_slots() const { return tet_vertex_.size() / 4; }
-  bool is_alive(TetId t) const { return tet_flags_[t] != kFreeFlag; }
+  std::size_t num_tet_slots() const { return tets_.size(); }
+  bool is_alive(TetId t) const { return tets_[t].v[0] != kNoVertex; }
   bool is_infinite(TetId t) const;
-  VertexId vertex(TetId t, int i) const { return tet_vertex_[4 * t + i]; }
-  FacetHandle neighbor(TetId t, int f) const { return tet_neighbor_[4 * t + f]; }
+  VertexId vertex(TetId t, int i) const { return to_caller(tets_[t].v[i]); }
+  FacetHandle neighbor(TetId t, int f) const { return tets_[t].n[f]; }
   const double* point(VertexId v) const { return xyz_ + 3 * std::size_t(v); }
   std::uint64_t label(VertexId v) const { return labels_ ? labels_[v] : v; }
 
   // For each point: itself, or the first point with the same coordinates.
-  VertexId duplicate_of(VertexId v) const { return duplicate_of_[v]; }
+  VertexId duplicate_of(VertexId v) const {
+    if (duplicate_of_.empty()) return v;
+    const auto it = duplicate_of_.find(v);
+    return it == duplicate_of_.end() ? v : it->second;
+  }
 
   // Calls f(const VertexId v[4]) for every finite tet, positively oriented.
   template <class F>
   void for_each_finite_tet(F&& f) const {
     const std::size_t slots = num_tet_slots();
     for (std::size_t t = 0; t < slots; ++t) {
-      if (tet_flags_[t] == kFreeFlag) continue;
-      const VertexId* v = &tet_vertex_[4 * t];
-      if (v[0] == kInfiniteVertex || v[1] == kInfiniteVertex || v[2] == kInfiniteVertex ||
-          v[3] == kInfiniteVertex)
+      const Tet& tet = tets_[t];
+      if (tet.v[0] == kNoVertex) continue;  // a free slot
+      if (tet.v[0] == kInfiniteVertex || tet.v[1] == kInfiniteVertex || tet.v[2] == kInfiniteVertex ||
+          tet.v[3] == kInfiniteVertex)
         continue;
-      f(v);
+      const VertexId v[4] = {order_[tet.v[0]], order_[tet.v[1]], order_[tet.v[2]], order_[tet.v[3]]};
+      f(static_cast<const VertexId*>(v));
     }
   }
 
@@ -124,7 +148,9 @@ class Delaunay {
   // Not thread-safe on one kernel (it marks tets while it searches).
   void star(VertexId v, std::vector<TetId>& out) const;
   // One tet incident to v, or kNoTet when v is not a vertex (a duplicate, not inserted).
-  TetId incident_tet(VertexId v) const { return vertex_tet_[v]; }
+  TetId incident_tet(VertexId v) const {
+    return v < vertex_tet_.size() ? vertex_tet_[v] : kNoTet;
+  }
 
   Circumsphere tet_circumsphere(TetId t) const;
 
@@ -132,13 +158,14 @@ class Delaunay {
   std::size_t memory_bytes() const;  // bytes held by the kernel's own arrays
 
  private:
-  // tet_flags_ values. kAlive/kFree describe the slot; the two marks exist only
-  // during one insertion and are reset before it returns.
-  static constexpr std::uint8_t kAlive = 0;
-  static constexpr std::uint8_t kInCavity = 1;
-  static constexpr std::uint8_t kNotInConflict = 2;
-  static constexpr std::uint8_t kStarMark = 3;  // only inside star()
-  static constexpr std::uint8_t kFreeFlag = 0xFF;
+  // One tet: vertices (internal ids, kInfiniteVertex) and neighbour facet handles,
+  // side by side in 32 bytes (two tets per cache line), so the conflict test of a tet
+  // and the step across its facets load one line. A free slot has v[0] == kNoVertex
+  // and chains the free list through n[0].
+  struct alignas(32) Tet {
+    VertexId v[4];
+    FacetHandle n[4];
+  };
 
   struct NewTet {  // one facet of the cavity boundary, joined to the new point
     VertexId v[4];
@@ -146,10 +173,34 @@ class Delaunay {
     std::uint32_t facet;  // position of the new point in v
   };
 
+  // Marks per tet slot, set only during one insertion (or one star()) and cleared
+  // before it returns: 2 bits per tet in one word, instead of a flag byte, keeps
+  // them cache-resident, and both marks of a tet come in one load.
+  static constexpr std::uint64_t kInCavity = 1;  // during insert(): in the cavity
+  static constexpr std::uint64_t kVisited = 2;   // insert(): tested, not in conflict; star(): in the star
+  struct Marks {
+    std::vector<std::uint64_t> bits;
+    std::uint64_t get(TetId t) const { return (bits[t >> 5] >> (2 * (t & 31))) & 3; }
+    void set(TetId t, std::uint64_t m) { bits[t >> 5] |= m << (2 * (t & 31)); }
+    void clear(TetId t) { bits[t >> 5] &= ~(std::uint64_t(3) << (2 * (t & 31))); }
+    void grow(std::size_t slots) {
+      if (bits.size() * 32 < slots) bits.resize(std::max(2 * bits.size(), slots / 32 + 1), 0);
+    }
+  };
+
+  VertexId to_caller(VertexId x) const { return x >= kNoVertex ? x : order_[x]; }
+  const double* ipoint(VertexId x) const { return &pts_[3 * std::size_t(x)]; }
+  std::uint64_t ilabel(VertexId x) const {
+    const VertexId c = order_[x];
+    return labels_ ? labels_[c] : c;
+  }
+  VertexId assign_internal(VertexId v);  // the next internal id, for v (copies v's point)
+
   void reset();
-  bool make_initial_tet(const std::vector<std::uint32_t>& order, std::uint32_t used[4]);
+  bool make_initial_tet(std::uint32_t used[4]);
   TetId locate(const double* p, TetId start);
-  bool in_conflict(TetId t, const double* p, std::uint64_t label) const;
+  bool in_conflict(const Tet& t, const double* p, VertexId x) const;
+  InsertOutcome insert_internal(VertexId x, TetId hint);
   TetId new_tet_slot();
   void free_tet_slot(TetId t);
   void link_new_tets(std::size_t count);
@@ -158,16 +209,17 @@ class Delaunay {
   const std::uint64_t* labels_ = nullptr;
   std::size_t num_points_ = 0;
 
-  // Struct-of-arrays tet storage; free slots are chained through tet_neighbor_[4t].
-  std::vector<VertexId> tet_vertex_;
-  std::vector<FacetHandle> tet_neighbor_;
-  mutable std::vector<std::uint8_t> tet_flags_;  // mutable: star() marks and unmarks
+  std::vector<Tet> tets_;
   TetId free_head_ = kNoTet;
   std::size_t num_alive_ = 0;
   std::size_t num_infinite_ = 0;
+  mutable Marks marks_;  // mutable: star() marks and unmarks
 
-  std::vector<TetId> vertex_tet_;
-  std::vector<VertexId> duplicate_of_;
+  // Internal numbering (see the top of this file).
+  std::vector<double> pts_;         // 3 per internal id
+  std::vector<VertexId> order_;     // internal -> caller
+  std::vector<TetId> vertex_tet_;   // caller -> one incident tet (kNoTet: not a vertex)
+  std::unordered_map<VertexId, VertexId> duplicate_of_;  // caller -> caller; rare
   TetId last_tet_ = kNoTet;
   std::size_t num_vertices_ = 0;
   std::uint64_t walk_rng_ = 0x9E3779B97F4A7C15ULL;
@@ -178,7 +230,11 @@ class Delaunay {
   std::vector<TetId> rejected_;
   std::vector<NewTet> new_tets_;
   std::vector<TetId> new_slots_;
-  std::vector<FacetHandle> edge_table_;  // boundary edge (local ids) -> open facet
+  std::vector<std::array<std::uint32_t, 3>> local_ids_;  // per new tet: its boundary vertices
+  std::vector<VertexId> local_vertex_;   // local id -> caller id (saved from order_)
+  std::vector<VertexId> local_internal_;  // local id -> internal id
+  std::vector<TetId> local_tet_;         // local id -> a new tet holding it
+  std::vector<FacetHandle> edge_table_;  // directed boundary edge (local ids) -> new facet
 
   DelaunayStats stats_;
 };

@@ -248,15 +248,14 @@ int exact_sign(const double* const* p, const Range& r) {
   return run.template operator()<33>();
 }
 
-// Points in decreasing label order (a 5-element insertion sort; ties keep index order).
+// Points in decreasing label order, ties in index order (a stable sort). Each
+// point's place is counted without branches: on random labels the comparisons of an
+// insertion sort mispredict often, and this runs on every perturbed decision.
 void sort_by_label_desc(const std::uint64_t* label, int n, int* order) {
   for (int i = 0; i < n; ++i) {
-    int j = i;
-    while (j > 0 && label[order[j - 1]] < label[i]) {
-      order[j] = order[j - 1];
-      --j;
-    }
-    order[j] = i;
+    int rank = 0;
+    for (int j = 0; j < n; ++j) rank += int(label[j] > label[i]) | (int(label[j] == label[i]) & int(j < i));
+    order[rank] = i;
   }
 }
 
@@ -264,13 +263,12 @@ void sort_by_label_desc(const std::uint64_t* label, int n, int* order) {
 
 namespace detail {
 
-int orient3d_fallback(const double* a, const double* b, const double* c, const double* d) {
+int orient3d_fallback(const double* a, const double* b, const double* c, const double* d, const FilterValue& f) {
   PredicateStats& st = tls_predicate_stats;
   ++st.orient3d_exact;
   const double* p[4] = {a, b, c, d};
   const Range r = scan(p, 4);
   if (!r.finite) return 0;
-  const FilterValue f = orient3d_filter(a, b, c, d);
   if (f.zero_axis) return 0;
   if (f.in_range) {
     if (f.det > f.bound) return 1;
@@ -281,13 +279,13 @@ int orient3d_fallback(const double* a, const double* b, const double* c, const d
   return exact_sign<4>(p, r);
 }
 
-int insphere_fallback(const double* a, const double* b, const double* c, const double* d, const double* e) {
+int insphere_fallback(const double* a, const double* b, const double* c, const double* d, const double* e,
+                      const FilterValue& f) {
   PredicateStats& st = tls_predicate_stats;
   ++st.insphere_exact;
   const double* p[5] = {a, b, c, d, e};
   const Range r = scan(p, 5);
   if (!r.finite) return 0;
-  const FilterValue f = insphere_filter(a, b, c, d, e);
   if (f.zero_axis) return 0;
   if (f.in_range) {
     if (f.det > f.bound) return 1;

@@ -222,9 +222,11 @@ TS_FORCE_INLINE FilterValue insphere_filter(const double* a, const double* b, co
 }
 
 // Out-of-line exact paths (predicates.cpp).
-TS_NOINLINE int orient3d_fallback(const double* a, const double* b, const double* c, const double* d);
+// f is the filter's value for the same arguments (the fallback reuses it).
+TS_NOINLINE int orient3d_fallback(const double* a, const double* b, const double* c, const double* d,
+                                  const FilterValue& f);
 TS_NOINLINE int insphere_fallback(const double* a, const double* b, const double* c, const double* d,
-                                  const double* e);
+                                  const double* e, const FilterValue& f);
 TS_NOINLINE int insphere_sos_tiebreak(const double* a, const double* b, const double* c, const double* d,
                                       const double* e, std::uint64_t la, std::uint64_t lb,
                                       std::uint64_t lc, std::uint64_t ld, std::uint64_t le);
@@ -244,7 +246,7 @@ TS_FORCE_INLINE int orient3d(const double* a, const double* b, const double* c, 
     if (f.det > f.bound) return 1;
     if (f.det < -f.bound) return -1;
   }
-  return detail::orient3d_fallback(a, b, c, d);
+  return detail::orient3d_fallback(a, b, c, d, f);
 }
 
 TS_FORCE_INLINE int insphere(const double* a, const double* b, const double* c, const double* d,
@@ -255,7 +257,7 @@ TS_FORCE_INLINE int insphere(const double* a, const double* b, const double* c, 
     if (f.det > f.bound) return 1;
     if (f.det < -f.bound) return -1;
   }
-  return detail::insphere_fallback(a, b, c, d, e);
+  return detail::insphere_fallback(a, b, c, d, e, f);
 }
 
 TS_FORCE_INLINE int insphere_sos(const double* a, const double* b, const double* c, const double* d,
