@@ -42,6 +42,9 @@ constexpr double kWindowBytesPerPoint = 480;
 constexpr double kOutputBytesPerPoint = 220;
 // What the budget keeps for everything else: writer buffers, encoders, the runtime.
 constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
+// Frames queued for the writer thread. With one, the segment loop hands over a frame
+// while the previous one is compressed; more only holds memory (8 MiB a frame).
+constexpr std::size_t kWriterQueueFrames = 1;
 
 
 // Tets per frame, about: a frame is cut at the first change of minimum label after
@@ -51,6 +54,10 @@ constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
 // the same for any segment plan or thread count: the same budget gives the same
 // bytes, and two budgets give the same frames but for the header's options.
 constexpr std::size_t kFrameTets = std::size_t(1) << 18;
+// The frames alive around the writer thread: the queued ones, the one being
+// compressed and the one being filled, each about kFrameTets tets of 4 8-byte labels
+// (a frame ends where its last minimum label's group does: a few tets more).
+constexpr double kWriterQueueBytes = double(kWriterQueueFrames + 2) * kFrameTets * 32 * 1.05;
 
 class FrameCutter {
  public:
@@ -349,7 +356,8 @@ RunSummary Job::run() {
     const int other = extent[(view.axis + 1) % 3] >= extent[(view.axis + 2) % 3] ? (view.axis + 1) % 3 : (view.axis + 2) % 3;
     const double strip_overhead = zones > 1 ? 2.0 * (zones - 1) * buffer_width / std::max(extent[other], 1e-300) : 0.0;
     const double avail =
-        (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - double(index.memory_bytes())) / segments_in_flight -
+        (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - double(index.memory_bytes())) /
+            segments_in_flight -
         kWindowBytesPerPoint * (buffer_points * (1 + strip_overhead) + double(view.hull_labels.size()) * zones);
     // With zones, the segment's tets exist twice for a moment (the zones' parts and
     // their merge by minimum label).
@@ -432,7 +440,7 @@ RunSummary Job::run() {
   // Stage 5 on its own thread behind a bounded queue of frames: compression and I/O
   // overlap the segments. Declared after the writer, so destroyed (cancelled, joined)
   // before it on the way out of a failure.
-  AsyncTetWriter writer(*writer_holder, /*capacity=*/4);
+  AsyncTetWriter writer(*writer_holder, kWriterQueueFrames);
   FrameCutter cutter(writer);
   cutter.restore(std::move(pending));
   std::uint64_t segments_done = summary.segments_resumed;
