@@ -76,10 +76,12 @@ expect_refusal() {  # expected exit code, message pattern, command...
 kill_when '[ "$(segments_done)" -ge 5 ]' 2
 [ -e out.tets.ckpt/state.json ] || fail "no checkpoint after a kill"
 expect_refusal 2 "--resume" "$T" "${opts[@]}"
-# Two processes on one job: the second is refused while the first holds the lock.
+# Two processes on one job: the second is refused while the first holds the lock
+# (stopped, so that it cannot finish in between).
 "$T" "${opts[@]}" --resume 2>/dev/null &
 first=$!
 for _ in $(seq 1 500); do [ "$(segments_done)" -ge 6 ] && break; sleep 0.01; done
+kill -STOP $first
 expect_refusal 2 "in use" "$T" "${opts[@]}" --resume
 kill -9 $first; wait $first 2>/dev/null || true
 expect_refusal 2 "option 'memory'" "$T" -q run points.f64 -o out.tets --memory 96M --sort-run-points 25000 --zone-points 2500 --resume
