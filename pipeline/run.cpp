@@ -34,10 +34,12 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// Bytes per window point at the kernel's peak: tets (~6.7 x 33 bytes), vertex arrays,
-// coordinates, labels, the mapped sorted record and the spatial index, with headroom
-// for the allocator; measured with /usr/bin/time on uniform data.
-constexpr double kWindowBytesPerPoint = 480;
+// Bytes per window point at the kernel's peak: tets (~6.75 x 32 bytes), the kernel's
+// coordinate copy and vertex arrays, the window's coordinates and labels, the mapped
+// sorted record and the spatial index, with headroom for the allocator; measured with
+// /usr/bin/time on uniform data (480 overshot 1G by 2% at 10^7 points once the kernel
+// kept its own coordinates: scripts/bench-pipeline --sizes 10000000, peak 1047 MiB).
+constexpr double kWindowBytesPerPoint = 520;
 // Bytes per zone point for the emitted tets (4 x 8-byte labels, ~6.7 tets).
 constexpr double kOutputBytesPerPoint = 220;
 // What the budget keeps for everything else: writer buffers, encoders, the runtime.

@@ -82,8 +82,9 @@ void setup_run(CLI::App& app, Context& ctx) {
   cmd->add_option("--checkpoint", args->options.checkpoint_dir,
                   "Checkpoint directory (default: OUTPUT.ckpt in --tmpdir): the job's working files and progress, "
                   "removed when it succeeds");
-  cmd->add_flag("!--no-checkpoint", args->options.checkpoint,
-                "Keep no checkpoint (temporary files in a private directory; the job cannot be resumed)");
+  cmd->add_flag_callback(
+      "--no-checkpoint", [args] { args->options.checkpoint = false; },
+      "Keep no checkpoint (temporary files in a private directory; the job cannot be resumed)");
   cmd->add_flag("--resume", args->options.resume,
                 "Continue the job checkpointed for this output after a crash, kill, Ctrl-C or full disk");
   cmd->add_flag("--force", args->options.force, "Discard an existing checkpoint for this output and start over")

@@ -24,10 +24,10 @@ namespace {
 constexpr const char* kExitCodes =
     "Exit codes:\n"
     "  0  success\n"
-    "  1  bad input (malformed, truncated or non-finite data; a failed verification)\n"
-    "  2  usage error (unknown option, bad value)\n"
-    "  3  I/O or resource failure (unreadable file, disk full, out of memory)\n"
-    "  130  interrupted (Ctrl-C, SIGTERM): temporary files are removed, no output is left\n";
+    "  1  bad input (malformed, truncated or non-finite data; a failed verification; a damaged checkpoint)\n"
+    "  2  usage error (unknown option, bad value; a checkpoint exists, or belongs to other input or options)\n"
+    "  3  I/O or resource failure (unreadable file, disk full, out of memory): run keeps its checkpoint\n"
+    "  130  interrupted (Ctrl-C, SIGTERM): no output under its final name; run keeps its checkpoint\n";
 
 void configure_logging(const GlobalOptions& g) {
   // Logs go to stderr so stdout stays clean for data (`cat`) and the --json summary.
