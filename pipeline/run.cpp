@@ -213,6 +213,9 @@ void record_work(const SegmentStats& w, std::uint64_t zone_points, RunSummary& s
   s.repair_points = w.repair_points;
   s.range_failures = w.range_failures;
   s.queries = w.queries;
+  s.query_points = w.query_points;
+  s.seconds_build = w.seconds_build;
+  s.seconds_check = w.seconds_check;
   s.rounds_max = w.rounds;
   s.tets = w.tets;
   s.seconds_segments = w.seconds_build + w.seconds_check;

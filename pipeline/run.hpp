@@ -51,6 +51,8 @@ struct RunSummary {
   std::uint64_t input_points = 0, points = 0, duplicates = 0;
   std::uint64_t segments = 0, zone_points = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
+  std::uint64_t query_points = 0;   // exact conflict tests the queries made
+  double seconds_build = 0, seconds_check = 0;  // kernel builds and exactness checks, summed over segments
   std::uint64_t tets = 0, output_bytes = 0;
   std::uint64_t tet_bytes = 0;  // of the tet frames alone (the file also holds the points)
   int axis = 0;

@@ -26,9 +26,10 @@ void run_run(RunArgs& args, Context& ctx) {
                s.duplicates, s.tets, s.segments, pipeline::human_bytes(double(s.output_bytes)),
                s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0);
   spdlog::info("time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
-               "{:.1f}%, {} repair points, {} queries",
+               "{:.1f}%, {} repair points, {} queries ({} exact tests); segments: build {:.1f}s, check {:.1f}s (summed)",
                s.seconds_sort, s.seconds_triangulate, s.seconds_write, s.seconds_total,
-               pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.repair_points, s.queries);
+               pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.repair_points, s.queries,
+               s.query_points, s.seconds_build, s.seconds_check);
   ctx.summary = {{"command", "run"},
                  {"input", o.input},
                  {"output", o.output},
@@ -42,6 +43,7 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"repair_points", s.repair_points},
                  {"range_failures", s.range_failures},
                  {"queries", s.queries},
+                 {"query_points", s.query_points},
                  {"redundant_ratio", s.redundant_ratio()},
                  {"tets", s.tets},
                  {"output_bytes", s.output_bytes},
@@ -49,6 +51,8 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"bytes_per_tet", s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0},
                  {"seconds", {{"sort", s.seconds_sort},
                               {"segments_summed", s.seconds_segments},
+                              {"segments_build_summed", s.seconds_build},
+                              {"segments_check_summed", s.seconds_check},
                               {"triangulate", s.seconds_triangulate},
                               {"write", s.seconds_write},
                               {"writer_thread_busy", s.seconds_writer_busy},
