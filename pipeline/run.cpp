@@ -142,7 +142,7 @@ void bbox_from(const json& j, double* v) {
 }
 std::string base_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
 
-json to_json(const SortProgress& p, const std::string&) {
+json to_json(const SortProgress& p) {
   json runs = json::array();
   for (const SortRunFile& r : p.runs)
     runs.push_back({{"file", base_name(r.path)}, {"records", r.records}, {"hull_file", base_name(r.hull_path)},
@@ -281,7 +281,7 @@ SortedPoints Job::sort() {
     if (state_.contains("sort")) progress = sort_progress_from(state_["sort"], *checkpoint_);
     sort_options.resume = &progress;
     sort_options.on_step = [this](const SortProgress& p) {
-      state_["sort"] = to_json(p, dir_);
+      state_["sort"] = to_json(p);
       save();
     };
   }
@@ -299,8 +299,7 @@ SortedPoints Job::sort() {
 
 RunSummary Job::run() {
   RunSummary& summary = summary_;
-  const bool resumed = state_.contains("sort") || state_.contains("sorted");
-  summary.resumed = resumed;
+  summary.resumed = state_.contains("sort") || state_.contains("sorted");
 
   // ---- stage 1: external sort ----
   SortedPoints sorted = sort();
@@ -358,8 +357,8 @@ RunSummary Job::run() {
     // budget is kept back for allocator slack and the pages of the sorted file that a
     // window's queries touch (released after each segment). Zones add their strip
     // buffers (two per cut) and each holds the hull.
-    const int other = extent[(view.axis + 1) % 3] >= extent[(view.axis + 2) % 3] ? (view.axis + 1) % 3 : (view.axis + 2) % 3;
-    const double strip_overhead = zones > 1 ? 2.0 * (zones - 1) * buffer_width / std::max(extent[other], 1e-300) : 0.0;
+    const double strip_overhead =
+        zones > 1 ? 2.0 * (zones - 1) * buffer_width / std::max(extent[strip_axis(view)], 1e-300) : 0.0;
     const double avail =
         (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - double(index.memory_bytes())) /
             segments_in_flight -
@@ -563,22 +562,25 @@ RunSummary Job::run() {
 
 }  // namespace
 
-std::string checkpoint_directory(const RunOptions& options) {
-  if (!options.checkpoint_dir.empty()) return options.checkpoint_dir;
+namespace {
+// Where a job's working files go: --tmpdir, else the output's directory.
+std::string work_parent(const RunOptions& options) {
   std::string dir = options.tmpdir;
   if (dir.empty()) dir = std::filesystem::path(options.output).parent_path().string();
-  if (dir.empty()) dir = ".";
-  return dir + "/" + base_name(options.output) + ".ckpt";
+  return dir.empty() ? "." : dir;
+}
+}  // namespace
+
+std::string checkpoint_directory(const RunOptions& options) {
+  if (!options.checkpoint_dir.empty()) return options.checkpoint_dir;
+  return work_parent(options) + "/" + base_name(options.output) + ".ckpt";
 }
 
 RunSummary run_job(const RunOptions& options) {
   options.validate();
   if (!options.checkpoint || io::is_std_stream(options.input)) {
     if (options.checkpoint) spdlog::info("the input is stdin: this job keeps no checkpoint (it cannot be resumed)");
-    std::string tmpdir = options.tmpdir;
-    if (tmpdir.empty()) tmpdir = std::filesystem::path(options.output).parent_path().string();
-    if (tmpdir.empty()) tmpdir = ".";
-    TempDir tmp(tmpdir, "tetstream-run");
+    TempDir tmp(work_parent(options), "tetstream-run");
     return Job(options, tmp.dir(), nullptr, json::object()).run();
   }
 
@@ -586,6 +588,17 @@ RunSummary run_job(const RunOptions& options) {
   const json identity = job_identity(options);
   json state = json::object();
   const std::string how_to_restart = "rerun with --force to discard it and start over";
+  // Runs f, which reads the checkpoint; a missing field or any other damage becomes a
+  // DamagedCheckpoint that says how to start over.
+  auto trusting_checkpoint = [&](auto&& f) {
+    try {
+      f();
+    } catch (const json::exception& e) {
+      throw DamagedCheckpoint(checkpoint.dir() + "/state.json: damaged checkpoint (" + e.what() + "); " + how_to_restart);
+    } catch (const DamagedCheckpoint& e) {
+      throw DamagedCheckpoint(std::string(e.what()) + "; " + how_to_restart);
+    }
+  };
   checkpoint.create_and_lock();
   if (checkpoint.exists()) {
     if (options.force) {
@@ -596,16 +609,13 @@ RunSummary run_job(const RunOptions& options) {
       throw UsageError(checkpoint.dir() + " holds the checkpoint of an unfinished job: rerun with --resume to continue "
                        "it, or with --force to discard it and start over");
     } else {
-      try {
+      std::string difference;
+      trusting_checkpoint([&] {
         state = checkpoint.load();
-        const std::string difference = identity_difference(state.at("job"), identity);
-        if (!difference.empty())
-          throw UsageError("cannot resume from " + checkpoint.dir() + ": " + difference + "; " + how_to_restart);
-      } catch (const json::exception& e) {
-        throw DamagedCheckpoint(checkpoint.dir() + "/state.json: damaged checkpoint (" + e.what() + "); " + how_to_restart);
-      } catch (const DamagedCheckpoint& e) {
-        throw DamagedCheckpoint(std::string(e.what()) + "; " + how_to_restart);
-      }
+        difference = identity_difference(state.at("job"), identity);
+      });
+      if (!difference.empty())
+        throw UsageError("cannot resume from " + checkpoint.dir() + ": " + difference + "; " + how_to_restart);
       spdlog::info("resuming the job checkpointed in {}", checkpoint.dir());
     }
   } else if (options.resume) {
@@ -637,13 +647,7 @@ RunSummary run_job(const RunOptions& options) {
   }
   try {
     RunSummary summary;
-    try {
-      summary = Job(options, checkpoint.dir(), &checkpoint, state).run();
-    } catch (const json::exception& e) {
-      throw DamagedCheckpoint(checkpoint.dir() + "/state.json: damaged checkpoint (" + e.what() + "); " + how_to_restart);
-    } catch (const DamagedCheckpoint& e) {
-      throw DamagedCheckpoint(std::string(e.what()) + "; " + how_to_restart);
-    }
+    trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state).run(); });
     checkpoint.remove();
     return summary;
   } catch (const DamagedCheckpoint&) {

@@ -92,8 +92,9 @@ class SegmentWorker {
   // Whether the point with this label, inside the window's label range, is in the
   // strip's window (always, without strips).
   bool in_strip_window(std::uint64_t label) const {
-    const double c = view_.points[label].xyz[strip_.axis < 0 ? 0 : strip_.axis];
-    return strip_.axis < 0 || (c >= strip_.window_lo && c <= strip_.window_hi);
+    if (strip_.axis < 0) return true;
+    const double c = view_.points[label].xyz[strip_.axis];
+    return c >= strip_.window_lo && c <= strip_.window_hi;
   }
 
   static constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
@@ -106,14 +107,11 @@ class SegmentWorker {
   std::vector<std::uint64_t> labels_;
   std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
   // Zone index of local vertex v (its label minus zone_begin), or -1 outside the zone
-  // (outside the segment's labels, or outside the strip this worker owns).
+  // (outside the segment's labels, or in another worker's strip: kNotMine, set once
+  // in run(), so the rounds' hot loop reads no coordinates).
   std::int64_t zone_index(VertexId v) const {
     const std::uint64_t l = labels_[v];
-    if (l < plan_.zone_begin || l >= plan_.zone_end) return -1;
-    if (strip_.axis >= 0) {
-      const double c = view_.points[l].xyz[strip_.axis];
-      if (!(c >= strip_.lo && c < strip_.hi)) return -1;
-    }
+    if (l < plan_.zone_begin || l >= plan_.zone_end || zone_state_[l - plan_.zone_begin] == kNotMine) return -1;
     return std::int64_t(l - plan_.zone_begin);
   }
   // Per zone vertex (by zone index): kPending until it is final and its tets
@@ -128,7 +126,7 @@ class SegmentWorker {
     }
   };
   std::unordered_set<TetKey, TetKeyHash> proved_empty_;
-  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
+  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2, kNotMine = 3;
   SegmentStats stats_;
 };
 
@@ -337,6 +335,11 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
 
   t0 = Clock::now();
   zone_state_.assign(plan_.zone_end - plan_.zone_begin, kPending);
+  if (strip_.axis >= 0)
+    for (std::uint64_t l = plan_.zone_begin; l < plan_.zone_end; ++l) {
+      const double c = view_.points[l].xyz[strip_.axis];
+      if (!(c >= strip_.lo && c < strip_.hi)) zone_state_[l - plan_.zone_begin] = kNotMine;
+    }
   std::vector<std::uint64_t> repairs;
   for (;;) {
     ++stats_.rounds;
@@ -384,6 +387,11 @@ std::uint64_t SortedView::upper_bound(double x) const {
   return lo;
 }
 
+int strip_axis(const SortedView& view) {
+  const int a1 = (view.axis + 1) % 3, a2 = (view.axis + 2) % 3;
+  return view.bbox_max[a1] - view.bbox_min[a1] >= view.bbox_max[a2] - view.bbox_min[a2] ? a1 : a2;
+}
+
 std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width,
                                        std::uint64_t first_label) {
   std::vector<SegmentPlan> plans;
@@ -413,8 +421,7 @@ SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan
 
   // Strips along the longer of the two other axes, cut at quantiles of the zone's
   // points so that each holds about the same number.
-  const int a1 = (view.axis + 1) % 3, a2 = (view.axis + 2) % 3;
-  const int axis = view.bbox_max[a1] - view.bbox_min[a1] >= view.bbox_max[a2] - view.bbox_min[a2] ? a1 : a2;
+  const int axis = strip_axis(view);
   std::vector<double> coords(zone_points);
   for (std::uint64_t i = 0; i < zone_points; ++i) coords[i] = view.points[plan.zone_begin + i].xyz[axis];
   std::vector<double> cuts;  // zones - 1 increasing cut values

@@ -88,6 +88,9 @@ struct SegmentStats {
   }
 };
 
+// The axis zones are cut along: the longer of the two other than the sort axis.
+int strip_axis(const SortedView& view);
+
 // Triangulates one segment and appends its tets (4 labels each, positively oriented,
 // grouped by minimum label in increasing order) to `out`. With zones > 1 the segment
 // is split into that many strips along the longer of the two other axes (at quantiles
