@@ -362,63 +362,168 @@ int infinite_conflict_coplanar(const double* a, const double* b, const double* c
 
 }  // namespace detail
 
+namespace {
+
+// |a| = m 2^e with m in [1/2, 1), rounded to the nearest double (one rounding: the top
+// 64 bits with a sticky bit for everything below them convert correctly). a != 0.
+template <int L>
+double scaled_magnitude(Int<L> a, int& e) {
+  if (is_negative(a)) a = -a;
+  int top = L - 1;
+  while (a.w[top] == 0) --top;
+  const int lz = std::countl_zero(a.w[top]);
+  std::uint64_t bits = a.w[top] << lz;
+  bool sticky = false;  // any set bit below the 64 kept in `bits`
+  if (top > 0) {
+    if (lz > 0) bits |= a.w[top - 1] >> (64 - lz);
+    sticky = lz > 0 ? (a.w[top - 1] << lz) != 0 : a.w[top - 1] != 0;
+    for (int i = top - 2; i >= 0 && !sticky; --i) sticky = a.w[i] != 0;
+  }
+  // 64 significant bits; the lowest is far below double precision, so or-ing the
+  // sticky information into it makes the single u64 -> double rounding correct.
+  if (sticky) bits |= 1;
+  e = 64 * top + (64 - lz);  // |a| < 2^e, |a| >= 2^(e-1)
+  return std::ldexp(double(bits), -64);
+}
+
+// The centre offset X = N / D of the circumsphere (see circumsphere() below),
+// evaluated exactly on the scaled integer coordinates and rounded once per
+// component: x[k] = N_k / D with N_k and D each correctly rounded, then one division.
+// Returns false when D == 0 (a flat tetrahedron). Sizes as in the predicates: with
+// |t| < 2^(64K-2), cross products and squared lengths fit 2K limbs, D (3 terms) 3K,
+// N (3 terms of products < 2^(256K-5)) 4K.
+template <int K>
+bool circumcentre_offset_int(const double* const* p, int low, double x[3]) {
+  Int<K> t[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) t[i][k] = to_int<K>(p[i + 1][k], low) - to_int<K>(p[0][k], low);
+  const auto cross = [&](int i, int j, int k) {
+    const int a = (k + 1) % 3, b = (k + 2) % 3;
+    return t[i][a] * t[j][b] - t[i][b] * t[j][a];
+  };
+  Int<2 * K> vw[3], wu[3], uv[3], sq[3];
+  for (int k = 0; k < 3; ++k) vw[k] = cross(1, 2, k), wu[k] = cross(2, 0, k), uv[k] = cross(0, 1, k);
+  for (int i = 0; i < 3; ++i) sq[i] = t[i][0] * t[i][0] + t[i][1] * t[i][1] + t[i][2] * t[i][2];
+  const Int<3 * K> det = t[0][0] * vw[0] + t[0][1] * vw[1] + t[0][2] * vw[2];
+  const int det_sign = sign(det);
+  if (det_sign == 0) return false;
+  int det_exp = 0;
+  const double det_mag = scaled_magnitude(det, det_exp);
+  for (int k = 0; k < 3; ++k) {
+    const Int<4 * K> n = sq[0] * vw[k] + sq[1] * wu[k] + sq[2] * uv[k];
+    const int n_sign = sign(n);
+    if (n_sign == 0) {
+      x[k] = 0.0;
+      continue;
+    }
+    int n_exp = 0;
+    const double n_mag = scaled_magnitude(n, n_exp);
+    // True differences are t 2^low: N scales by 2^(4 low), D = 2 det by 2^(3 low).
+    x[k] = double(n_sign * det_sign) * std::ldexp(n_mag / det_mag, n_exp - det_exp + low - 1);
+  }
+  return true;
+}
+
+}  // namespace
+
 // Circumsphere with a rigorous error bound. With u_ = b-a, v_ = c-a, w_ = d-a, the
 // centre is a + N / D, N = |u|^2 (v x w) + |v|^2 (w x u) + |w|^2 (u x v), D = 2 u.(v x w).
-// Rounding counts as in predicates.hpp (differences included), M = max |computed
-// difference component|:
+//
+// Fast path, in floating point. Rounding counts as in predicates.hpp (differences
+// included), M = max |computed difference component|:
 //   D: like orient3d, n = 8, P <= 6 M^3, times 2 exactly: |dD| <= 12 gamma_8 M^3/(1-u)^3;
 //   N_k: |u|^2 has n = 5, (v x w)_k n = 4, product 10, two sums: n = 12, and
 //        P <= 3 * 3M^2 * 2M^2: |dN| <= 18 gamma_12 M^4 / (1-u)^4.
 // For x = N/D and x~ = N~/D~ (computed N, D): x - x~ = x dD/D~ - dN/D~, so with
-// r = |dD|/|D~| < 1: |x - x~| <= (|x~| r + |dN|/|D~|) / (1 - r). We require r <= 1/2
-// (else "too flat": valid = false). The division adds u|x~|, the final a + X adds
-// u|center|. The radius |X| has relative error <= gamma_3 / 2 + u < 4u, and
-// |sqrt(r2*) - |X|| <= |x* - X|_2 <= sqrt(3) max_k |x*_k - X_k|. The bound itself is
-// evaluated in floating point with a few dozen roundings, covered by the final factor
-// (1 + 2^-20), which also absorbs underflow (M >= 2^-200 makes any underflow error at
-// most 2^-600 of the bound). M > 2^200 (overflow risk) also gives valid = false.
+// r = |dD|/|D~| < 1: |x - x~| <= (|x~| r + |dN|/|D~|) / (1 - r). The division adds
+// u|x~|, the final a + X adds u|center|. The radius |X| has relative error
+// <= gamma_3 / 2 + u < 4u, and |sqrt(r2*) - |X|| <= |x* - X|_2 <= sqrt(3) max_k
+// |x*_k - X_k|. The bound itself is evaluated in floating point with a few dozen
+// roundings, covered by the final factor (1 + 2^-20), which also absorbs underflow
+// (M >= 2^-200 makes any underflow error at most 2^-600 of the bound).
+//
+// Exact path, when the fast bound is loose (over 2^-36 M: a flat tetrahedron, whose
+// centre lies far away and whose computed centre may be off by r |X|, a large
+// distance at the scale of the points), or when M is out of range: N and D exactly, each rounded once, then one division,
+// so |x~_k - x_k| <= 3u |x_k| (1 + O(u)) <= 4u |x~_k|; with the final sum the centre
+// is within 4u |x~_k| + 2u |center_k| of the truth. This is what keeps the pipeline's
+// queries cheap on the flat tets along the hull, whose balls are huge: a loose
+// centre there widens a thin cap into a slab holding a large share of the points.
+// Only an exactly flat tetrahedron (D == 0) or an overflowing result gives
+// valid = false.
 Circumsphere circumsphere(const double* a, const double* b, const double* c, const double* d) {
   constexpr double u = 0x1p-53;
   constexpr double kSlack = 1.0 + 0x1p-20;
   Circumsphere s{};
   s.valid = false;
+  const auto finish = [&](const double x[3], const double off_err_k[3]) {
+    double off_err = 0.0, center_err = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      s.center[k] = a[k] + x[k];
+      off_err = std::max(off_err, off_err_k[k]);
+      center_err = std::max(center_err, off_err_k[k] + 2 * u * std::fabs(s.center[k]));
+    }
+    // |X|, scaled by a power of two (exact) so that the squares neither underflow
+    // nor overflow: the exact path's offsets may lie anywhere in the double range.
+    const int scale = std::ilogb(std::max({std::fabs(x[0]), std::fabs(x[1]), std::fabs(x[2]), 0x1p-1000}));
+    double sum = 0.0;
+    for (int k = 0; k < 3; ++k) sum += std::ldexp(x[k], -scale) * std::ldexp(x[k], -scale);
+    s.radius = std::ldexp(std::sqrt(sum), scale);
+    // 0x1p-1060: room for an underflowed (subnormal) offset or centre.
+    s.center_error = center_err * kSlack + 0x1p-1060;
+    s.radius_error = (1.75 * off_err + 4 * u * s.radius) * kSlack + 0x1p-1060;
+    s.valid = std::isfinite(s.center[0]) && std::isfinite(s.center[1]) && std::isfinite(s.center[2]) &&
+              std::isfinite(s.radius) && std::isfinite(s.center_error) && std::isfinite(s.radius_error);
+  };
+
   const double ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
   const double vx = c[0] - a[0], vy = c[1] - a[1], vz = c[2] - a[2];
   const double wx = d[0] - a[0], wy = d[1] - a[1], wz = d[2] - a[2];
   double m = 0.0;
   for (double t : {ux, uy, uz, vx, vy, vz, wx, wy, wz}) m = std::max(m, std::fabs(t));
-  if (!(m >= 0x1p-200 && m <= 0x1p200)) return s;  // also rejects NaN
-  const double vwx = vy * wz - vz * wy, vwy = vz * wx - vx * wz, vwz = vx * wy - vy * wx;
-  const double wux = wy * uz - wz * uy, wuy = wz * ux - wx * uz, wuz = wx * uy - wy * ux;
-  const double uvx = uy * vz - uz * vy, uvy = uz * vx - ux * vz, uvz = ux * vy - uy * vx;
-  const double uu = ux * ux + uy * uy + uz * uz;
-  const double vv = vx * vx + vy * vy + vz * vz;
-  const double ww = wx * wx + wy * wy + wz * wz;
-  const double det2 = 2.0 * (ux * vwx + uy * vwy + uz * vwz);
-  const double nx = uu * vwx + vv * wux + ww * uvx;
-  const double ny = uu * vwy + vv * wuy + ww * uvy;
-  const double nz = uu * vwz + vv * wuz + ww * uvz;
-  const double gamma8 = 8 * u / (1 - 8 * u), gamma12 = 12 * u / (1 - 12 * u);
-  const double m3 = m * m * m;
-  const double err_d = 12 * gamma8 * m3 / ((1 - u) * (1 - u) * (1 - u));
-  const double err_n = 18 * gamma12 * m3 * m / ((1 - u) * (1 - u) * (1 - u) * (1 - u));
-  const double abs_d = std::fabs(det2);
-  if (!(err_d <= 0.5 * abs_d)) return s;  // too flat (or D == 0)
-  const double ratio = err_d / abs_d;
-  const double x[3] = {nx / det2, ny / det2, nz / det2};
-  double off_err = 0.0, center_err = 0.0;
-  for (int k = 0; k < 3; ++k) {
-    const double ax = std::fabs(x[k]) * (1 + 2 * u);  // >= |x~_k|
-    const double e = (ax * ratio + err_n / abs_d) / (1 - ratio) + 2 * u * std::fabs(x[k]);
-    s.center[k] = a[k] + x[k];
-    off_err = std::max(off_err, e);
-    center_err = std::max(center_err, e + 2 * u * std::fabs(s.center[k]));
+  if (m >= 0x1p-200 && m <= 0x1p200) {
+    const double vwx = vy * wz - vz * wy, vwy = vz * wx - vx * wz, vwz = vx * wy - vy * wx;
+    const double wux = wy * uz - wz * uy, wuy = wz * ux - wx * uz, wuz = wx * uy - wy * ux;
+    const double uvx = uy * vz - uz * vy, uvy = uz * vx - ux * vz, uvz = ux * vy - uy * vx;
+    const double uu = ux * ux + uy * uy + uz * uz;
+    const double vv = vx * vx + vy * vy + vz * vz;
+    const double ww = wx * wx + wy * wy + wz * wz;
+    const double det2 = 2.0 * (ux * vwx + uy * vwy + uz * vwz);
+    const double gamma8 = 8 * u / (1 - 8 * u), gamma12 = 12 * u / (1 - 12 * u);
+    const double m3 = m * m * m;
+    const double err_d = 12 * gamma8 * m3 / ((1 - u) * (1 - u) * (1 - u));
+    const double err_n = 18 * gamma12 * m3 * m / ((1 - u) * (1 - u) * (1 - u) * (1 - u));
+    const double abs_d = std::fabs(det2);
+    if (err_d <= 0.5 * abs_d) {
+      const double ratio = err_d / abs_d;
+      const double x[3] = {(uu * vwx + vv * wux + ww * uvx) / det2, (uu * vwy + vv * wuy + ww * uvy) / det2,
+                           (uu * vwz + vv * wuz + ww * uvz) / det2};
+      double e[3];
+      for (int k = 0; k < 3; ++k) {
+        const double ax = std::fabs(x[k]) * (1 + 2 * u);  // >= |x~_k|
+        e[k] = (ax * ratio + err_n / abs_d) / (1 - ratio) + 2 * u * std::fabs(x[k]);
+      }
+      if (std::max({e[0], e[1], e[2]}) <= 0x1p-36 * m) {
+        finish(x, e);
+        return s;
+      }
+    }
   }
-  s.radius = std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
-  s.center_error = center_err * kSlack;
-  s.radius_error = (1.75 * off_err + 4 * u * s.radius) * kSlack;
-  s.valid = std::isfinite(s.center[0]) && std::isfinite(s.center[1]) && std::isfinite(s.center[2]) &&
-            std::isfinite(s.radius) && std::isfinite(s.center_error) && std::isfinite(s.radius_error);
+
+  // Exact path: the narrowest integer width that holds the call (as exact_sign).
+  const double* p[4] = {a, b, c, d};
+  const Range r = scan(p, 4);
+  if (!r.finite) return s;
+  double x[3];
+  const int span = r.max_exp - r.low;
+  const bool ok = span <= 61    ? circumcentre_offset_int<1>(p, r.low, x)
+                  : span <= 125 ? circumcentre_offset_int<2>(p, r.low, x)
+                  : span <= 253 ? circumcentre_offset_int<4>(p, r.low, x)
+                                : circumcentre_offset_int<33>(p, r.low, x);
+  if (!ok) return s;
+  double e[3];
+  for (int k = 0; k < 3; ++k) e[k] = 4 * u * std::fabs(x[k]);
+  finish(x, e);
   return s;
 }
 

@@ -713,7 +713,7 @@ TEST(Predicates, InfiniteConflictAgreesWithFiniteTets) {
 TEST(Predicates, CircumsphereBoundIsSound) {
   SEEDED(seed, 808);
   tp::Rng rng(seed);
-  int valid = 0, invalid = 0;
+  int valid = 0, invalid = 0, huge = 0;
   for (int it = 0; it < 3000; ++it) {
     std::array<P3, 4> p;
     const int kind = it % 4;
@@ -775,12 +775,21 @@ TEST(Predicates, CircumsphereBoundIsSound) {
       ASSERT_LE(lo * lo, r2) << "iteration " << it;
     }
     ASSERT_LE(r2, hi * hi) << "iteration " << it;
-    if (kind == 0) {  // well-shaped random tets: the bound is tight enough to be useful
-      EXPECT_LT(cs.center_error, 1e-6 * (1 + cs.radius)) << "iteration " << it;
-    }
+    // Tight enough to be useful on every shape, the flattest included (their huge
+    // balls are where the pipeline's queries would otherwise scan slabs of points):
+    // the fast path is taken only when its bound is within 2^-36 of the tet's extent,
+    // the exact path is within a few ulps of the offset and the centre.
+    double extent = 0;
+    for (int i = 1; i < 4; ++i)
+      for (int k = 0; k < 3; ++k) extent = std::max(extent, std::fabs(p[i][k] - p[0][k]));
+    const double centre = std::max({std::fabs(cs.center[0]), std::fabs(cs.center[1]), std::fabs(cs.center[2])});
+    EXPECT_LE(cs.center_error, 2e-11 * extent + 1e-15 * (centre + cs.radius)) << "iteration " << it;
+    EXPECT_LE(cs.radius_error, 4e-11 * extent + 2e-15 * cs.radius) << "iteration " << it;
+    if (kind == 1 && cs.radius > 1e9 * std::max(1.0, std::fabs(p[0][0]))) ++huge;
   }
-  EXPECT_GT(valid, 1500);
-  EXPECT_GT(invalid, 10);  // the flattest tets are refused
+  EXPECT_GT(valid, 2500);
+  EXPECT_EQ(invalid, 0);  // only an exactly flat tet (skipped above) has no sphere
+  EXPECT_GT(huge, 20);    // the exact path was exercised
 }
 
 TEST(Predicates, StatsCountFilterFailures) {
