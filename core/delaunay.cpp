@@ -1,5 +1,7 @@
 #include "core/delaunay.hpp"
 
+#include "core/huge_pages.hpp"
+
 #include "core/compiler.hpp"
 #include "core/spatial_sort.hpp"
 
@@ -70,8 +72,10 @@ void Delaunay::reserve(std::size_t points) {
   assert(double(points) * kTetsPerPointEstimate < double(1u << 30));
   const std::size_t tets = std::size_t(double(points) * kTetsPerPointEstimate) + 64;
   tets_.reserve(tets);
+  advise_huge_pages(tets_.data(), tets_.capacity() * sizeof(Tet));
   marks_.grow(tets);
   pts_.reserve(3 * points);
+  advise_huge_pages(pts_.data(), pts_.capacity() * sizeof(double));
   order_.reserve(points);
   vertex_tet_.reserve(points);
 }

@@ -463,12 +463,18 @@ Circumsphere circumsphere(const double* a, const double* b, const double* c, con
       off_err = std::max(off_err, off_err_k[k]);
       center_err = std::max(center_err, off_err_k[k] + 2 * u * std::fabs(s.center[k]));
     }
-    // |X|, scaled by a power of two (exact) so that the squares neither underflow
-    // nor overflow: the exact path's offsets may lie anywhere in the double range.
-    const int scale = std::ilogb(std::max({std::fabs(x[0]), std::fabs(x[1]), std::fabs(x[2]), 0x1p-1000}));
-    double sum = 0.0;
-    for (int k = 0; k < 3; ++k) sum += std::ldexp(x[k], -scale) * std::ldexp(x[k], -scale);
-    s.radius = std::ldexp(std::sqrt(sum), scale);
+    // |X|. The exact path's offsets may lie anywhere in the double range: out of
+    // [2^-500, 2^500] they are scaled by a power of two (exact) first, so that the
+    // squares neither underflow nor overflow.
+    const double big = std::max({std::fabs(x[0]), std::fabs(x[1]), std::fabs(x[2])});
+    if (big >= 0x1p-500 && big <= 0x1p500) {
+      s.radius = std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]);
+    } else {
+      const int scale = std::ilogb(std::max(big, 0x1p-1000));
+      double sum = 0.0;
+      for (int k = 0; k < 3; ++k) sum += std::ldexp(x[k], -scale) * std::ldexp(x[k], -scale);
+      s.radius = std::ldexp(std::sqrt(sum), scale);
+    }
     // 0x1p-1060: room for an underflowed (subnormal) offset or centre.
     s.center_error = center_err * kSlack + 0x1p-1060;
     s.radius_error = (1.75 * off_err + 4 * u * s.radius) * kSlack + 0x1p-1060;

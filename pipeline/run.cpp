@@ -65,8 +65,9 @@ class FrameCutter {
  public:
   explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer) {}
 
-  void add(const std::vector<std::uint64_t>& tets) {
-    pending_.insert(pending_.end(), tets.begin(), tets.end());
+  // Appends `count` tets (whole minimum-label groups, in increasing label order).
+  void add(const std::uint64_t* tets, std::size_t count) {
+    pending_.insert(pending_.end(), tets, tets + 4 * count);
     std::size_t begin = 0;
     const std::size_t n = pending_.size() / 4;
     while (n - begin > kFrameTets) {
@@ -99,6 +100,77 @@ class FrameCutter {
   AsyncTetWriter& writer_;
   std::vector<std::uint64_t> pending_;
 };
+
+// The segment size and the zones per segment for the budget.
+//
+// Model (points spread evenly over the bounding box; spacing w0 = cbrt(volume / n),
+// buffer width w = buffer_spacings w0). A segment of S labels is a slab across the sort
+// axis; its window adds the two axis buffers, B = 2 w n / E_axis points for the whole
+// cross-section. Cut into k zones (strips along strip_axis, of width E_strip / k),
+// each zone's window is the share 1/k + 2 w / E_strip of the segment's window:
+//   window(k) = (S + B) min(1, 1/k + 2w/E_strip [k > 1]) + hull,   zone Z = S / k.
+// Memory: `threads` zones in flight, each window at kWindowBytesPerPoint, and the
+// output of one segment plus threads - 1 zones at kOutputBytesPerPoint:
+//   threads window(k) 520 + (k + threads - 1) Z 220 <= available.
+// That is linear in Z; for each k the largest Z follows, and the k with the smallest
+// redundancy (window / Z - 1) wins: thin slabs waste their buffers, narrow strips
+// theirs, and the best zone is about as wide as its slab is thick. --zone-points fixes
+// S (tests force many segments) and --zones fixes k.
+struct ZonePlan {
+  std::uint64_t segment_points = 0;
+  int zones = 1;
+  double buffer_width = 0;
+  double redundancy = 0;  // the model's window / zone - 1
+};
+
+ZonePlan plan_for_budget(const SortedView& view, double index_bytes, const RunOptions& o, int threads) {
+  double extent[3], volume = 1;
+  for (int k = 0; k < 3; ++k) {
+    extent[k] = view.bbox_max[k] - view.bbox_min[k];
+    volume *= std::max(extent[k], 1e-300);
+  }
+  const double n = double(view.count);
+  ZonePlan plan;
+  plan.buffer_width = o.buffer_spacings * std::cbrt(volume / n);
+  const double w = plan.buffer_width;
+  const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[view.axis], 1e-300));
+  const double strip_extent = std::max(extent[strip_axis(view)], 1e-300);
+  const double hull = double(view.hull_labels.size());
+  const double t = double(threads);
+  const double available =
+      0.8 * double(o.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - index_bytes;
+  auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
+  auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
+    const double window = (segment_points + axis_buffers) * share(k) + hull;
+    const double zone = segment_points / k;
+    const double memory =
+        t * window * kWindowBytesPerPoint + (double(k) + t - 1) * zone * kOutputBytesPerPoint;
+    return std::pair{window / zone - 1, memory};
+  };
+  auto largest_segment = [&](int k) {  // S with memory(S) = available (linear in S)
+    const double fixed = evaluate(k, 0).second;
+    const double per_point = evaluate(k, 1e6).second / 1e6 - fixed / 1e6;
+    return (available - fixed) / per_point;
+  };
+  int first_k = 1, last_k = 256;
+  if (o.zones > 0) first_k = last_k = o.zones;
+  else if (o.zone_points > 0) last_k = 1;  // --zone-points alone: whole segments
+  double best = std::numeric_limits<double>::infinity();
+  for (int k = first_k; k <= last_k; ++k) {
+    const double s = o.zone_points > 0 ? double(o.zone_points) : std::min(n, largest_segment(k));
+    // Zones under 1000 points: the budget is too small for this k (for k = 1, for
+    // the input), or the input too small for k zones.
+    if (o.zone_points == 0 && s < std::min(n, 1000.0 * k)) continue;
+    const double r = evaluate(k, s).first;
+    if (r < best - 1e-9) best = r, plan.zones = k, plan.segment_points = std::uint64_t(s), plan.redundancy = r;
+  }
+  if (plan.segment_points == 0)
+    throw UsageError("--memory " + std::to_string(o.memory_bytes >> 20) +
+                     "M is too small for this input: each window needs about " +
+                     std::to_string(std::uint64_t((axis_buffers + hull) * kWindowBytesPerPoint) >> 20) +
+                     "M for its buffers and hull alone");
+  return plan;
+}
 
 }  // namespace
 
@@ -339,41 +411,9 @@ RunSummary Job::run() {
   }
 
   // ---- segment plan from the budget ----
-  double extent[3], volume = 1;
-  for (int k = 0; k < 3; ++k) {
-    extent[k] = view.bbox_max[k] - view.bbox_min[k];
-    volume *= std::max(extent[k], 1e-300);
-  }
-  const double spacing = std::cbrt(volume / double(view.count));
-  const double buffer_width = options_.buffer_spacings * spacing;
-  const double points_per_length = double(view.count) / std::max(extent[view.axis], 1e-300);
-  const double buffer_points = std::min(double(view.count), 2 * buffer_width * points_per_length);
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
-  std::uint64_t zone_points = options_.zone_points;
-  const int zones = std::max(options_.zones, 1);
-  const int segments_in_flight = zones > 1 ? 1 : threads;
-  if (zone_points == 0) {
-    // Each of the segments in flight gets an equal share of the budget. 20% of the
-    // budget is kept back for allocator slack and the pages of the sorted file that a
-    // window's queries touch (released after each segment). Zones add their strip
-    // buffers (two per cut) and each holds the hull.
-    const double strip_overhead =
-        zones > 1 ? 2.0 * (zones - 1) * buffer_width / std::max(extent[strip_axis(view)], 1e-300) : 0.0;
-    const double avail =
-        (0.8 * double(options_.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - double(index.memory_bytes())) /
-            segments_in_flight -
-        kWindowBytesPerPoint * (buffer_points * (1 + strip_overhead) + double(view.hull_labels.size()) * zones);
-    // With zones, the segment's tets exist twice for a moment (the zones' parts and
-    // their merge by minimum label).
-    const double output_bytes = kOutputBytesPerPoint * (zones > 1 ? 2 : 1);
-    const double z = avail / (kWindowBytesPerPoint * (1 + strip_overhead) + output_bytes);
-    if (z < 1000)
-      throw UsageError("--memory " + std::to_string(options_.memory_bytes >> 20) +
-                       "M is too small for this input: each window needs about " +
-                       std::to_string(std::uint64_t((buffer_points + view.hull_labels.size()) * kWindowBytesPerPoint) >> 20) +
-                       "M for its buffers and hull alone");
-    zone_points = std::uint64_t(z);
-  }
+  const ZonePlan zone_plan = plan_for_budget(view, double(index.memory_bytes()), options_, threads);
+  const double buffer_width = zone_plan.buffer_width;
 
   // ---- writer: header and points (or the checkpoint's partial output) ----
   io::TetFileHeader header;
@@ -464,38 +504,53 @@ RunSummary Job::run() {
   };
   if (!state_.contains("output")) commit(0);
 
-  const auto plans = plan_segments(view, zone_points, buffer_width, first_label);
+  auto plans = plan_segments(view, zone_plan.segment_points, buffer_width, first_label);
+  struct Unit {
+    std::size_t segment;
+    std::size_t zone;
+  };
+  std::vector<Unit> units;
+  for (std::size_t s = 0; s < plans.size(); ++s) {
+    split_into_zones(view, plans[s], zone_plan.zones);
+    for (std::size_t z = 0; z < plans[s].zones.size(); ++z) units.push_back({s, z});
+  }
+  release_mapped_pages(mapping.data(), mapping.size());  // the zones' samples
   summary.segments = segments_done + plans.size();
-  spdlog::info("{} segments of ~{} points, buffer {:.3g} ({} spacings, ~{:.0f} points), {} hull vertices", plans.size(),
-               plans.empty() ? 0 : plans[0].zone_end - plans[0].zone_begin, buffer_width, options_.buffer_spacings,
-               buffer_points, view.hull_labels.size());
+  summary.zones = units.size();
+  spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
+               plans.size(), plans.empty() ? 0 : plans[0].zone_end - plans[0].zone_begin, units.size(),
+               plans.empty() ? 0 : (plans[0].zone_end - plans[0].zone_begin) / plans[0].zones.size(), buffer_width,
+               options_.buffer_spacings, view.hull_labels.size());
 
-  // ---- stages 2-5: segments, `threads` at a time, written in segment order ----
-  // Each thread triangulates whole segments (they are independent given the sorted
-  // file); the ordered region hands their tets to the writer in plan order, so the
-  // bytes do not depend on the thread count, and a finished segment waits there for
-  // its predecessors: at most `threads` segments are in memory at once, which is
-  // what the zone size above was planned for. After each segment the checkpoint
-  // records the output so far: a crash loses at most the segments in flight.
+  // ---- stages 2-5: zones, `threads` at a time, written in segment order ----
+  // Each thread triangulates whole zones (they are independent given the sorted
+  // file). The ordered region collects a segment's zones in plan order; after its
+  // last one it merges them by minimum label into the writer's frames, so the bytes
+  // depend neither on the thread count nor on the plan. A finished zone waits there
+  // for its predecessors: at most `threads` zones are in flight, and the outputs of
+  // at most one segment plus `threads` - 1 zones are held, which is what the plan
+  // above was sized for. After each segment the checkpoint records the output so
+  // far: a crash loses at most the segments in flight.
   Progress progress("triangulating", "points", view.count, options_.progress);
   progress.add(first_label);
   std::exception_ptr failure;
   std::atomic<bool> cancelled{false};
   const auto stage_start = Clock::now();
-  const std::int64_t segment_count = std::int64_t(plans.size());
+  const std::int64_t unit_count = std::int64_t(units.size());
   const std::uint64_t first_segment = segments_done;  // segments_done changes in the loop
-  // (With zones, one segment at a time: this team has one thread, which leaves the
-  // zones' team inside triangulate_segment the first active level of parallelism.)
-#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(segments_in_flight)
-  for (std::int64_t i = 0; i < segment_count; ++i) {
-    const SegmentPlan& plan = plans[std::size_t(i)];
+  std::vector<std::vector<std::uint64_t>> parts;      // the current segment's zones' tets
+  SegmentStats segment_work;
+#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads)
+  for (std::int64_t i = 0; i < unit_count; ++i) {
+    const Unit unit = units[std::size_t(i)];
+    const SegmentPlan& plan = plans[unit.segment];
     std::vector<std::uint64_t> tets;
     SegmentStats s;
     if (!cancelled.load()) {
       try {
         check_interrupted();
-        maybe_inject_fault("segment", first_segment + std::uint64_t(i));
-        s = triangulate_segment(view, plan, tets, zones, threads);
+        maybe_inject_fault("segment", first_segment + unit.segment);
+        s = triangulate_zone(view, plan, plan.zones[unit.zone], tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
         // process): the first failure is kept, the others stop, and it is rethrown
@@ -508,30 +563,39 @@ RunSummary Job::run() {
 #pragma omp ordered
     {
       if (!cancelled.load()) {
-        try {
-          const auto t0 = Clock::now();
-          maybe_inject_fault("write", segments_done);
-          cutter.add(tets);
-          work += s;
-          zone_points_done += plan.zone_end - plan.zone_begin;
-          record_work(work, zone_points_done, summary);
-          ++segments_done;
-          commit(plan.zone_end);
-          summary.seconds_write += since(t0);
-        } catch (...) {
+        parts.push_back(std::move(tets));
+        segment_work += s;
+        const std::uint64_t points = plan.zone_end - plan.zone_begin, k = plan.zones.size();
+        progress.add(points * (unit.zone + 1) / k - points * unit.zone / k);
+        if (unit.zone + 1 == plan.zones.size()) {
+          try {
+            const auto t0 = Clock::now();
+            maybe_inject_fault("write", segments_done);
+            merge_by_min_label(parts, [&](const std::uint64_t* t, std::size_t n) { cutter.add(t, n); });
+            work += segment_work;
+            zone_points_done += points;
+            record_work(work, zone_points_done, summary);
+            ++segments_done;
+            commit(plan.zone_end);
+            summary.seconds_write += since(t0);
+          } catch (...) {
 #pragma omp critical(tetstream_run_failure)
-          if (!failure) failure = std::current_exception();
-          cancelled = true;
+            if (!failure) failure = std::current_exception();
+            cancelled = true;
+          }
+          spdlog::debug("segment [{}, {}) in {} zones: windows {} (+{} repairs), {} range failures, {} queries, "
+                        "{} rounds, {} tets, build {:.2f}s check {:.2f}s (summed), kernels {}",
+                        plan.zone_begin, plan.zone_end, k, segment_work.window_points, segment_work.repair_points,
+                        segment_work.range_failures, segment_work.queries, segment_work.rounds, segment_work.tets,
+                        segment_work.seconds_build, segment_work.seconds_check,
+                        human_bytes(double(segment_work.kernel_bytes)));
+          parts.clear();
+          segment_work = SegmentStats{};
         }
-        spdlog::debug("segment [{}, {}): window {} (+{} repairs), {} range failures, {} queries, {} rounds, {} tets, "
-                      "build {:.2f}s check {:.2f}s, kernel {}",
-                      plan.zone_begin, plan.zone_end, s.window_points, s.repair_points, s.range_failures, s.queries,
-                      s.rounds, s.tets, s.seconds_build, s.seconds_check, human_bytes(double(s.kernel_bytes)));
-        progress.add(plan.zone_end - plan.zone_begin);
       }
       std::vector<std::uint64_t>().swap(tets);
       release_mapped_pages(mapping.data(), mapping.size());
-      malloc_trim(0);  // hand the segment's freed heap back, so resident memory tracks the windows
+      malloc_trim(0);  // hand the zone's freed heap back, so resident memory tracks the windows
     }
   }
   if (failure) std::rethrow_exception(failure);

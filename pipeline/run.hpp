@@ -28,11 +28,11 @@ struct RunOptions {
   double buffer_spacings = 2.0;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
-  // Parallelism: 1 (segments): each thread triangulates whole segments, `threads` of
-  // them in flight, each with its share of the budget. N > 1 (zones): one segment at a
-  // time, with the whole budget, split into N zones triangulated `threads` at a time.
-  // The output's bytes depend on neither.
-  int zones = 1;
+  // Zones per segment (strips across the sort axis, run.cpp plan_for_budget): 0 picks
+  // the number that wastes the least on buffers for the budget. The zones of all
+  // segments are triangulated `threads` at a time. The output's bytes depend on
+  // neither this nor the thread count.
+  int zones = 0;
   bool progress = true;
   // Checkpoints (pipeline/checkpoint.hpp): the job keeps its working files and its
   // progress in `checkpoint_dir` (default: OUTPUT's file name + ".ckpt" in tmpdir) and
@@ -49,7 +49,7 @@ struct RunOptions {
 
 struct RunSummary {
   std::uint64_t input_points = 0, points = 0, duplicates = 0;
-  std::uint64_t segments = 0, zone_points = 0, window_points = 0, repair_points = 0;
+  std::uint64_t segments = 0, zones = 0, zone_points = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
   std::uint64_t query_points = 0;   // exact conflict tests the queries made
   double seconds_build = 0, seconds_check = 0;  // kernel builds and exactness checks, summed over segments

@@ -1,6 +1,7 @@
 #include "pipeline/segment.hpp"
 
 #include "core/error.hpp"
+#include "core/huge_pages.hpp"
 #include "core/predicates.hpp"
 #include "core/spatial_sort.hpp"
 
@@ -107,16 +108,21 @@ class SegmentWorker {
   std::vector<std::uint64_t> labels_;
   std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
   // Zone index of local vertex v (its label minus zone_begin), or -1 outside the zone
-  // (outside the segment's labels, or in another worker's strip: kNotMine, set once
-  // in run(), so the rounds' hot loop reads no coordinates).
+  // (outside the segment's labels, or in another worker's strip). One 4-byte load:
+  // zone_of_ is filled once in run(), so the rounds' hot loops read no labels or
+  // coordinates.
   std::int64_t zone_index(VertexId v) const {
-    const std::uint64_t l = labels_[v];
-    if (l < plan_.zone_begin || l >= plan_.zone_end || zone_state_[l - plan_.zone_begin] == kNotMine) return -1;
-    return std::int64_t(l - plan_.zone_begin);
+    const std::uint32_t z = zone_of_[v];
+    return z == kNoZone ? -1 : std::int64_t(z);
   }
+  static constexpr std::uint32_t kNoZone = 0xFFFFFFFFu;
+  std::vector<std::uint32_t> zone_of_;  // by local vertex: zone index or kNoZone
   // Per zone vertex (by zone index): kPending until it is final and its tets
   // are emitted, then kDone.
   std::vector<std::uint8_t> zone_state_;
+  std::vector<VertexId> zone_vertex_;  // by zone index: the local vertex (kNoVertex: another strip's)
+  std::vector<VertexId> pending_;      // the zone vertices still pending after a round
+  std::vector<TetId> star_;        // scratch for a pending vertex's star
   using TetKey = std::array<VertexId, 4>;  // sorted vertex ids: a tet's identity
   struct TetKeyHash {
     std::size_t operator()(const TetKey& k) const {
@@ -126,7 +132,7 @@ class SegmentWorker {
     }
   };
   std::unordered_set<TetKey, TetKeyHash> proved_empty_;
-  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2, kNotMine = 3;
+  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
   SegmentStats stats_;
 };
 
@@ -259,35 +265,47 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   return false;
 }
 
-// The round scans the tet arrays in memory order rather than walking vertex stars:
-// a zone vertex is final when no tet incident to it is unsafe, and a tet belongs to
-// the star of each of its vertices, so one pass marks the blocked vertices. A final
-// vertex's star never changes again (no later repair point lies in any of its tets'
-// balls), so its tets can be emitted after the last round.
+// A zone vertex is final when no tet incident to it is unsafe. The first round, with
+// every zone vertex pending, scans the tet array in memory order (a tet belongs to
+// the star of each of its vertices, so one pass marks the blocked vertices); later
+// rounds, with few vertices left, walk the stars of those alone. A final vertex's
+// star never changes again (no later repair point lies in any of its tets' balls),
+// so its tets can be emitted after the last round.
 std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
-  const std::size_t slots = dt_.num_tet_slots();
-  auto pending_zone_vertex = [&](VertexId v) {
-    const std::int64_t z = zone_index(v);
-    return z >= 0 && zone_state_[std::size_t(z)] != kDone;
-  };
-  for (std::size_t t = 0; t < slots; ++t) {
-    if (!dt_.is_alive(TetId(t))) continue;
-    VertexId v[4];
-    bool touches_pending = false;
+  auto block_pending = [&](TetId t) {
     for (int i = 0; i < 4; ++i) {
-      v[i] = dt_.vertex(TetId(t), i);
-      touches_pending |= v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i]);
+      const VertexId v = dt_.vertex(t, i);
+      if (v == core::kInfiniteVertex) continue;
+      const std::int64_t z = zone_index(v);
+      if (z >= 0 && zone_state_[std::size_t(z)] != kDone) zone_state_[std::size_t(z)] = kBlocked;
     }
-    if (!touches_pending || check_tet(TetId(t), repairs)) continue;
-    for (int i = 0; i < 4; ++i)
-      if (v[i] != core::kInfiniteVertex && pending_zone_vertex(v[i])) zone_state_[std::size_t(zone_index(v[i]))] = kBlocked;
+  };
+  if (stats_.rounds == 1) {
+    const std::size_t slots = dt_.num_tet_slots();
+    for (std::size_t t = 0; t < slots; ++t) {
+      if (!dt_.is_alive(TetId(t))) continue;
+      bool touches_zone = false;
+      for (int i = 0; i < 4; ++i) {
+        const VertexId v = dt_.vertex(TetId(t), i);
+        touches_zone |= v != core::kInfiniteVertex && zone_of_[v] != kNoZone;
+      }
+      if (touches_zone && !check_tet(TetId(t), repairs)) block_pending(TetId(t));
+    }
+  } else {
+    for (VertexId v : pending_) {
+      star_.clear();
+      dt_.star(v, star_);
+      for (TetId t : star_)
+        if (!check_tet(t, repairs)) block_pending(t);
+    }
   }
-  std::size_t still = 0;
-  for (auto& state : zone_state_) {
+  pending_.clear();
+  for (std::size_t z = 0; z < zone_state_.size(); ++z) {
+    std::uint8_t& state = zone_state_[z];
     if (state == kPending) state = kDone;
-    else if (state == kBlocked) state = kPending, ++still;
+    else if (state == kBlocked) state = kPending, pending_.push_back(zone_vertex_[z]);
   }
-  return still;
+  return pending_.size();
 }
 
 // Minimum vertex filter, once every zone vertex is final: each finite tet whose
@@ -297,32 +315,33 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
 // the writer cut identical frames for any budget split or thread count.
 void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
   const std::size_t slots = dt_.num_tet_slots();
+  // Pass 1: each tet's owner (the zone index of its smallest label, or kNoZone),
+  // counted per zone vertex; pass 2 places the owned tets, reading only the owners.
+  std::vector<std::uint32_t> owner(slots, kNoZone);
   std::vector<std::uint64_t> start(zone_state_.size() + 1, 0);
-  auto owner_of = [&](TetId t, std::uint64_t q[4]) -> std::int64_t {
-    int owner = 0;
-    for (int i = 0; i < 4; ++i) {
-      q[i] = labels_[dt_.vertex(t, i)];
-      if (q[i] < q[owner]) owner = i;
+  for (std::size_t t = 0; t < slots; ++t) {
+    if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
+    VertexId m = dt_.vertex(TetId(t), 0);
+    std::uint64_t lm = labels_[m];
+    for (int i = 1; i < 4; ++i) {
+      const VertexId v = dt_.vertex(TetId(t), i);
+      if (labels_[v] < lm) lm = labels_[v], m = v;
     }
-    const VertexId m = dt_.vertex(t, owner);
-    return zone_index(m);
-  };
-  for (int pass = 0; pass < 2; ++pass) {
-    for (std::size_t t = 0; t < slots; ++t) {
-      if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
-      std::uint64_t q[4];
-      const std::int64_t m = owner_of(TetId(t), q);
-      if (m < 0) continue;
-      if (pass == 0) ++start[std::size_t(m) + 1];
-      else std::copy(q, q + 4, &out[4 * start[std::size_t(m)]++]);
-    }
-    if (pass == 0) {
-      const std::size_t base = out.size() / 4;
-      start[0] = base;
-      for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
-      stats_.tets += start.back() - base;
-      out.resize(4 * start.back());
-    }
+    const std::uint32_t z = zone_of_[m];
+    owner[t] = z;
+    if (z != kNoZone) ++start[std::size_t(z) + 1];
+  }
+  const std::size_t base = out.size() / 4;
+  start[0] = base;
+  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
+  stats_.tets += start.back() - base;
+  out.reserve(4 * start.back());
+  core::advise_huge_pages(out.data(), out.capacity() * sizeof(std::uint64_t));
+  out.resize(4 * start.back());
+  for (std::size_t t = 0; t < slots; ++t) {
+    if (owner[t] == kNoZone) continue;
+    std::uint64_t* q = &out[4 * start[owner[t]]++];
+    for (int i = 0; i < 4; ++i) q[i] = labels_[dt_.vertex(TetId(t), i)];
   }
 }
 
@@ -334,12 +353,24 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
   stats_.seconds_build = since(t0);
 
   t0 = Clock::now();
-  zone_state_.assign(plan_.zone_end - plan_.zone_begin, kPending);
-  if (strip_.axis >= 0)
-    for (std::uint64_t l = plan_.zone_begin; l < plan_.zone_end; ++l) {
-      const double c = view_.points[l].xyz[strip_.axis];
-      if (!(c >= strip_.lo && c < strip_.hi)) zone_state_[l - plan_.zone_begin] = kNotMine;
+  // The zone vertices: the window's points with a label in the segment's zone and,
+  // with strips, a coordinate in this strip. Every other label of the zone is
+  // another strip's (kDone here from the start).
+  zone_state_.assign(plan_.zone_end - plan_.zone_begin, kDone);
+  zone_vertex_.assign(plan_.zone_end - plan_.zone_begin, core::kNoVertex);
+  zone_of_.assign(labels_.size(), kNoZone);
+  for (VertexId v = 0; v < labels_.size(); ++v) {
+    const std::uint64_t l = labels_[v];
+    if (l < plan_.zone_begin || l >= plan_.zone_end) continue;
+    if (strip_.axis >= 0) {
+      const double c = xyz_[3 * std::size_t(v) + std::size_t(strip_.axis)];
+      if (!(c >= strip_.lo && c < strip_.hi)) continue;
     }
+    const std::uint64_t z = l - plan_.zone_begin;
+    zone_of_[v] = std::uint32_t(z);
+    zone_vertex_[z] = v;
+    zone_state_[z] = kPending;
+  }
   std::vector<std::uint64_t> repairs;
   for (;;) {
     ++stats_.rounds;
@@ -355,6 +386,7 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
       labels_.push_back(label);
       extra_.insert(std::upper_bound(extra_.begin(), extra_.end(), label), label);
     }
+    zone_of_.resize(labels_.size(), kNoZone);  // repair points are never zone points
     dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
     stats_.repair_points += repairs.size();
@@ -413,70 +445,39 @@ std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zon
   return plans;
 }
 
-SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out,
-                                 int zones, int threads) {
+void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones) {
   const std::uint64_t zone_points = plan.zone_end - plan.zone_begin;
   zones = int(std::clamp<std::uint64_t>(std::uint64_t(std::max(zones, 1)), 1, std::max<std::uint64_t>(zone_points / 256, 1)));
-  if (zones == 1) return SegmentWorker(view, plan, ZoneStrip{}).run(out);
-
-  // Strips along the longer of the two other axes, cut at quantiles of the zone's
-  // points so that each holds about the same number.
+  plan.zones.assign(1, ZoneStrip{});
+  if (zones == 1) return;
+  // Quantiles of a sample (at most ~64k points, every stride-th label): the zones
+  // need about equal counts, not exact ones, and the sample keeps this pass cheap.
   const int axis = strip_axis(view);
-  std::vector<double> coords(zone_points);
-  for (std::uint64_t i = 0; i < zone_points; ++i) coords[i] = view.points[plan.zone_begin + i].xyz[axis];
-  std::vector<double> cuts;  // zones - 1 increasing cut values
+  const std::uint64_t stride = std::max<std::uint64_t>(1, zone_points / 65536);
+  std::vector<double> coords;
+  coords.reserve(std::size_t(zone_points / stride + 1));
+  for (std::uint64_t l = plan.zone_begin; l < plan.zone_end; l += stride) coords.push_back(view.points[l].xyz[axis]);
+  std::vector<double> cuts;  // increasing cut values
   for (int z = 1; z < zones; ++z) {
-    auto nth = coords.begin() + std::ptrdiff_t(zone_points * std::uint64_t(z) / std::uint64_t(zones));
+    auto nth = coords.begin() + std::ptrdiff_t(coords.size() * std::size_t(z) / std::size_t(zones));
     std::nth_element(coords.begin(), nth, coords.end());
     if (cuts.empty() || *nth > cuts.back()) cuts.push_back(*nth);
   }
-  std::vector<double>().swap(coords);
   const double inf = std::numeric_limits<double>::infinity();
-  std::vector<ZoneStrip> strips(cuts.size() + 1);
-  for (std::size_t z = 0; z < strips.size(); ++z) {
-    ZoneStrip& st = strips[z];
+  plan.zones.assign(cuts.size() + 1, ZoneStrip{});
+  for (std::size_t z = 0; z < plan.zones.size(); ++z) {
+    ZoneStrip& st = plan.zones[z];
     st.axis = axis;
     st.lo = z == 0 ? -inf : cuts[z - 1];
     st.hi = z == cuts.size() ? inf : cuts[z];
     st.window_lo = st.lo - plan.buffer_width;
     st.window_hi = st.hi + plan.buffer_width;
   }
+}
 
-  // Each strip emits the tets whose minimum label is one of its zone vertices,
-  // grouped by that label; every label of the segment belongs to one strip, so the
-  // strips' outputs, merged by minimum label, are the segment's.
-  std::vector<std::vector<std::uint64_t>> parts(strips.size());
-  std::vector<SegmentStats> stats(strips.size());
-  std::exception_ptr failure;
-#pragma omp parallel for schedule(dynamic, 1) num_threads(std::clamp(threads, 1, int(strips.size())))
-  for (std::int64_t z = 0; z < std::int64_t(strips.size()); ++z) {
-    try {
-      stats[std::size_t(z)] = SegmentWorker(view, plan, strips[std::size_t(z)]).run(parts[std::size_t(z)]);
-    } catch (...) {
-#pragma omp critical(tetstream_zone_failure)
-      if (!failure) failure = std::current_exception();
-    }
-  }
-  if (failure) std::rethrow_exception(failure);
-
-  SegmentStats total;
-  for (const SegmentStats& st : stats) total += st;
-  // Merge by minimum label: a counting sort over the segment's labels.
-  std::vector<std::uint64_t> start(zone_points + 1, 0);
-  auto owner = [&](const std::uint64_t* q) {
-    return std::min(std::min(q[0], q[1]), std::min(q[2], q[3])) - plan.zone_begin;
-  };
-  for (const auto& part : parts)
-    for (std::size_t t = 0; t < part.size(); t += 4) ++start[owner(&part[t]) + 1];
-  const std::size_t base = out.size() / 4;
-  start[0] = base;
-  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
-  out.resize(4 * start.back());
-  for (auto& part : parts) {
-    for (std::size_t t = 0; t < part.size(); t += 4) std::copy_n(&part[t], 4, &out[4 * start[owner(&part[t])]++]);
-    std::vector<std::uint64_t>().swap(part);
-  }
-  return total;
+SegmentStats triangulate_zone(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& zone,
+                              std::vector<std::uint64_t>& out) {
+  return SegmentWorker(view, plan, zone).run(out);
 }
 
 }  // namespace tetstream::pipeline

@@ -43,12 +43,6 @@ struct SortedView {
   std::uint64_t upper_bound(double x) const;
 };
 
-struct SegmentPlan {
-  std::uint64_t zone_begin = 0, zone_end = 0;      // labels this segment owns
-  std::uint64_t window_begin = 0, window_end = 0;  // labels in its window (zone + buffers)
-  double buffer_width = 0;                         // of the buffers (and of its zones')
-};
-
 // One zone of a segment, for parallel zonal insertion (the paper's section 3): the
 // segment's zone points whose coordinate along `axis` lies in [lo, hi). It is
 // triangulated alone, in a window of the segment's window points whose coordinate lies
@@ -62,11 +56,28 @@ struct ZoneStrip {
   double window_lo = 0, window_hi = 0;
 };
 
-// Splits [first_label, count) into zones of about `zone_points` labels and gives each
-// a window extended by `buffer_width` along the axis on each side. (A resumed job
+struct SegmentPlan {
+  std::uint64_t zone_begin = 0, zone_end = 0;      // labels this segment owns
+  std::uint64_t window_begin = 0, window_end = 0;  // labels in its window (zone + buffers)
+  double buffer_width = 0;                         // of the buffers (and of its zones')
+  // The segment's zones, in increasing strip order; one ZoneStrip{} (the whole
+  // segment) unless split_into_zones cut it.
+  std::vector<ZoneStrip> zones{ZoneStrip{}};
+};
+
+// Splits [first_label, count) into segments of about `zone_points` labels and gives
+// each a window extended by `buffer_width` along the axis on each side. (A resumed job
 // plans the labels it has not written yet; the output does not depend on the plan.)
 std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width,
                                        std::uint64_t first_label = 0);
+
+// The axis zones are cut along: the longer of the two other than the sort axis.
+int strip_axis(const SortedView& view);
+
+// Cuts the segment into `zones` strips along strip_axis, at quantiles of (a sample of)
+// its zone points, so that each holds about the same number; fewer when the segment
+// has too few points (at least 256 a zone) or too few distinct coordinates.
+void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones);
 
 struct SegmentStats {
   std::uint64_t window_points = 0;  // zone + buffers + hull vertices, before repairs
@@ -88,16 +99,40 @@ struct SegmentStats {
   }
 };
 
-// The axis zones are cut along: the longer of the two other than the sort axis.
-int strip_axis(const SortedView& view);
+// Triangulates one zone of a segment (the whole segment for ZoneStrip{}) and appends
+// the tets whose minimum label is one of its points (4 labels each, positively
+// oriented) to `out`, grouped by minimum label in increasing order. Every label of the
+// segment belongs to exactly one of its zones, so the zones' outputs together are the
+// segment's tets, each once. Throws InputError when the window has fewer than 4
+// affinely independent points (only possible when the whole input has).
+SegmentStats triangulate_zone(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& zone,
+                              std::vector<std::uint64_t>& out);
 
-// Triangulates one segment and appends its tets (4 labels each, positively oriented,
-// grouped by minimum label in increasing order) to `out`. With zones > 1 the segment
-// is split into that many strips along the longer of the two other axes (at quantiles
-// of its zone points, at least 256 points each), triangulated concurrently on up to
-// `threads` OpenMP threads; the tets are the same set, in the same grouping. Throws InputError when the window has fewer
-// than 4 affinely independent points (only possible when the whole input has).
-SegmentStats triangulate_segment(const SortedView& view, const SegmentPlan& plan, std::vector<std::uint64_t>& out,
-                                 int zones = 1, int threads = 1);
+// Merges the outputs of a segment's zones into one stream grouped by minimum label in
+// increasing order: calls sink(tets, count) with runs of whole groups.
+template <class Sink>
+void merge_by_min_label(const std::vector<std::vector<std::uint64_t>>& parts, Sink&& sink) {
+  const auto min_label = [](const std::uint64_t* q) { return std::min(std::min(q[0], q[1]), std::min(q[2], q[3])); };
+  std::vector<std::size_t> at(parts.size(), 0);  // next tet of each part
+  for (;;) {
+    std::size_t best = parts.size();
+    std::uint64_t best_label = 0;
+    for (std::size_t p = 0; p < parts.size(); ++p) {
+      if (4 * at[p] == parts[p].size()) continue;
+      const std::uint64_t l = min_label(&parts[p][4 * at[p]]);
+      if (best == parts.size() || l < best_label) best = p, best_label = l;
+    }
+    if (best == parts.size()) return;
+    // The part's run of groups below every other part's next label.
+    std::uint64_t limit = ~std::uint64_t(0);
+    for (std::size_t p = 0; p < parts.size(); ++p)
+      if (p != best && 4 * at[p] < parts[p].size()) limit = std::min(limit, min_label(&parts[p][4 * at[p]]));
+    const std::vector<std::uint64_t>& part = parts[best];
+    std::size_t end = at[best];
+    while (4 * end < part.size() && min_label(&part[4 * end]) < limit) ++end;
+    sink(part.data() + 4 * at[best], end - at[best]);
+    at[best] = end;
+  }
+}
 
 }  // namespace tetstream::pipeline

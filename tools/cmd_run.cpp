@@ -22,8 +22,8 @@ void run_run(RunArgs& args, Context& ctx) {
   o.progress = !ctx.global.quiet;
   const pipeline::RunSummary s = pipeline::run_job(o);
   const double tets_per_s = s.seconds_total > 0 ? double(s.tets) / s.seconds_total : 0;
-  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments; {} written, tets {:.2f} B/tet", s.points,
-               s.duplicates, s.tets, s.segments, pipeline::human_bytes(double(s.output_bytes)),
+  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments ({} zones); {} written, tets {:.2f} B/tet", s.points,
+               s.duplicates, s.tets, s.segments, s.zones, pipeline::human_bytes(double(s.output_bytes)),
                s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0);
   spdlog::info("time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
                "{:.1f}%, {} repair points, {} queries ({} exact tests); segments: build {:.1f}s, check {:.1f}s (summed)",
@@ -39,6 +39,7 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"axis", std::string(1, "xyz"[s.axis])},
                  {"hull_vertices", s.hull_vertices},
                  {"segments", s.segments},
+                 {"zones", s.zones},
                  {"window_points", s.window_points},
                  {"repair_points", s.repair_points},
                  {"range_failures", s.range_failures},
@@ -76,10 +77,10 @@ void setup_run(CLI::App& app, Context& ctx) {
   cmd->add_option("--zone-points", args->options.zone_points,
                   "Points per segment (default: from --memory; small values force many segments)");
   cmd->add_option("--zones", args->options.zones,
-                  "Parallelism inside a segment: 1 runs --threads segments at once; N > 1 runs one segment at a "
-                  "time with the whole budget, split into zones on --threads threads")
+                  "Zones per segment (strips across the sort axis, triangulated --threads at a time); "
+                  "0: the number that wastes the least on buffers for --memory")
       ->capture_default_str()
-      ->check(CLI::Range(1, 4096));
+      ->check(CLI::Range(0, 4096));
   cmd->add_option("--sort-run-points", args->options.sort_run_points,
                   "Points per sorted run (default: from --memory; tests force many runs)")
       ->group("");  // hidden: a testing knob

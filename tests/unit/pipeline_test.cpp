@@ -123,6 +123,25 @@ TEST_F(PipelineTest, ZonesInsideSegments) {
   expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 800, 2, 3);
 }
 
+// The planner's own choice: a budget small enough that the segments are cut into
+// zones (strips) chosen to waste the least on buffers, run on 2 threads.
+TEST_F(PipelineTest, BudgetPlansZones) {
+  for (const auto& g : {dist(io::Distribution::kUniform, 100000, 11), dist(io::Distribution::kEllipsoidShell, 100000, 12)}) {
+    SCOPED_TRACE(io::to_string(g.dist));
+    const std::string input = write_points(g);
+    pipeline::RunOptions o;
+    o.threads = 2;
+    o.input = input;
+    o.output = (dir_ / "out.tets").string();
+    o.memory_bytes = std::uint64_t(128) << 20;
+    o.progress = false;
+    const auto summary = pipeline::run_job(o);
+    EXPECT_GE(summary.segments, 3u);
+    EXPECT_GT(summary.zones, summary.segments) << "the planner cut no zones";
+    EXPECT_EQ(container_tets(o.output), incore_tets(o.output));
+  }
+}
+
 TEST_F(PipelineTest, DuplicatesAreMergedAndCounted) {
   auto g = dist(io::Distribution::kUniform, 10000, 7);
   g.duplicates = 0.1;

@@ -1,0 +1,29 @@
+#pragma once
+// Transparent huge pages for the large arrays that are accessed at random (the
+// kernel's tets and coordinates, a segment's emitted tets): with 4 KiB pages nearly
+// every access to a 100 MiB array misses the TLB, with 2 MiB pages almost none does.
+// Advice only: where THP is off ("never") or unsupported this does nothing, and it
+// changes no result.
+#include <cstddef>
+#include <cstdint>
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+namespace tetstream::core {
+
+// Asks for huge pages on the 2 MiB-aligned part of [data, data + bytes). Call it
+// before the memory is first touched (the pages are chosen when they fault in).
+inline void advise_huge_pages(const void* data, std::size_t bytes) {
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  constexpr std::uintptr_t kHuge = std::uintptr_t(1) << 21;
+  const auto begin = (reinterpret_cast<std::uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+  const auto end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(kHuge - 1);
+  if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
+#else
+  (void)data, (void)bytes;
+#endif
+}
+
+}  // namespace tetstream::core
