@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <filesystem>
 #include <unordered_set>
 
@@ -93,7 +94,10 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   const std::size_t run_points =
       options.run_points ? options.run_points
                          : std::max<std::size_t>(kReadChunk, options.memory_bytes / 3 / (sizeof(SortedPoint) + 3 * sizeof(double)));
-  const std::size_t hull_piece = std::max<std::size_t>(4096, options.memory_bytes / 4 / 320);
+  // A quarter of the budget for the hull pieces' kernels (~320 bytes a point), shared
+  // by the threads that run them at once.
+  const std::size_t hull_piece =
+      std::max<std::size_t>(4096, options.memory_bytes / 4 / 320 / std::size_t(std::max(1, detail::max_threads())));
   ExternalSortOptions sorter_options;
   sorter_options.memory_bytes = options.memory_bytes / 3;
   sorter_options.dir = dir;
@@ -124,13 +128,26 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
       parallel_sort(run.data(), run.data() + run.size(), before);
       run_xyz.resize(3 * run.size());
       for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
-      // Hull candidates piece by piece, so the kernel's memory stays a fraction of
-      // the budget even when most points are on the hull (a thin shell).
+      // Hull candidates piece by piece, so the kernels' memory stays a fraction of
+      // the budget even when most points are on the hull (a thin shell); the pieces
+      // are independent and run on all threads, their results joined in order.
       run_hull.clear();
-      for (std::size_t first = 0; first < run.size(); first += hull_piece) {
-        const std::size_t n = std::min(hull_piece, run.size() - first);
-        for (std::uint32_t i : hull_vertex_candidates(&run_xyz[3 * first], n)) run_hull.push_back(run[first + i].original);
+      const std::size_t pieces = (run.size() + hull_piece - 1) / hull_piece;
+      std::vector<std::vector<std::uint32_t>> piece_hull(pieces);
+      std::exception_ptr failure;  // (out of memory) rethrown after the join, never out of the region
+#pragma omp parallel for schedule(dynamic, 1)
+      for (std::size_t p = 0; p < pieces; ++p) {
+        const std::size_t first = p * hull_piece, n = std::min(hull_piece, run.size() - first);
+        try {
+          piece_hull[p] = hull_vertex_candidates(&run_xyz[3 * first], n);
+        } catch (...) {
+#pragma omp critical(tetstream_hull_failure)
+          if (!failure) failure = std::current_exception();
+        }
       }
+      if (failure) std::rethrow_exception(failure);
+      for (std::size_t p = 0; p < pieces; ++p)
+        for (std::uint32_t i : piece_hull[p]) run_hull.push_back(run[p * hull_piece + i].original);
       hull_originals.insert(run_hull.begin(), run_hull.end());
       maybe_inject_fault("sort-run", result.runs);
       sorter.push_sorted_run(std::span<SortedPoint>(run));

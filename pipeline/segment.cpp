@@ -6,6 +6,7 @@
 #include "core/spatial_sort.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <array>
@@ -310,15 +311,25 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
 
 // Minimum vertex filter, once every zone vertex is final: each finite tet whose
 // smallest label is a zone vertex is emitted, grouped by that label in increasing
-// order (a counting sort over the zone, two passes over the tets). The stream of a
-// whole job is then ordered by minimum label whatever the segment plan, which lets
-// the writer cut identical frames for any budget split or thread count.
+// order. The stream of a whole job is then ordered by minimum label whatever the
+// segment plan, which lets the writer cut identical frames for any budget split or
+// thread count.
+//
+// The grouping is a two-level counting sort. Placing each tet straight at its
+// label's position would scatter writes over the whole output (100+ MiB, a cache
+// miss each: the tets come in the kernel's spatial order, the labels follow the sort
+// axis); instead the tets go to at most 2048 buckets of consecutive zone indices (one
+// write stream per bucket, all of them cache-resident), and each bucket, small enough
+// for the cache, is then ordered in place by its own counting sort.
 void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
   const std::size_t slots = dt_.num_tet_slots();
+  const std::size_t zone_size = zone_state_.size();
+  const int shift = std::max(0, int(std::bit_width(zone_size)) - 11);
+  const std::size_t buckets = (zone_size >> shift) + 1;
   // Pass 1: each tet's owner (the zone index of its smallest label, or kNoZone),
-  // counted per zone vertex; pass 2 places the owned tets, reading only the owners.
+  // counted per bucket.
   std::vector<std::uint32_t> owner(slots, kNoZone);
-  std::vector<std::uint64_t> start(zone_state_.size() + 1, 0);
+  std::vector<std::size_t> bucket_start(buckets + 1, 0);
   for (std::size_t t = 0; t < slots; ++t) {
     if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
     VertexId m = dt_.vertex(TetId(t), 0);
@@ -329,19 +340,46 @@ void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
     }
     const std::uint32_t z = zone_of_[m];
     owner[t] = z;
-    if (z != kNoZone) ++start[std::size_t(z) + 1];
+    if (z != kNoZone) ++bucket_start[(z >> shift) + 1];
   }
   const std::size_t base = out.size() / 4;
-  start[0] = base;
-  for (std::size_t i = 1; i < start.size(); ++i) start[i] += start[i - 1];
-  stats_.tets += start.back() - base;
-  out.reserve(4 * start.back());
+  bucket_start[0] = base;
+  for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
+  const std::size_t total = bucket_start[buckets];
+  stats_.tets += total - base;
+  out.reserve(4 * total);
   core::advise_huge_pages(out.data(), out.capacity() * sizeof(std::uint64_t));
-  out.resize(4 * start.back());
+  out.resize(4 * total);
+  // Pass 2: into the buckets, in the kernel's order.
+  std::vector<std::size_t> fill(bucket_start.begin(), bucket_start.end() - 1);
   for (std::size_t t = 0; t < slots; ++t) {
-    if (owner[t] == kNoZone) continue;
-    std::uint64_t* q = &out[4 * start[owner[t]]++];
+    const std::uint32_t z = owner[t];
+    if (z == kNoZone) continue;
+    std::uint64_t* q = &out[4 * fill[z >> shift]++];
     for (int i = 0; i < 4; ++i) q[i] = labels_[dt_.vertex(TetId(t), i)];
+  }
+  std::vector<std::uint32_t>().swap(owner);
+  // Pass 3: each bucket by zone index (its minimum label minus zone_begin).
+  std::vector<std::uint64_t> scratch;
+  std::vector<std::size_t> count(std::size_t(1) << shift);
+  const std::uint64_t low_mask = (std::uint64_t(1) << shift) - 1;
+  for (std::size_t b = 0; b < buckets; ++b) {
+    const std::size_t first = bucket_start[b], n = bucket_start[b + 1] - first;
+    if (n < 2 || shift == 0) continue;
+    scratch.assign(out.begin() + std::ptrdiff_t(4 * first), out.begin() + std::ptrdiff_t(4 * (first + n)));
+    std::fill(count.begin(), count.end(), 0);
+    auto key = [&](std::size_t i) {
+      const std::uint64_t* q = &scratch[4 * i];
+      return (std::min(std::min(q[0], q[1]), std::min(q[2], q[3])) - plan_.zone_begin) & low_mask;
+    };
+    for (std::size_t i = 0; i < n; ++i) ++count[key(i)];
+    std::size_t at = first;
+    for (std::size_t& c : count) {
+      const std::size_t k = c;
+      c = at;
+      at += k;
+    }
+    for (std::size_t i = 0; i < n; ++i) std::copy_n(&scratch[4 * i], 4, &out[4 * count[key(i)]++]);
   }
 }
 
