@@ -9,46 +9,51 @@
 namespace tetstream::pipeline {
 
 void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis, bool release_file_pages) {
+  (void)axis;
   offsets_.assign(count, 0);
   cells_.clear();
   blocks_.clear();
-  const int u = (axis + 1) % 3, v = (axis + 2) % 3;
   const double inf = std::numeric_limits<double>::infinity();
-  std::vector<std::uint32_t> cell_of(kBlockPoints);
-  std::vector<std::uint32_t> fill(kGrid * kGrid + 1);
+  auto box_of = [&](std::uint64_t base, std::uint32_t begin, std::uint32_t end) {
+    Box b{{inf, inf, inf}, {-inf, -inf, -inf}};
+    for (std::uint32_t j = begin; j < end; ++j)
+      for (int k = 0; k < 3; ++k) {
+        const double x = points[base + offsets_[base + j]].xyz[k];
+        b.lo[k] = std::min(b.lo[k], x);
+        b.hi[k] = std::max(b.hi[k], x);
+      }
+    return b;
+  };
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> stack;
   for (std::uint64_t base = 0; base < count; base += kBlockPoints) {
     const std::uint32_t n = std::uint32_t(std::min<std::uint64_t>(kBlockPoints, count - base));
-    Block block{{{inf, inf, inf}, {-inf, -inf, -inf}}, std::uint32_t(cells_.size()), 0};
-    for (std::uint32_t i = 0; i < n; ++i)
-      for (int k = 0; k < 3; ++k) {
-        block.box.lo[k] = std::min(block.box.lo[k], points[base + i].xyz[k]);
-        block.box.hi[k] = std::max(block.box.hi[k], points[base + i].xyz[k]);
+    for (std::uint32_t i = 0; i < n; ++i) offsets_[base + i] = std::uint16_t(i);
+    Block block{box_of(base, 0, n), std::uint32_t(cells_.size()), 0};
+    // Cells: the leaves of a median split on the widest side, down to kCellPoints
+    // points. Leaves hold few points however the block's points are spread (a dense
+    // filament or a thin shell falls into many small cells, not one crowded one),
+    // and their boxes are tight.
+    stack.assign(1, {0u, n});
+    while (!stack.empty()) {
+      const auto [begin, end] = stack.back();
+      stack.pop_back();
+      const Box box = box_of(base, begin, end);
+      if (end - begin <= kCellPoints) {
+        cells_.push_back(Cell{box, begin, end});
+        ++block.cells;
+        continue;
       }
-    // Grid over the block's own extent in the two other axes; counting sort by cell.
-    const double su = block.box.hi[u] > block.box.lo[u] ? kGrid / (block.box.hi[u] - block.box.lo[u]) : 0;
-    const double sv = block.box.hi[v] > block.box.lo[v] ? kGrid / (block.box.hi[v] - block.box.lo[v]) : 0;
-    std::fill(fill.begin(), fill.end(), 0);
-    for (std::uint32_t i = 0; i < n; ++i) {
-      const double* p = points[base + i].xyz;
-      const std::uint32_t cu = std::min<std::uint32_t>(kGrid - 1, std::uint32_t((p[u] - block.box.lo[u]) * su));
-      const std::uint32_t cv = std::min<std::uint32_t>(kGrid - 1, std::uint32_t((p[v] - block.box.lo[v]) * sv));
-      cell_of[i] = cu * kGrid + cv;
-      ++fill[cell_of[i] + 1];
-    }
-    for (std::uint32_t c = 0; c < kGrid * kGrid; ++c) fill[c + 1] += fill[c];
-    std::vector<std::uint32_t> start(fill.begin(), fill.end());
-    for (std::uint32_t i = 0; i < n; ++i) offsets_[base + fill[cell_of[i]]++] = std::uint16_t(i);
-    for (std::uint32_t c = 0; c < kGrid * kGrid; ++c) {
-      if (start[c] == start[c + 1]) continue;
-      Cell cell{{{inf, inf, inf}, {-inf, -inf, -inf}}, start[c], start[c + 1]};
-      for (std::uint32_t j = cell.begin; j < cell.end; ++j)
-        for (int k = 0; k < 3; ++k) {
-          const double x = points[base + offsets_[base + j]].xyz[k];
-          cell.box.lo[k] = std::min(cell.box.lo[k], x);
-          cell.box.hi[k] = std::max(cell.box.hi[k], x);
-        }
-      cells_.push_back(cell);
-      ++block.cells;
+      int widest = 0;
+      for (int k = 1; k < 3; ++k)
+        if (box.hi[k] - box.lo[k] > box.hi[widest] - box.lo[widest]) widest = k;
+      const std::uint32_t mid = begin + (end - begin) / 2;
+      std::uint16_t* o = &offsets_[base];
+      std::nth_element(o + begin, o + mid, o + end, [&](std::uint16_t a, std::uint16_t b) {
+        return points[base + a].xyz[widest] < points[base + b].xyz[widest];
+      });
+      // Right half first on the stack, so the cells come out left to right.
+      stack.push_back({mid, end});
+      stack.push_back({begin, mid});
     }
     blocks_.push_back(block);
     if (release_file_pages) release_mapped_pages(points + base, n * sizeof(SortedPoint));

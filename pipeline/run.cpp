@@ -513,8 +513,11 @@ RunSummary Job::run() {
   for (std::size_t s = 0; s < plans.size(); ++s) {
     split_into_zones(view, plans[s], zone_plan.zones);
     for (std::size_t z = 0; z < plans[s].zones.size(); ++z) units.push_back({s, z});
+    // The samples touch about every page of the segment's labels: hand them back
+    // now, or the whole mapped file would be resident before the first zone starts.
+    release_mapped_pages(view.points + plans[s].zone_begin,
+                         (plans[s].zone_end - plans[s].zone_begin) * sizeof(SortedPoint));
   }
-  release_mapped_pages(mapping.data(), mapping.size());  // the zones' samples
   summary.segments = segments_done + plans.size();
   summary.zones = units.size();
   spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
