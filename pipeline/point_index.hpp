@@ -5,22 +5,30 @@
 // span much of the axis but touch few points.
 //
 // The sorted file is cut into blocks of consecutive labels (thin slabs across the
-// axis). Each block is split into cells of at most kCellPoints points by median splits
-// on the widest side of their box (a kd-tree's leaves); a cell stores its points'
-// labels (as 16-bit offsets in the block) and their tight bounding box. A query visits
-// the blocks of its axis range whose box meets the ball, then the cells whose box
-// meets it, and tests only their points. (A fixed grid per block put the points of a
-// dense filament into one crowded cell, which every ball touching the filament had to
-// scan: 10^7 points of the `mixed` distribution took 9x longer than uniform ones.)
+// axis). Each block holds a small kd-tree: median splits on the widest side of the
+// box, down to leaves of at most kCellPoints points, every node with the tight box of
+// its points, the leaves' labels stored as 16-bit offsets in the block. A query visits
+// the blocks of its label range, and in each the nodes whose box meets the ball,
+// skipping a whole subtree when its box does not; it tests only the points of the
+// leaves it reaches. (A fixed 12x12 grid per block put the points of a dense filament
+// into one crowded cell, and a flat list of cells still cost a box test per cell for
+// every block a big ball spans: `mixed` 10^7 ran 9x slower than uniform points.)
 //
-// Memory: 2 bytes per point plus 56 bytes per cell (a cell holds 32 to 64 points):
-// about 3.5 bytes per point.
+// Memory: 2 bytes per point plus 64 bytes per node (about 2 nodes per 48 points):
+// about 5 bytes per point.
 #include "pipeline/point_sort.hpp"
 
 #include <cstdint>
 #include <vector>
 
 namespace tetstream::pipeline {
+
+// A slab whose points a query does not want (a strip window's own, which are not
+// missing): index nodes whose box lies inside it are skipped. axis < 0: none.
+struct ExcludedSlab {
+  int axis = -1;
+  double lo = 0, hi = 0;
+};
 
 class PointIndex {
  public:
@@ -35,31 +43,43 @@ class PointIndex {
   void build(const SortedPoint* points, std::uint64_t count, int axis, bool release_file_pages = false);
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
-  // closed ball (center, radius); points certainly outside are skipped. Stops early,
-  // between cells, once stop() returns true.
+  // closed ball (center, radius), except some inside `exclude`; points certainly
+  // outside the ball are skipped. Stops early, between leaves, once stop() returns
+  // true.
   template <class Visit, class Stop>
   void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last,
-                          Visit&& visit, Stop&& stop) const {
+                          Visit&& visit, Stop&& stop, const ExcludedSlab& exclude = {}) const {
     if (first >= last) return;
     const std::uint64_t b0 = first / kBlockPoints, b1 = (last - 1) / kBlockPoints;
     for (std::uint64_t b = b0; b <= b1; ++b) {
-      if (!box_meets_ball(blocks_[b].box, center, radius)) continue;
       const std::uint64_t base = b * kBlockPoints;
-      const std::uint32_t c_end = blocks_[b].first_cell + blocks_[b].cells;
-      for (std::uint32_t c = blocks_[b].first_cell; c < c_end; ++c) {
-        const Cell& cell = cells_[c];
-        if (!box_meets_ball(cell.box, center, radius)) continue;
+      // Nodes in preorder; `next` of a node is the first node after its subtree, so
+      // a node whose box misses the ball is skipped with its whole subtree, and one
+      // that meets it is entered by moving to the node that follows it.
+      const std::uint32_t end = blocks_[b].first_node + blocks_[b].nodes;
+      for (std::uint32_t i = blocks_[b].first_node; i < end;) {
+        const Node& node = nodes_[i];
+        if (!box_meets_ball(node.box, center, radius) ||
+            (exclude.axis >= 0 && node.box.lo[exclude.axis] >= exclude.lo && node.box.hi[exclude.axis] <= exclude.hi)) {
+          i = node.next;
+          continue;
+        }
+        if (!node.leaf) {
+          ++i;
+          continue;
+        }
         if (stop()) return;
-        for (std::uint32_t i = cell.begin; i < cell.end; ++i) {
-          const std::uint64_t label = base + offsets_[base + i];
+        for (std::uint32_t j = node.begin; j < node.end; ++j) {
+          const std::uint64_t label = base + offsets_[base + j];
           if (label >= first && label < last) visit(label);
         }
+        i = node.next;
       }
     }
   }
 
   std::size_t memory_bytes() const {
-    return offsets_.capacity() * sizeof(std::uint16_t) + cells_.capacity() * sizeof(Cell) +
+    return offsets_.capacity() * sizeof(std::uint16_t) + nodes_.capacity() * sizeof(Node) +
            blocks_.capacity() * sizeof(Block);
   }
 
@@ -67,13 +87,14 @@ class PointIndex {
   struct Box {
     double lo[3], hi[3];
   };
-  struct Cell {
+  struct Node {
     Box box;
     std::uint32_t begin, end;  // range in offsets_, relative to the block's base
+    std::uint32_t next;        // the first node after this one's subtree (absolute)
+    std::uint32_t leaf;        // 1: a leaf, its points are [begin, end)
   };
   struct Block {
-    Box box;
-    std::uint32_t first_cell, cells;
+    std::uint32_t first_node, nodes;
   };
   // Conservative: rounding may only say "meets" when it does not.
   static bool box_meets_ball(const Box& b, const double* c, double r) {
@@ -88,7 +109,7 @@ class PointIndex {
   }
 
   std::vector<std::uint16_t> offsets_;  // per block: offsets of its labels, grouped by cell
-  std::vector<Cell> cells_;
+  std::vector<Node> nodes_;
   std::vector<Block> blocks_;
 };
 

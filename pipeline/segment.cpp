@@ -211,8 +211,11 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
     auto visit_outside_strip = [&](std::uint64_t label) {
       if (!in_strip_window(label)) visit(label);
     };
+    // The strip window's own points are not missing: whole index nodes inside it are
+    // skipped, the rest filtered point by point.
     view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_begin),
-                                    std::min(last, plan_.window_end), visit_outside_strip, enough);
+                                    std::min(last, plan_.window_end), visit_outside_strip, enough,
+                                    ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
   }
   return best;
 }
