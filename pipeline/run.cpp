@@ -111,7 +111,10 @@ class FrameCutter {
 //   window(k) = (S + B) min(1, 1/k + 2w/E_strip [k > 1]) + hull,   zone Z = S / k.
 // Memory: `threads` zones in flight, each window at kWindowBytesPerPoint, and the
 // output of one segment plus threads - 1 zones at kOutputBytesPerPoint:
-//   threads window(k) 520 + (k + threads - 1) Z 220 <= available.
+//   threads window(k) 520 + (k + threads - 1) Z 220 <= available,
+// available = 80% of the budget less the fixed overhead, the writer's queue and the
+// point index. Of the other 20%, half bounds the mapped pages of the sorted file that
+// the queries read (SortedView::query_page_bytes), half is the allocator's slack.
 // That is linear in Z; for each k the largest Z follows, and the k with the smallest
 // redundancy (window / Z - 1) wins: thin slabs waste their buffers, narrow strips
 // theirs, and the best zone is about as wide as its slab is thick. --zone-points fixes
@@ -413,6 +416,9 @@ RunSummary Job::run() {
   // ---- segment plan from the budget ----
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
   const ZonePlan zone_plan = plan_for_budget(view, double(index.memory_bytes()), options_, threads);
+  // Half of the budget's 20% reserve, shared by the workers, for the pages of the
+  // sorted file their queries read (segment.cpp, touch()).
+  view.query_page_bytes = std::max<std::uint64_t>(std::uint64_t(1) << 20, options_.memory_bytes / 10 / std::uint64_t(threads));
   const double buffer_width = zone_plan.buffer_width;
 
   // ---- writer: header and points (or the checkpoint's partial output) ----

@@ -4,6 +4,7 @@
 #include "core/huge_pages.hpp"
 #include "core/predicates.hpp"
 #include "core/spatial_sort.hpp"
+#include "pipeline/temp_files.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -91,6 +92,18 @@ class SegmentWorker {
   // (unless `strip_clear`). Returns the deepest conflicting label, or kNone.
   std::uint64_t deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi, bool outside_clear,
                                          bool strip_clear);
+  // The queries read points of the mapped sorted file all over it (a leaf's points
+  // lie on up to one page each), and mapped pages count in the resident set until
+  // they are handed back. touch() counts the points read (one page each, at most)
+  // and the label range; once they may hold view_.query_page_bytes, or when asked,
+  // release_touched_pages() hands that range back to the page cache.
+  void touch(std::uint64_t label) {
+    ++touched_;
+    touched_lo_ = std::min(touched_lo_, label);
+    touched_hi_ = std::max(touched_hi_, label);
+  }
+  void release_touched_pages(bool always);
+  std::uint64_t touched_ = 0, touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
   // Whether the point with this label, inside the window's label range, is in the
   // strip's window (always, without strips).
   bool in_strip_window(std::uint64_t label) const {
@@ -184,6 +197,7 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   constexpr std::uint64_t kEnoughConflicts = 16;
   std::uint64_t found = 0;
   auto visit = [&](std::uint64_t label) {
+    touch(label);
     const double* p = view_.points[label].xyz;
     double d2 = 0;
     for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
@@ -209,7 +223,8 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   }
   if (!strip_clear && !enough()) {
     auto visit_outside_strip = [&](std::uint64_t label) {
-      if (!in_strip_window(label)) visit(label);
+      if (in_strip_window(label)) touch(label);
+      else visit(label);
     };
     // The strip window's own points are not missing: whole index nodes inside it are
     // skipped, the rest filtered point by point.
@@ -217,7 +232,16 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
                                     std::min(last, plan_.window_end), visit_outside_strip, enough,
                                     ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
   }
+  release_touched_pages(false);
   return best;
+}
+
+void SegmentWorker::release_touched_pages(bool always) {
+  if (touched_ == 0 || view_.query_page_bytes == 0) return;
+  if (!always && touched_ * 4096 < view_.query_page_bytes) return;
+  release_mapped_pages(view_.points + touched_lo_, (touched_hi_ + 1 - touched_lo_) * sizeof(SortedPoint));
+  touched_ = 0;
+  touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
 }
 
 bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
@@ -432,6 +456,7 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
     stats_.repair_points += repairs.size();
   }
+  release_touched_pages(true);
   emit(out);
   stats_.seconds_check = since(t0);
   stats_.kernel_bytes = dt_.memory_bytes();

@@ -35,6 +35,10 @@ struct SortedView {
   double bbox_min[3], bbox_max[3];
   std::vector<std::uint64_t> hull_labels;  // sorted
   const PointIndex* index = nullptr;       // over points[0, count)
+  // When `points` is a read-only file mapping: the mapped bytes a worker's emptiness
+  // queries may keep resident before handing them back (0: never hand them back;
+  // anonymous memory must not be, MADV_DONTNEED would zero it).
+  std::uint64_t query_page_bytes = 0;
 
   double key(std::uint64_t label) const { return points[label].xyz[axis]; }
   // First label whose axis coordinate is >= x (count when none).
