@@ -74,7 +74,9 @@ void clipped_extent(const ConflictBall& b, const SortedView& view, int axis, dou
 class SegmentWorker {
  public:
   SegmentWorker(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& strip)
-      : view_(view), plan_(plan), strip_(strip) {}
+      : view_(view), plan_(plan), strip_(strip) {
+    touched_blocks_.assign((view.count / PointIndex::kBlockPoints + 64) / 64, 0);
+  }
 
   SegmentStats run(std::vector<std::uint64_t>& out);
 
@@ -92,17 +94,27 @@ class SegmentWorker {
   // (unless `strip_clear`). Returns the deepest conflicting label, or kNone.
   std::uint64_t deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi, bool outside_clear,
                                          bool strip_clear);
-  // The queries read points of the mapped sorted file all over it (a leaf's points
-  // lie on up to one page each), and mapped pages count in the resident set until
-  // they are handed back. touch() counts the points read (one page each, at most)
-  // and the label range; once they may hold view_.query_page_bytes, or when asked,
-  // release_touched_pages() hands that range back to the page cache.
+  // The queries read points of the mapped sorted file all over it, and mapped pages
+  // count in the resident set until they are handed back. touch() records the index
+  // blocks whose points were read (a block's points span kBlockBytes, so that bounds
+  // the pages they hold) and the label range; once those blocks may hold
+  // view_.query_page_bytes, or when asked, release_touched_pages() hands the range
+  // back to the page cache.
+  static constexpr std::uint64_t kBlockBytes = PointIndex::kBlockPoints * sizeof(SortedPoint);
   void touch(std::uint64_t label) {
+    const std::uint64_t b = label / PointIndex::kBlockPoints;
+    std::uint64_t& word = touched_blocks_[b >> 6];
+    const std::uint64_t bit = std::uint64_t(1) << (b & 63);
+    if (word & bit) return;
+    word |= bit;
     ++touched_;
     touched_lo_ = std::min(touched_lo_, label);
-    touched_hi_ = std::max(touched_hi_, label);
+    touched_hi_ = std::max(touched_hi_, label + 1);
   }
   void release_touched_pages(bool always);
+  std::vector<std::uint64_t> touched_blocks_;  // bitmap over the index's blocks
+  static constexpr std::uint64_t kQueriesBetweenReleases = 256;
+  std::uint64_t queries_since_release_ = 0;
   std::uint64_t touched_ = 0, touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
   // Whether the point with this label, inside the window's label range, is in the
   // strip's window (always, without strips).
@@ -238,8 +250,20 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
 
 void SegmentWorker::release_touched_pages(bool always) {
   if (touched_ == 0 || view_.query_page_bytes == 0) return;
-  if (!always && touched_ * 4096 < view_.query_page_bytes) return;
-  release_mapped_pages(view_.points + touched_lo_, (touched_hi_ + 1 - touched_lo_) * sizeof(SortedPoint));
+  // At most every kQueriesBetweenReleases queries: a run of huge balls (big empty
+  // tets between the dense filaments of a clustered input) can touch more blocks in
+  // one query than the share holds, and handing them back after each would make
+  // every query fault them in again.
+  ++queries_since_release_;
+  if (!always && (touched_ * kBlockBytes < view_.query_page_bytes || queries_since_release_ < kQueriesBetweenReleases))
+    return;
+  queries_since_release_ = 0;
+  // Whole blocks: a touched block's points may lie anywhere in it.
+  const std::uint64_t first = touched_lo_ / PointIndex::kBlockPoints * PointIndex::kBlockPoints;
+  const std::uint64_t last = std::min(view_.count, (touched_hi_ + PointIndex::kBlockPoints - 1) /
+                                                       PointIndex::kBlockPoints * PointIndex::kBlockPoints);
+  release_mapped_pages(view_.points + first, (last - first) * sizeof(SortedPoint));
+  std::fill(touched_blocks_.begin(), touched_blocks_.end(), 0);
   touched_ = 0;
   touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
 }
