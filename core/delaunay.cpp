@@ -1,8 +1,7 @@
 #include "core/delaunay.hpp"
 
-#include "core/huge_pages.hpp"
-
 #include "core/compiler.hpp"
+#include "core/huge_pages.hpp"
 #include "core/spatial_sort.hpp"
 
 #include <algorithm>

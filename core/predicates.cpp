@@ -230,22 +230,27 @@ int insphere_int(const double* const* p, int low) {
               (lift(2) * minor3(0, 1, 3) - lift(3) * minor3(0, 1, 2)));
 }
 
-// Exact sign for any finite input: the narrowest integer width that holds the call.
-// span <= 1024 + 1074 = 2098 <= 64 * 33 - 3 always.
+// Calls f.template operator()<K>() with the narrowest limb count K that holds a call
+// whose coordinates span `span` bits (max_exp - low): span <= 64K - 3. Any finite
+// doubles have span <= 1024 + 1074 = 2098 <= 64 * 33 - 3.
+template <class F>
+auto with_exact_width(int span, F&& f) {
+  if (span <= 61) return f.template operator()<1>();
+  if (span <= 125) return f.template operator()<2>();
+  if (span <= 253) return f.template operator()<4>();
+  return f.template operator()<33>();
+}
+
+// Exact sign for any finite input.
 template <int kPoints>
 int exact_sign(const double* const* p, const Range& r) {
-  const int span = r.max_exp - r.low;
-  const auto run = [&]<int K>() {
+  return with_exact_width(r.max_exp - r.low, [&]<int K>() {
     if constexpr (kPoints == 5) {
       return insphere_int<K>(p, r.low);
     } else {
       return orient3d_int<K>(p, r.low);
     }
-  };
-  if (span <= 61) return run.template operator()<1>();
-  if (span <= 125) return run.template operator()<2>();
-  if (span <= 253) return run.template operator()<4>();
-  return run.template operator()<33>();
+  });
 }
 
 // Points in decreasing label order, ties in index order (a stable sort). Each
@@ -444,8 +449,9 @@ bool circumcentre_offset_int(const double* const* p, int low, double x[3]) {
 //
 // Exact path, when the fast bound is loose (over 2^-36 M: a flat tetrahedron, whose
 // centre lies far away and whose computed centre may be off by r |X|, a large
-// distance at the scale of the points), or when M is out of range: N and D exactly, each rounded once, then one division,
-// so |x~_k - x_k| <= 3u |x_k| (1 + O(u)) <= 4u |x~_k|; with the final sum the centre
+// distance at the scale of the points), or when M is out of range: N and D exactly,
+// each rounded once, then one division, so |x~_k - x_k| <= 3u |x_k| (1 + O(u))
+// <= 4u |x~_k|; with the final sum the centre
 // is within 4u |x~_k| + 2u |center_k| of the truth. This is what keeps the pipeline's
 // queries cheap on the flat tets along the hull, whose balls are huge: a loose
 // centre there widens a thin cap into a slab holding a large share of the points.
@@ -516,17 +522,13 @@ Circumsphere circumsphere(const double* a, const double* b, const double* c, con
     }
   }
 
-  // Exact path: the narrowest integer width that holds the call (as exact_sign).
+  // Exact path, in the narrowest integer width that holds the call.
   const double* p[4] = {a, b, c, d};
   const Range r = scan(p, 4);
   if (!r.finite) return s;
   double x[3];
-  const int span = r.max_exp - r.low;
-  const bool ok = span <= 61    ? circumcentre_offset_int<1>(p, r.low, x)
-                  : span <= 125 ? circumcentre_offset_int<2>(p, r.low, x)
-                  : span <= 253 ? circumcentre_offset_int<4>(p, r.low, x)
-                                : circumcentre_offset_int<33>(p, r.low, x);
-  if (!ok) return s;
+  if (!with_exact_width(r.max_exp - r.low, [&]<int K>() { return circumcentre_offset_int<K>(p, r.low, x); }))
+    return s;
   double e[3];
   for (int k = 0; k < 3; ++k) e[k] = 4 * u * std::fabs(x[k]);
   finish(x, e);

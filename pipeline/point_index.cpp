@@ -8,7 +8,7 @@
 
 namespace tetstream::pipeline {
 
-void PointIndex::build(const SortedPoint* points, std::uint64_t count, int /*axis*/, bool release_file_pages) {
+void PointIndex::build(const SortedPoint* points, std::uint64_t count, bool release_file_pages) {
   offsets_.assign(count, 0);
   nodes_.clear();
   blocks_.clear();
@@ -29,7 +29,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int /*axi
           box.hi[k] = std::max(box.hi[k], x);
         }
       const std::uint32_t id = std::uint32_t(nodes_.size());
-      const bool leaf = end - begin <= kCellPoints;
+      const bool leaf = end - begin <= kLeafPoints;
       nodes_.push_back(Node{box, begin, end, 0, leaf ? 1u : 0u});
       if (!leaf) {
         int widest = 0;

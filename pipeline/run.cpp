@@ -89,10 +89,7 @@ class FrameCutter {
   void restore(std::vector<std::uint64_t> pending) { pending_ = std::move(pending); }
 
  private:
-  std::uint64_t min_label(std::size_t t) const {
-    const std::uint64_t* q = &pending_[4 * t];
-    return std::min(std::min(q[0], q[1]), std::min(q[2], q[3]));
-  }
+  std::uint64_t min_label(std::size_t t) const { return tet_min_label(&pending_[4 * t]); }
   void write(std::size_t begin, std::size_t end) {
     writer_.add_tets(std::span<const std::uint64_t>(pending_.data() + 4 * begin, 4 * (end - begin)));
   }
@@ -123,7 +120,6 @@ struct ZonePlan {
   std::uint64_t segment_points = 0;
   int zones = 1;
   double buffer_width = 0;
-  double redundancy = 0;  // the model's window / zone - 1
 };
 
 ZonePlan plan_for_budget(const SortedView& view, double index_bytes, const RunOptions& o, int threads) {
@@ -152,8 +148,7 @@ ZonePlan plan_for_budget(const SortedView& view, double index_bytes, const RunOp
   };
   auto largest_segment = [&](int k) {  // S with memory(S) = available (linear in S)
     const double fixed = evaluate(k, 0).second;
-    const double per_point = evaluate(k, 1e6).second / 1e6 - fixed / 1e6;
-    return (available - fixed) / per_point;
+    return (available - fixed) / (evaluate(k, 1).second - fixed);
   };
   int first_k = 1, last_k = 256;
   if (o.zones > 0) first_k = last_k = o.zones;
@@ -165,7 +160,7 @@ ZonePlan plan_for_budget(const SortedView& view, double index_bytes, const RunOp
     // the input), or the input too small for k zones.
     if (o.zone_points == 0 && s < std::min(n, 1000.0 * k)) continue;
     const double r = evaluate(k, s).first;
-    if (r < best - 1e-9) best = r, plan.zones = k, plan.segment_points = std::uint64_t(s), plan.redundancy = r;
+    if (r < best - 1e-9) best = r, plan.zones = k, plan.segment_points = std::uint64_t(s);
   }
   if (plan.segment_points == 0)
     throw UsageError("--memory " + std::to_string(o.memory_bytes >> 20) +
@@ -400,7 +395,7 @@ RunSummary Job::run() {
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
   PointIndex index;
-  index.build(view.points, view.count, view.axis, /*release_file_pages=*/true);
+  index.build(view.points, view.count, /*release_file_pages=*/true);
   view.index = &index;
 
   // The global hull: the hull of the runs' candidates.
@@ -539,7 +534,7 @@ RunSummary Job::run() {
   // for its predecessors: at most `threads` zones are in flight, and the outputs of
   // at most one segment plus `threads` - 1 zones are held, which is what the plan
   // above was sized for. After each segment the checkpoint records the output so
-  // far: a crash loses at most the segments in flight.
+  // far: a crash loses the zones finished or started since.
   Progress progress("triangulating", "points", view.count, options_.progress);
   progress.add(first_label);
   std::exception_ptr failure;

@@ -414,15 +414,12 @@ void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
   std::vector<std::uint64_t> scratch;
   std::vector<std::size_t> count(std::size_t(1) << shift);
   const std::uint64_t low_mask = (std::uint64_t(1) << shift) - 1;
-  for (std::size_t b = 0; b < buckets; ++b) {
+  for (std::size_t b = 0; shift > 0 && b < buckets; ++b) {  // shift 0: one zone index a bucket
     const std::size_t first = bucket_start[b], n = bucket_start[b + 1] - first;
-    if (n < 2 || shift == 0) continue;
+    if (n < 2) continue;
     scratch.assign(out.begin() + std::ptrdiff_t(4 * first), out.begin() + std::ptrdiff_t(4 * (first + n)));
     std::fill(count.begin(), count.end(), 0);
-    auto key = [&](std::size_t i) {
-      const std::uint64_t* q = &scratch[4 * i];
-      return (std::min(std::min(q[0], q[1]), std::min(q[2], q[3])) - plan_.zone_begin) & low_mask;
-    };
+    auto key = [&](std::size_t i) { return (tet_min_label(&scratch[4 * i]) - plan_.zone_begin) & low_mask; };
     for (std::size_t i = 0; i < n; ++i) ++count[key(i)];
     std::size_t at = first;
     for (std::size_t& c : count) {

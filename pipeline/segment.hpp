@@ -112,29 +112,33 @@ struct SegmentStats {
 SegmentStats triangulate_zone(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& zone,
                               std::vector<std::uint64_t>& out);
 
+// The smallest of a tet's 4 labels: the label that owns it under the minimum vertex
+// rule, by which the output stream is grouped.
+inline std::uint64_t tet_min_label(const std::uint64_t* q) {
+  return std::min(std::min(q[0], q[1]), std::min(q[2], q[3]));
+}
+
 // Merges the outputs of a segment's zones into one stream grouped by minimum label in
 // increasing order: calls sink(tets, count) with runs of whole groups.
 template <class Sink>
 void merge_by_min_label(const std::vector<std::vector<std::uint64_t>>& parts, Sink&& sink) {
-  const auto min_label = [](const std::uint64_t* q) { return std::min(std::min(q[0], q[1]), std::min(q[2], q[3])); };
+  constexpr std::uint64_t kDone = ~std::uint64_t(0);
   std::vector<std::size_t> at(parts.size(), 0);  // next tet of each part
+  auto next_label = [&](std::size_t p) { return 4 * at[p] < parts[p].size() ? tet_min_label(&parts[p][4 * at[p]]) : kDone; };
   for (;;) {
-    std::size_t best = parts.size();
-    std::uint64_t best_label = 0;
+    // The part with the smallest next label, and the smallest next label of the others.
+    std::size_t best = 0;
+    std::uint64_t best_label = kDone, limit = kDone;
     for (std::size_t p = 0; p < parts.size(); ++p) {
-      if (4 * at[p] == parts[p].size()) continue;
-      const std::uint64_t l = min_label(&parts[p][4 * at[p]]);
-      if (best == parts.size() || l < best_label) best = p, best_label = l;
+      const std::uint64_t l = next_label(p);
+      if (l < best_label) limit = best_label, best_label = l, best = p;
+      else limit = std::min(limit, l);
     }
-    if (best == parts.size()) return;
-    // The part's run of groups below every other part's next label.
-    std::uint64_t limit = ~std::uint64_t(0);
-    for (std::size_t p = 0; p < parts.size(); ++p)
-      if (p != best && 4 * at[p] < parts[p].size()) limit = std::min(limit, min_label(&parts[p][4 * at[p]]));
-    const std::vector<std::uint64_t>& part = parts[best];
+    if (best_label == kDone) return;
+    // That part's run of groups below every other part's next label.
     std::size_t end = at[best];
-    while (4 * end < part.size() && min_label(&part[4 * end]) < limit) ++end;
-    sink(part.data() + 4 * at[best], end - at[best]);
+    while (4 * end < parts[best].size() && tet_min_label(&parts[best][4 * end]) < limit) ++end;
+    sink(parts[best].data() + 4 * at[best], end - at[best]);
     at[best] = end;
   }
 }
