@@ -4,18 +4,25 @@
 // ball?" must be cheap even for the huge, thin balls of flat tets on the hull, which
 // span much of the axis but touch few points.
 //
-// The sorted file is cut into blocks of consecutive labels (thin slabs across the
-// axis). Each block holds a small kd-tree: median splits on the widest side of the
-// box, down to leaves of at most kLeafPoints points, every node with the tight box of
-// its points, the leaves' labels stored as 16-bit offsets in the block. A query visits
-// the blocks of its label range, and in each the nodes whose box meets the ball,
-// skipping a whole subtree when its box does not; it tests only the points of the
-// leaves it reaches. (A fixed 12x12 grid per block put the points of a dense filament
-// into one crowded cell, and a flat list of cells still cost a box test per cell for
-// every block a big ball spans: `mixed` 10^7 took 336 s against 39 s for uniform.)
+// The sorted file is cut into blocks of consecutive labels: slabs across the sort
+// axis, each a few point spacings thick (block_points_for). Each block holds a kd-tree:
+// median splits on the widest side of the box, down to leaves of at most kLeafPoints
+// points, every node with the tight box of its points, the leaves' labels stored as
+// 32-bit offsets in the block. A query visits the blocks of its label range, and in
+// each the nodes whose box meets the ball (and, along the axis, the coordinates of
+// that label range), skipping a whole subtree when its box does not; it tests only
+// the points of the leaves it reaches.
 //
-// Memory: 2 bytes per point plus 64 bytes per node (about 2 nodes per 48 points):
-// about 5 bytes per point.
+// Why thick blocks: a query ball is a point spacing or two across. Blocks of a fixed
+// 8192 labels were a fifth of a spacing thick at 10^7 uniform points, so a ball
+// crossed some 20 of them, descending 20 trees to reach leaves that were flat tiles
+// of 64 points, most of them outside the ball. A block a few spacings thick is
+// crossed by one or two balls' worth, and its leaves are compact cells.
+// (Before the trees, a fixed 12x12 grid per block put a dense filament into one
+// crowded cell: `mixed` 10^7 took 336 s against 39 s for uniform.)
+//
+// Memory: 4 bytes per point plus 64 bytes per node (about 2 nodes per 48 points):
+// about 7 bytes per point.
 #include "pipeline/point_sort.hpp"
 
 #include <cstdint>
@@ -32,15 +39,23 @@ struct ExcludedSlab {
 
 class PointIndex {
  public:
-  static constexpr std::uint32_t kBlockPoints = 8192;  // labels per block (< 2^16)
-  static constexpr std::uint32_t kLeafPoints = 64;     // most points in a leaf
+  static constexpr std::uint32_t kLeafPoints = 64;  // most points in a leaf
+  static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 16;
+
+  // Labels per block for `count` points sorted along an axis of length `axis_extent`
+  // in a bounding box of `volume`: the points of a slab about 8 mean spacings thick,
+  // within [kMinBlockPoints, kMaxBlockPoints] (the upper bound caps the file pages a
+  // block's build holds: 64 MiB).
+  static std::uint32_t block_points_for(std::uint64_t count, double axis_extent, double volume);
 
   PointIndex() = default;
-  // Builds the index over points[0, count). When the points are
-  // a read-only file mapping, release_file_pages hands each block's pages back to
-  // the page cache once it is indexed (one pass, bounded resident set); never set it
-  // for anonymous memory, whose pages MADV_DONTNEED would zero.
-  void build(const SortedPoint* points, std::uint64_t count, bool release_file_pages = false);
+  // Builds the index over points[0, count), sorted along `axis`, in blocks of
+  // `block_points` labels. When the points are a read-only file mapping,
+  // release_file_pages hands each block's pages back to the page cache once it is
+  // indexed (one pass, bounded resident set); never set it for anonymous memory,
+  // whose pages MADV_DONTNEED would zero.
+  void build(const SortedPoint* points, std::uint64_t count, int axis, std::uint32_t block_points,
+             bool release_file_pages = false);
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
   // closed ball (center, radius), except some inside `exclude`; points certainly
@@ -50,16 +65,20 @@ class PointIndex {
   void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last,
                           Visit&& visit, Stop&& stop, const ExcludedSlab& exclude = {}) const {
     if (first >= last) return;
-    const std::uint64_t b0 = first / kBlockPoints, b1 = (last - 1) / kBlockPoints;
+    // The labels [first, last) have axis coordinates in [axis_lo, axis_hi] (the file
+    // is sorted): a node entirely outside that interval holds none of them.
+    const double axis_lo = points_[first].xyz[axis_], axis_hi = points_[last - 1].xyz[axis_];
+    const std::uint64_t b0 = first / block_points_, b1 = (last - 1) / block_points_;
     for (std::uint64_t b = b0; b <= b1; ++b) {
-      const std::uint64_t base = b * kBlockPoints;
+      const std::uint64_t base = b * block_points_;
       // Nodes in preorder; `next` of a node is the first node after its subtree, so
       // a node whose box misses the ball is skipped with its whole subtree, and one
       // that meets it is entered by moving to the node that follows it.
       const std::uint32_t end = blocks_[b].first_node + blocks_[b].nodes;
       for (std::uint32_t i = blocks_[b].first_node; i < end;) {
         const Node& node = nodes_[i];
-        if (!box_meets_ball(node.box, center, radius) ||
+        if (!box_meets_ball(node.box, center, radius) || node.box.hi[axis_] < axis_lo ||
+            node.box.lo[axis_] > axis_hi ||
             (exclude.axis >= 0 && node.box.lo[exclude.axis] >= exclude.lo && node.box.hi[exclude.axis] <= exclude.hi)) {
           i = node.next;
           continue;
@@ -79,7 +98,7 @@ class PointIndex {
   }
 
   std::size_t memory_bytes() const {
-    return offsets_.capacity() * sizeof(std::uint16_t) + nodes_.capacity() * sizeof(Node) +
+    return offsets_.capacity() * sizeof(std::uint32_t) + nodes_.capacity() * sizeof(Node) +
            blocks_.capacity() * sizeof(Block);
   }
 
@@ -108,7 +127,10 @@ class PointIndex {
     return d2 <= r * r * (1 + 1e-12);
   }
 
-  std::vector<std::uint16_t> offsets_;  // per block: offsets of its labels, grouped by leaf
+  const SortedPoint* points_ = nullptr;
+  int axis_ = 0;
+  std::uint32_t block_points_ = kMinBlockPoints;
+  std::vector<std::uint32_t> offsets_;  // per block: offsets of its labels, grouped by leaf
   std::vector<Node> nodes_;
   std::vector<Block> blocks_;
 };

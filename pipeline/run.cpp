@@ -40,8 +40,9 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 // /usr/bin/time on uniform data (480 overshot 1G by 2% at 10^7 points once the kernel
 // kept its own coordinates: scripts/bench-pipeline --sizes 10000000, peak 1047 MiB).
 constexpr double kWindowBytesPerPoint = 520;
-// Bytes per zone point for the emitted tets (4 x 8-byte labels, ~6.7 tets).
-constexpr double kOutputBytesPerPoint = 220;
+// Bytes per zone point for the emitted tets (ZoneTets: ~6.8 tets of 4 x 4-byte local
+// ids, and 8-byte labels for the zone's window, ~1.2 points per zone point).
+constexpr double kOutputBytesPerPoint = 125;
 // What the budget keeps for everything else: writer buffers, encoders, the runtime.
 constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
 // Frames queued for the writer thread. With one, the segment loop hands over a frame
@@ -65,7 +66,8 @@ class FrameCutter {
  public:
   explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer) {}
 
-  // Appends `count` tets (whole minimum-label groups, in increasing label order).
+  // Appends `count` tets, in increasing minimum-label order (a group may go on in the
+  // next call).
   void add(const std::uint64_t* tets, std::size_t count) {
     pending_.insert(pending_.end(), tets, tets + 4 * count);
     std::size_t begin = 0;
@@ -394,8 +396,15 @@ RunSummary Job::run() {
   view.axis = sorted.axis;
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
+  view.sample_keys();
   PointIndex index;
-  index.build(view.points, view.count, /*release_file_pages=*/true);
+  {
+    double volume = 1;
+    for (int k = 0; k < 3; ++k) volume *= view.bbox_max[k] - view.bbox_min[k];
+    index.build(view.points, view.count, view.axis,
+                PointIndex::block_points_for(view.count, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume),
+                /*release_file_pages=*/true);
+  }
   view.index = &index;
 
   // The global hull: the hull of the runs' candidates.
@@ -542,19 +551,26 @@ RunSummary Job::run() {
   const auto stage_start = Clock::now();
   const std::int64_t unit_count = std::int64_t(units.size());
   const std::uint64_t first_segment = segments_done;  // segments_done changes in the loop
-  std::vector<std::vector<std::uint64_t>> parts;      // the current segment's zones' tets
+  std::vector<ZoneTets> parts;                        // the current segment's zones' tets
   SegmentStats segment_work;
+  // Per thread, a triangulator whose buffers live from zone to zone; and the zones'
+  // output vectors, recycled once merged. Fresh memory for each zone cost the OS's
+  // page zeroing, a tenth of the run.
+  OutputPool output_pool;
+  std::vector<std::unique_ptr<ZoneTriangulator>> triangulators(static_cast<std::size_t>(threads));
 #pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads)
   for (std::int64_t i = 0; i < unit_count; ++i) {
     const Unit unit = units[std::size_t(i)];
     const SegmentPlan& plan = plans[unit.segment];
-    std::vector<std::uint64_t> tets;
+    ZoneTets tets;
     SegmentStats s;
     if (!cancelled.load()) {
       try {
         check_interrupted();
         maybe_inject_fault("segment", first_segment + unit.segment);
-        s = triangulate_zone(view, plan, plan.zones[unit.zone], tets);
+        auto& triangulator = triangulators[std::size_t(omp_get_thread_num())];
+        if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool);
+        s = triangulator->run(plan, plan.zones[unit.zone], tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
         // process): the first failure is kept, the others stop, and it is rethrown
@@ -593,13 +609,14 @@ RunSummary Job::run() {
                         segment_work.range_failures, segment_work.queries, segment_work.rounds, segment_work.tets,
                         segment_work.seconds_build, segment_work.seconds_check,
                         human_bytes(double(segment_work.kernel_bytes)));
+          for (auto& part : parts) output_pool.give(std::move(part));
           parts.clear();
           segment_work = SegmentStats{};
         }
       }
-      std::vector<std::uint64_t>().swap(tets);
+      tets = ZoneTets{};
       release_mapped_pages(mapping.data(), mapping.size());
-      malloc_trim(0);  // hand the zone's freed heap back, so resident memory tracks the windows
+      malloc_trim(0);  // hand any freed heap back, so resident memory tracks the windows
     }
   }
   if (failure) std::rethrow_exception(failure);

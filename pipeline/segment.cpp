@@ -71,14 +71,19 @@ void clipped_extent(const ConflictBall& b, const SortedView& view, int axis, dou
   hi += std::fabs(hi) * 1e-15;
 }
 
+}  // namespace
+
+// The state of one thread's zone triangulations. It lives across zones: the kernel
+// and the buffers keep their capacity from one zone to the next, so a thread faults
+// its memory in once (fresh pages cost the OS's zeroing: a tenth of the run's time
+// when every zone allocated anew).
 class SegmentWorker {
  public:
-  SegmentWorker(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& strip)
-      : view_(view), plan_(plan), strip_(strip) {
-    touched_blocks_.assign((view.count / PointIndex::kBlockPoints + 64) / 64, 0);
+  SegmentWorker(const SortedView& view, OutputPool* pool) : view_(view), pool_(pool) {
+    touched_blocks_.assign((view.count / kPageBlockPoints + 64) / 64, 0);
   }
 
-  SegmentStats run(std::vector<std::uint64_t>& out);
+  SegmentStats run(const SegmentPlan& plan, const ZoneStrip& strip, ZoneTets& out);
 
  private:
   void load_window();
@@ -86,7 +91,7 @@ class SegmentWorker {
   // safe (collecting repair points), declares the others final, and returns how
   // many zone vertices remain pending.
   std::size_t check_round(std::vector<std::uint64_t>& repairs);
-  void emit(std::vector<std::uint64_t>& out);
+  void emit(ZoneTets& out);
   bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
   // Exact emptiness query of tet t's conflict region against the missing points
   // whose axis coordinate lies in [lo, hi]: those outside the window's label range
@@ -95,14 +100,16 @@ class SegmentWorker {
   std::uint64_t deepest_missing_conflict(TetId t, const ConflictBall& ball, double lo, double hi, bool outside_clear,
                                          bool strip_clear);
   // The queries read points of the mapped sorted file all over it, and mapped pages
-  // count in the resident set until they are handed back. touch() records the index
-  // blocks whose points were read (a block's points span kBlockBytes, so that bounds
-  // the pages they hold) and the label range; once those blocks may hold
+  // count in the resident set until they are handed back. touch() records the blocks
+  // of kPageBlockPoints labels whose points were read (a block's points span
+  // kBlockBytes, so that bounds the pages they hold) and the label range; once those
+  // blocks may hold
   // view_.query_page_bytes, or when asked, release_touched_pages() hands the range
   // back to the page cache.
-  static constexpr std::uint64_t kBlockBytes = PointIndex::kBlockPoints * sizeof(SortedPoint);
+  static constexpr std::uint64_t kPageBlockPoints = 8192;
+  static constexpr std::uint64_t kBlockBytes = kPageBlockPoints * sizeof(SortedPoint);
   void touch(std::uint64_t label) {
-    const std::uint64_t b = label / PointIndex::kBlockPoints;
+    const std::uint64_t b = label / kPageBlockPoints;
     std::uint64_t& word = touched_blocks_[b >> 6];
     const std::uint64_t bit = std::uint64_t(1) << (b & 63);
     if (word & bit) return;
@@ -112,7 +119,7 @@ class SegmentWorker {
     touched_hi_ = std::max(touched_hi_, label + 1);
   }
   void release_touched_pages(bool always);
-  std::vector<std::uint64_t> touched_blocks_;  // bitmap over the index's blocks
+  std::vector<std::uint64_t> touched_blocks_;  // bitmap over the page blocks
   static constexpr std::uint64_t kQueriesBetweenReleases = 256;
   std::uint64_t queries_since_release_ = 0;
   std::uint64_t touched_ = 0, touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
@@ -127,8 +134,9 @@ class SegmentWorker {
   static constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
 
   const SortedView& view_;
-  const SegmentPlan& plan_;
-  const ZoneStrip strip_;
+  OutputPool* const pool_;
+  const SegmentPlan* plan_ = nullptr;  // of the zone being triangulated
+  ZoneStrip strip_;
   core::Delaunay dt_;
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
@@ -149,21 +157,63 @@ class SegmentWorker {
   std::vector<VertexId> zone_vertex_;  // by zone index: the local vertex (kNoVertex: another strip's)
   std::vector<VertexId> pending_;      // the zone vertices still pending after a round
   std::vector<TetId> star_;        // scratch for a pending vertex's star
-  using TetKey = std::array<VertexId, 4>;  // sorted vertex ids: a tet's identity
-  struct TetKeyHash {
-    std::size_t operator()(const TetKey& k) const {
-      std::uint64_t h = 0x9E3779B97F4A7C15ULL;
-      for (VertexId v : k) h = (h ^ v) * 0xBF58476D1CE4E5B9ULL;
-      return std::size_t(h ^ (h >> 31));
+  // The tets proved empty, by their sorted vertex ids packed in 128 bits: an
+  // open-addressing table (linear probing, at most half full), one cache line per
+  // lookup. (A node-based std::unordered_set was a third of the check's time once thin
+  // buffers made queries common.)
+  class TetSet {
+   public:
+    bool contains(std::uint64_t a, std::uint64_t b) const {
+      if (slots_.empty()) return false;
+      for (std::size_t i = hash(a, b) & mask_;; i = (i + 1) & mask_) {
+        if (slots_[i].a == a && slots_[i].b == b) return true;
+        if (slots_[i].a == kEmpty) return false;
+      }
     }
+    void insert(std::uint64_t a, std::uint64_t b) {
+      if (2 * (size_ + 1) > slots_.size()) grow();
+      for (std::size_t i = hash(a, b) & mask_;; i = (i + 1) & mask_) {
+        if (slots_[i].a == a && slots_[i].b == b) return;
+        if (slots_[i].a == kEmpty) {
+          slots_[i] = {a, b};
+          ++size_;
+          return;
+        }
+      }
+    }
+    void clear() {
+      std::fill(slots_.begin(), slots_.end(), Slot{});
+      size_ = 0;
+    }
+
+   private:
+    // No key has a == kEmpty: its low half is a vertex id below kNoVertex.
+    static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);
+    struct Slot {
+      std::uint64_t a = kEmpty, b = 0;
+    };
+    static std::size_t hash(std::uint64_t a, std::uint64_t b) {
+      std::uint64_t h = (a ^ (b * 0x9E3779B97F4A7C15ULL)) * 0xBF58476D1CE4E5B9ULL;
+      return std::size_t(h ^ (h >> 29));
+    }
+    void grow() {
+      std::vector<Slot> old(std::max<std::size_t>(1024, 2 * slots_.size()));
+      old.swap(slots_);
+      mask_ = slots_.size() - 1;
+      size_ = 0;
+      for (const Slot& s : old)
+        if (s.a != kEmpty) insert(s.a, s.b);
+    }
+    std::vector<Slot> slots_;
+    std::size_t mask_ = 0, size_ = 0;
   };
-  std::unordered_set<TetKey, TetKeyHash> proved_empty_;
+  TetSet proved_empty_;
   static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
   SegmentStats stats_;
 };
 
 void SegmentWorker::load_window() {
-  const std::uint64_t w0 = plan_.window_begin, w1 = plan_.window_end;
+  const std::uint64_t w0 = plan_->window_begin, w1 = plan_->window_end;
   // extra_: labels held although outside the window proper (the label range, and the
   // strip's window inside it): the hull's vertices, later the repair points.
   for (std::uint64_t h : view_.hull_labels)
@@ -177,6 +227,9 @@ void SegmentWorker::load_window() {
   };
   for (std::uint64_t label = w0; label < w1; ++label)
     if (in_strip_window(label)) add(label);
+  // A strip reads its segment's whole window range to pick its points: hand those
+  // pages back now (their points are copied) rather than hold them through the build.
+  if (view_.query_page_bytes > 0) release_mapped_pages(view_.points + w0, (w1 - w0) * sizeof(SortedPoint));
   for (std::uint64_t label : extra_) add(label);
   const std::size_t total = labels_.size();
   // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
@@ -189,6 +242,8 @@ void SegmentWorker::load_window() {
     std::copy_n(&xyz_[3 * std::size_t(order[i])], 3, &xyz[3 * i]);
     labels[i] = labels_[order[i]];
   }
+  // The arrays in Hilbert order are kept (with their capacity, for the next zone);
+  // the unordered ones go (not worth holding while the kernel builds).
   xyz_.swap(xyz);
   labels_.swap(labels);
   stats_.window_points = total;
@@ -229,9 +284,9 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
   auto enough = [&] { return found >= kEnoughConflicts; };
   if (!outside_clear) {
-    view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_.window_begin), visit, enough);
+    view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_->window_begin), visit, enough);
     if (!enough())
-      view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_end), last, visit, enough);
+      view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_->window_end), last, visit, enough);
   }
   if (!strip_clear && !enough()) {
     auto visit_outside_strip = [&](std::uint64_t label) {
@@ -240,8 +295,8 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
     };
     // The strip window's own points are not missing: whole index nodes inside it are
     // skipped, the rest filtered point by point.
-    view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_.window_begin),
-                                    std::min(last, plan_.window_end), visit_outside_strip, enough,
+    view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_->window_begin),
+                                    std::min(last, plan_->window_end), visit_outside_strip, enough,
                                     ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
   }
   release_touched_pages(false);
@@ -259,9 +314,9 @@ void SegmentWorker::release_touched_pages(bool always) {
     return;
   queries_since_release_ = 0;
   // Whole blocks: a touched block's points may lie anywhere in it.
-  const std::uint64_t first = touched_lo_ / PointIndex::kBlockPoints * PointIndex::kBlockPoints;
-  const std::uint64_t last = std::min(view_.count, (touched_hi_ + PointIndex::kBlockPoints - 1) /
-                                                       PointIndex::kBlockPoints * PointIndex::kBlockPoints);
+  const std::uint64_t first = touched_lo_ / kPageBlockPoints * kPageBlockPoints;
+  const std::uint64_t last =
+      std::min(view_.count, (touched_hi_ + kPageBlockPoints - 1) / kPageBlockPoints * kPageBlockPoints);
   release_mapped_pages(view_.points + first, (last - first) * sizeof(SortedPoint));
   std::fill(touched_blocks_.begin(), touched_blocks_.end(), 0);
   touched_ = 0;
@@ -283,8 +338,8 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
     if (lo > hi) return true;
     // Missing points on the left have axis coordinates <= key(window_begin - 1), on
     // the right >= key(window_end).
-    const bool left_clear = plan_.window_begin == 0 || lo > view_.key(plan_.window_begin - 1);
-    const bool right_clear = plan_.window_end == view_.count || hi < view_.key(plan_.window_end);
+    const bool left_clear = plan_->window_begin == 0 || lo > view_.key(plan_->window_begin - 1);
+    const bool right_clear = plan_->window_end == view_.count || hi < view_.key(plan_->window_end);
     outside_clear = left_clear && right_clear;
     if (!strip_clear) {
       // Missing points of the window's range lie outside [window_lo, window_hi]
@@ -298,10 +353,11 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   ++stats_.range_failures;
   // A tet proved empty stays empty for the rest of the segment: later repairs insert
   // only points that were missing, and none of those is in its ball.
-  TetKey key;
-  for (int i = 0; i < 4; ++i) key[i] = dt_.vertex(t, i);
-  std::sort(key.begin(), key.end());
-  if (proved_empty_.count(key)) return true;
+  std::array<VertexId, 4> v;
+  for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
+  std::sort(v.begin(), v.end());
+  const std::uint64_t key_a = std::uint64_t(v[1]) << 32 | v[0], key_b = std::uint64_t(v[3]) << 32 | v[2];
+  if (proved_empty_.contains(key_a, key_b)) return true;
   ConflictBall query_ball = ball;
   if (!ball.valid) {
     // No usable bound: the query examines every missing point exactly.
@@ -310,7 +366,7 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   }
   const std::uint64_t deepest = deepest_missing_conflict(t, query_ball, lo, hi, outside_clear, strip_clear);
   if (deepest == kNone) {
-    proved_empty_.insert(key);
+    proved_empty_.insert(key_a, key_b);
     return true;
   }
   repairs.push_back(deepest);
@@ -372,7 +428,7 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
 // axis); instead the tets go to at most 2048 buckets of consecutive zone indices (one
 // write stream per bucket, all of them cache-resident), and each bucket, small enough
 // for the cache, is then ordered in place by its own counting sort.
-void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
+void SegmentWorker::emit(ZoneTets& out) {
   const std::size_t slots = dt_.num_tet_slots();
   const std::size_t zone_size = zone_state_.size();
   const int shift = std::max(0, int(std::bit_width(zone_size)) - 11);
@@ -393,33 +449,37 @@ void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
     owner[t] = z;
     if (z != kNoZone) ++bucket_start[(z >> shift) + 1];
   }
-  const std::size_t base = out.size() / 4;
-  bucket_start[0] = base;
   for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
   const std::size_t total = bucket_start[buckets];
-  stats_.tets += total - base;
-  out.reserve(4 * total);
-  core::advise_huge_pages(out.data(), out.capacity() * sizeof(std::uint64_t));
-  out.resize(4 * total);
+  stats_.tets += total;
+  if (pool_) out = pool_->take();
+  std::vector<VertexId>& tets = out.tets;
+  tets.reserve(4 * total);
+  core::advise_huge_pages(tets.data(), tets.capacity() * sizeof(VertexId));
+  tets.resize(4 * total);
   // Pass 2: into the buckets, in the kernel's order.
   std::vector<std::size_t> fill(bucket_start.begin(), bucket_start.end() - 1);
   for (std::size_t t = 0; t < slots; ++t) {
     const std::uint32_t z = owner[t];
     if (z == kNoZone) continue;
-    std::uint64_t* q = &out[4 * fill[z >> shift]++];
-    for (int i = 0; i < 4; ++i) q[i] = labels_[dt_.vertex(TetId(t), i)];
+    VertexId* q = &tets[4 * fill[z >> shift]++];
+    for (int i = 0; i < 4; ++i) q[i] = dt_.vertex(TetId(t), i);
   }
   std::vector<std::uint32_t>().swap(owner);
   // Pass 3: each bucket by zone index (its minimum label minus zone_begin).
-  std::vector<std::uint64_t> scratch;
+  std::vector<VertexId> scratch;
   std::vector<std::size_t> count(std::size_t(1) << shift);
   const std::uint64_t low_mask = (std::uint64_t(1) << shift) - 1;
   for (std::size_t b = 0; shift > 0 && b < buckets; ++b) {  // shift 0: one zone index a bucket
     const std::size_t first = bucket_start[b], n = bucket_start[b + 1] - first;
     if (n < 2) continue;
-    scratch.assign(out.begin() + std::ptrdiff_t(4 * first), out.begin() + std::ptrdiff_t(4 * (first + n)));
+    scratch.assign(tets.begin() + std::ptrdiff_t(4 * first), tets.begin() + std::ptrdiff_t(4 * (first + n)));
     std::fill(count.begin(), count.end(), 0);
-    auto key = [&](std::size_t i) { return (tet_min_label(&scratch[4 * i]) - plan_.zone_begin) & low_mask; };
+    auto key = [&](std::size_t i) {
+      const VertexId* q = &scratch[4 * i];
+      const std::uint64_t m = std::min(std::min(labels_[q[0]], labels_[q[1]]), std::min(labels_[q[2]], labels_[q[3]]));
+      return (m - plan_->zone_begin) & low_mask;
+    };
     for (std::size_t i = 0; i < n; ++i) ++count[key(i)];
     std::size_t at = first;
     for (std::size_t& c : count) {
@@ -427,11 +487,26 @@ void SegmentWorker::emit(std::vector<std::uint64_t>& out) {
       c = at;
       at += k;
     }
-    for (std::size_t i = 0; i < n; ++i) std::copy_n(&scratch[4 * i], 4, &out[4 * count[key(i)]++]);
+    for (std::size_t i = 0; i < n; ++i) std::copy_n(&scratch[4 * i], 4, &tets[4 * count[key(i)]++]);
   }
+  // The local ids' labels go with the tets (the worker's table is refilled by the
+  // next zone's load_window anyway).
+  out.labels.swap(labels_);
 }
 
-SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
+SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip, ZoneTets& out) {
+  plan_ = &plan;
+  strip_ = strip;
+  stats_ = SegmentStats{};
+  extra_.clear();
+  pending_.clear();
+  proved_empty_.clear();
+  if (touched_ > 0) {  // never handed back (no mapped file)
+    std::fill(touched_blocks_.begin(), touched_blocks_.end(), 0);
+    touched_ = 0;
+    touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
+  }
+  queries_since_release_ = 0;
   auto t0 = Clock::now();
   load_window();
   if (dt_.build(xyz_.data(), labels_.data(), labels_.size()) != core::BuildStatus::kOk)
@@ -442,17 +517,17 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
   // The zone vertices: the window's points with a label in the segment's zone and,
   // with strips, a coordinate in this strip. Every other label of the zone is
   // another strip's (kDone here from the start).
-  zone_state_.assign(plan_.zone_end - plan_.zone_begin, kDone);
-  zone_vertex_.assign(plan_.zone_end - plan_.zone_begin, core::kNoVertex);
+  zone_state_.assign(plan_->zone_end - plan_->zone_begin, kDone);
+  zone_vertex_.assign(plan_->zone_end - plan_->zone_begin, core::kNoVertex);
   zone_of_.assign(labels_.size(), kNoZone);
   for (VertexId v = 0; v < labels_.size(); ++v) {
     const std::uint64_t l = labels_[v];
-    if (l < plan_.zone_begin || l >= plan_.zone_end) continue;
+    if (l < plan_->zone_begin || l >= plan_->zone_end) continue;
     if (strip_.axis >= 0) {
       const double c = xyz_[3 * std::size_t(v) + std::size_t(strip_.axis)];
       if (!(c >= strip_.lo && c < strip_.hi)) continue;
     }
-    const std::uint64_t z = l - plan_.zone_begin;
+    const std::uint64_t z = l - plan_->zone_begin;
     zone_of_[v] = std::uint32_t(z);
     zone_vertex_[z] = v;
     zone_state_[z] = kPending;
@@ -484,26 +559,43 @@ SegmentStats SegmentWorker::run(std::vector<std::uint64_t>& out) {
   return stats_;
 }
 
-}  // namespace
 
-std::uint64_t SortedView::lower_bound(double x) const {
-  std::uint64_t lo = 0, hi = count;
+void SortedView::sample_keys() {
+  key_samples.clear();
+  key_samples.reserve(std::size_t(count / kKeyStride + 1));
+  for (std::uint64_t label = 0; label < count; label += kKeyStride) key_samples.push_back(key(label));
+}
+
+namespace {
+// The first label in [0, count) for which `after(key)` holds (keys are sorted, and
+// `after` is monotone along them): first among the samples, then within one stride.
+template <class After>
+std::uint64_t partition_point(const SortedView& view, After after) {
+  std::uint64_t lo = 0, hi = view.count;
+  if (!view.key_samples.empty()) {
+    // Sample s is label s * kKeyStride: the answer lies after the last sample that is
+    // not `after`, and at or before the first that is.
+    const auto s = std::size_t(std::partition_point(view.key_samples.begin(), view.key_samples.end(),
+                                                    [&](double k) { return !after(k); }) -
+                               view.key_samples.begin());
+    lo = s == 0 ? 0 : (s - 1) * SortedView::kKeyStride + 1;
+    hi = std::min(view.count, s * SortedView::kKeyStride);
+  }
   while (lo < hi) {
     const std::uint64_t mid = lo + (hi - lo) / 2;
-    if (key(mid) < x) lo = mid + 1;
-    else hi = mid;
+    if (after(view.key(mid))) hi = mid;
+    else lo = mid + 1;
   }
   return lo;
 }
+}  // namespace
+
+std::uint64_t SortedView::lower_bound(double x) const {
+  return partition_point(*this, [x](double k) { return k >= x; });
+}
 
 std::uint64_t SortedView::upper_bound(double x) const {
-  std::uint64_t lo = 0, hi = count;
-  while (lo < hi) {
-    const std::uint64_t mid = lo + (hi - lo) / 2;
-    if (key(mid) <= x) lo = mid + 1;
-    else hi = mid;
-  }
-  return lo;
+  return partition_point(*this, [x](double k) { return k > x; });
 }
 
 int strip_axis(const SortedView& view) {
@@ -562,9 +654,27 @@ void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones) {
   }
 }
 
-SegmentStats triangulate_zone(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& zone,
-                              std::vector<std::uint64_t>& out) {
-  return SegmentWorker(view, plan, zone).run(out);
+ZoneTets OutputPool::take() {
+  std::lock_guard lock(mutex_);
+  if (spare_.empty()) return {};
+  ZoneTets v = std::move(spare_.back());
+  spare_.pop_back();
+  return v;
+}
+
+void OutputPool::give(ZoneTets&& v) {
+  v.tets.clear();
+  v.labels.clear();
+  std::lock_guard lock(mutex_);
+  spare_.push_back(std::move(v));
+}
+
+ZoneTriangulator::ZoneTriangulator(const SortedView& view, OutputPool* pool)
+    : worker_(std::make_unique<SegmentWorker>(view, pool)) {}
+ZoneTriangulator::~ZoneTriangulator() = default;
+
+SegmentStats ZoneTriangulator::run(const SegmentPlan& plan, const ZoneStrip& zone, ZoneTets& out) {
+  return worker_->run(plan, zone, out);
 }
 
 }  // namespace tetstream::pipeline

@@ -22,6 +22,8 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
+#include <mutex>
 #include <span>
 #include <vector>
 
@@ -39,6 +41,13 @@ struct SortedView {
   // queries may keep resident before handing them back (0: never hand them back;
   // anonymous memory must not be, MADV_DONTNEED would zero it).
   std::uint64_t query_page_bytes = 0;
+
+  // The key of every kKeyStride-th label, so that lower_bound and upper_bound search
+  // a small in-memory table and then one stride of the file, instead of probing the
+  // mapped file all over (a cache and TLB miss each: a quarter of the check's time).
+  static constexpr std::uint64_t kKeyStride = 128;
+  std::vector<double> key_samples;
+  void sample_keys();
 
   double key(std::uint64_t label) const { return points[label].xyz[axis]; }
   // First label whose axis coordinate is >= x (count when none).
@@ -103,14 +112,53 @@ struct SegmentStats {
   }
 };
 
-// Triangulates one zone of a segment (the whole segment for ZoneStrip{}) and appends
-// the tets whose minimum label is one of its points (4 labels each, positively
-// oriented) to `out`, grouped by minimum label in increasing order. Every label of the
-// segment belongs to exactly one of its zones, so the zones' outputs together are the
-// segment's tets, each once. Throws InputError when the window has fewer than 4
-// affinely independent points (only possible when the whole input has).
-SegmentStats triangulate_zone(const SortedView& view, const SegmentPlan& plan, const ZoneStrip& zone,
-                              std::vector<std::uint64_t>& out);
+// The tets one zone emits: those whose minimum label is one of its points, 4 local
+// vertex ids each (positively oriented), grouped by minimum label in increasing
+// order, with the table from local id to label. (A segment's zones are held until its
+// last one is done: 16 bytes a tet and the window's labels are half of what 4 labels a
+// tet would take, and the budget buys larger zones with the difference.)
+struct ZoneTets {
+  std::vector<std::uint32_t> tets;    // 4 local ids per tet
+  std::vector<std::uint64_t> labels;  // local id -> label
+  std::size_t size() const { return tets.size() / 4; }
+  std::uint64_t label(std::size_t tet, int i) const { return labels[tets[4 * tet + std::size_t(i)]]; }
+  std::uint64_t min_label(std::size_t tet) const {
+    return std::min(std::min(label(tet, 0), label(tet, 1)), std::min(label(tet, 2), label(tet, 3)));
+  }
+};
+
+// Zone outputs recycled between zones (thread-safe): a zone takes one when it emits,
+// not before, so it holds no output while its kernel builds; the merge gives them
+// back. Fresh pages cost the OS's zeroing, and a zone's output is 100+ bytes a point.
+class OutputPool {
+ public:
+  ZoneTets take();  // empty, with the capacity of a given-back one if any
+  void give(ZoneTets&& v);
+
+ private:
+  std::mutex mutex_;
+  std::vector<ZoneTets> spare_;
+};
+
+class SegmentWorker;
+// Triangulates zones of segments, one at a time, and emits each one's tets into `out`
+// (taken from `pool` when given). Every label of a segment belongs to exactly one of
+// its zones, so the zones' outputs together are the segment's tets, each once. Throws
+// InputError when a window has fewer than 4 affinely independent points (only possible
+// when the whole input has).
+//
+// The kernel and the buffers keep their capacity from one zone to the next, instead
+// of faulting fresh pages in for each (the OS's zeroing of fresh pages was a tenth of
+// a run). One object per thread (not thread-safe).
+class ZoneTriangulator {
+ public:
+  explicit ZoneTriangulator(const SortedView& view, OutputPool* pool = nullptr);
+  ~ZoneTriangulator();
+  SegmentStats run(const SegmentPlan& plan, const ZoneStrip& zone, ZoneTets& out);
+
+ private:
+  std::unique_ptr<SegmentWorker> worker_;
+};
 
 // The smallest of a tet's 4 labels: the label that owns it under the minimum vertex
 // rule, by which the output stream is grouped.
@@ -119,12 +167,16 @@ inline std::uint64_t tet_min_label(const std::uint64_t* q) {
 }
 
 // Merges the outputs of a segment's zones into one stream grouped by minimum label in
-// increasing order: calls sink(tets, count) with runs of whole groups.
+// increasing order: calls sink(tets, count) with runs of whole groups, as labels (4 a
+// tet), at most kMergeChunk tets a call.
+inline constexpr std::size_t kMergeChunk = 1 << 14;
 template <class Sink>
-void merge_by_min_label(const std::vector<std::vector<std::uint64_t>>& parts, Sink&& sink) {
+void merge_by_min_label(const std::vector<ZoneTets>& parts, Sink&& sink) {
   constexpr std::uint64_t kDone = ~std::uint64_t(0);
   std::vector<std::size_t> at(parts.size(), 0);  // next tet of each part
-  auto next_label = [&](std::size_t p) { return 4 * at[p] < parts[p].size() ? tet_min_label(&parts[p][4 * at[p]]) : kDone; };
+  auto next_label = [&](std::size_t p) { return at[p] < parts[p].size() ? parts[p].min_label(at[p]) : kDone; };
+  std::vector<std::uint64_t> chunk;
+  chunk.reserve(4 * kMergeChunk);
   for (;;) {
     // The part with the smallest next label, and the smallest next label of the others.
     std::size_t best = 0;
@@ -135,11 +187,16 @@ void merge_by_min_label(const std::vector<std::vector<std::uint64_t>>& parts, Si
       else limit = std::min(limit, l);
     }
     if (best_label == kDone) return;
-    // That part's run of groups below every other part's next label.
-    std::size_t end = at[best];
-    while (4 * end < parts[best].size() && tet_min_label(&parts[best][4 * end]) < limit) ++end;
-    sink(parts[best].data() + 4 * at[best], end - at[best]);
-    at[best] = end;
+    // That part's run of groups below every other part's next label, translated to
+    // labels a chunk at a time.
+    const ZoneTets& part = parts[best];
+    std::size_t& i = at[best];
+    while (i < part.size() && part.min_label(i) < limit) {
+      chunk.clear();
+      for (; i < part.size() && chunk.size() < 4 * kMergeChunk && part.min_label(i) < limit; ++i)
+        for (int k = 0; k < 4; ++k) chunk.push_back(part.label(i, k));
+      sink(static_cast<const std::uint64_t*>(chunk.data()), chunk.size() / 4);
+    }
   }
 }
 

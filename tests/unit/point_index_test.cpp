@@ -1,0 +1,107 @@
+// The emptiness queries' building blocks: the spatial index must report every point
+// of a ball (within the label range, outside the excluded slab it may skip), and the
+// sampled key search must agree with a plain binary search over the sorted file.
+#include "pipeline/point_index.hpp"
+#include "pipeline/segment.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <set>
+#include <vector>
+
+namespace tetstream::pipeline {
+namespace {
+
+// n points sorted along `axis` as the sorted file is; coordinates on a coarse grid
+// when `coarse` (many equal keys, points on node boxes' faces).
+std::vector<SortedPoint> sorted_points(std::size_t n, int axis, bool coarse, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<SortedPoint> p(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (double& c : p[i].xyz) c = coarse ? std::round(u(rng) * 8) / 8 : u(rng);
+    p[i].xyz[(axis + 1) % 3] *= 3;  // not a cube: the widest side varies by node
+    p[i].original = i;
+  }
+  std::sort(p.begin(), p.end(), [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); });
+  return p;
+}
+
+TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
+  for (const bool coarse : {false, true}) {
+    for (const std::uint32_t block : {PointIndex::kMinBlockPoints, 1000u, 20000u}) {
+      const int axis = 2;
+      const std::vector<SortedPoint> p = sorted_points(20000, axis, coarse, 7 + block);
+      PointIndex index;
+      index.build(p.data(), p.size(), axis, block);
+      std::mt19937_64 rng(block);
+      std::uniform_real_distribution<double> u(-1.2, 1.2);
+      std::uniform_int_distribution<std::uint64_t> label(0, p.size());
+      for (int q = 0; q < 300; ++q) {
+        const double c[3] = {u(rng), 3 * u(rng), u(rng)};
+        const double r = q % 10 == 0 ? 2.0 : 0.02 + 0.2 * std::abs(u(rng));
+        std::uint64_t first = label(rng), last = label(rng);
+        if (first > last) std::swap(first, last);
+        ExcludedSlab exclude;
+        if (q % 3 == 0) exclude = ExcludedSlab{0, u(rng) - 0.3, u(rng) + 0.3};
+        std::set<std::uint64_t> seen;
+        index.for_each_candidate(
+            c, r, first, last,
+            [&](std::uint64_t l) {
+              EXPECT_GE(l, first);
+              EXPECT_LT(l, last);
+              EXPECT_TRUE(seen.insert(l).second) << "label " << l << " reported twice";
+            },
+            [] { return false; }, exclude);
+        for (std::uint64_t l = first; l < last; ++l) {
+          const double* x = p[l].xyz;
+          const double d2 = (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]);
+          const bool excluded = exclude.axis >= 0 && x[exclude.axis] >= exclude.lo && x[exclude.axis] <= exclude.hi;
+          if (d2 <= r * r && !excluded)
+            ASSERT_TRUE(seen.count(l)) << "point " << l << " in the ball was not reported (query " << q << ", block "
+                                       << block << (coarse ? ", coarse" : "") << ")";
+        }
+      }
+    }
+  }
+}
+
+TEST(PointIndex, BlockPointsFollowTheSlabDensity) {
+  // 10^7 points in a unit cube: a spacing is 1/215, a slab of 8 spacings 372k points,
+  // capped at the largest block.
+  EXPECT_EQ(PointIndex::block_points_for(10'000'000, 1.0, 1.0), PointIndex::kMaxBlockPoints);
+  EXPECT_EQ(PointIndex::block_points_for(1000, 1.0, 1.0), PointIndex::kMinBlockPoints);
+  // Degenerate boxes fall back to the largest block, never divide by zero.
+  EXPECT_EQ(PointIndex::block_points_for(10'000'000, 0.0, 0.0), PointIndex::kMaxBlockPoints);
+}
+
+TEST(SortedView, SampledSearchMatchesBinarySearch) {
+  for (const bool coarse : {false, true}) {
+    for (const std::size_t n : {std::size_t(1), std::size_t(127), std::size_t(128), std::size_t(129), std::size_t(5000)}) {
+      const std::vector<SortedPoint> p = sorted_points(n, 0, coarse, unsigned(n));
+      SortedView view;
+      view.points = p.data();
+      view.count = p.size();
+      view.axis = 0;
+      std::vector<double> keys;
+      for (const SortedPoint& s : p) keys.push_back(s.xyz[0]);
+      std::vector<double> probes = keys;
+      for (double x : {-5.0, 5.0, 0.0, 1.0 / 16, 0.5 + 1e-12}) probes.push_back(x);
+      for (const bool sampled : {false, true}) {
+        if (sampled) view.sample_keys();
+        for (double x : probes) {
+          ASSERT_EQ(view.lower_bound(x), std::uint64_t(std::lower_bound(keys.begin(), keys.end(), x) - keys.begin()))
+              << "n " << n << " x " << x << (sampled ? " sampled" : "");
+          ASSERT_EQ(view.upper_bound(x), std::uint64_t(std::upper_bound(keys.begin(), keys.end(), x) - keys.begin()))
+              << "n " << n << " x " << x << (sampled ? " sampled" : "");
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tetstream::pipeline
