@@ -20,15 +20,15 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
                        bool release_file_pages) {
   points_ = points;
   axis_ = axis;
-  block_points_ = std::max<std::uint32_t>(block_points, 1);
+  block_points_ = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
   offsets_.assign(count, 0);
   nodes_.clear();
   blocks_.clear();
   const double inf = std::numeric_limits<double>::infinity();
   for (std::uint64_t base = 0; base < count; base += block_points_) {
     const std::uint32_t n = std::uint32_t(std::min<std::uint64_t>(block_points_, count - base));
-    std::uint32_t* o = &offsets_[base];
-    for (std::uint32_t i = 0; i < n; ++i) o[i] = i;
+    std::uint16_t* o = &offsets_[base];
+    for (std::uint32_t i = 0; i < n; ++i) o[i] = std::uint16_t(i);
     Block block{std::uint32_t(nodes_.size()), 0};
     // Recursive median splits, written in preorder. `next` of a node is set when its
     // subtree is complete: the build recurses on the left half, then the right.
@@ -48,7 +48,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
         for (int k = 1; k < 3; ++k)
           if (box.hi[k] - box.lo[k] > box.hi[widest] - box.lo[widest]) widest = k;
         const std::uint32_t mid = begin + (end - begin) / 2;
-        std::nth_element(o + begin, o + mid, o + end, [&](std::uint32_t a, std::uint32_t b) {
+        std::nth_element(o + begin, o + mid, o + end, [&](std::uint16_t a, std::uint16_t b) {
           return points[base + a].xyz[widest] < points[base + b].xyz[widest];
         });
         self(self, begin, mid);

@@ -8,7 +8,7 @@
 // axis, each a few point spacings thick (block_points_for). Each block holds a kd-tree:
 // median splits on the widest side of the box, down to leaves of at most kLeafPoints
 // points, every node with the tight box of its points, the leaves' labels stored as
-// 32-bit offsets in the block. A query visits the blocks of its label range, and in
+// 16-bit offsets in the block. A query visits the blocks of its label range, and in
 // each the nodes whose box meets the ball (and, along the axis, the coordinates of
 // that label range), skipping a whole subtree when its box does not; it tests only
 // the points of the leaves it reaches.
@@ -17,12 +17,15 @@
 // 8192 labels were a fifth of a spacing thick at 10^7 uniform points, so a ball
 // crossed some 20 of them, descending 20 trees to reach leaves that were flat tiles
 // of 64 points, most of them outside the ball. A block a few spacings thick is
-// crossed by one or two balls' worth, and its leaves are compact cells.
+// crossed by one or two balls' worth, and its leaves are compact cells. Why at most
+// 2^16 labels: a leaf's points are scattered over its block's span of the file, and
+// over a 2 MiB span they stay within reach of the cache and the TLB (2^21-label blocks
+// made the strip queries, which filter leaf points one by one, miss on every point).
 // (Before the trees, a fixed 12x12 grid per block put a dense filament into one
 // crowded cell: `mixed` 10^7 took 336 s against 39 s for uniform.)
 //
-// Memory: 4 bytes per point plus 64 bytes per node (about 2 nodes per 48 points):
-// about 7 bytes per point.
+// Memory: 2 bytes per point plus 64 bytes per node (about 2 nodes per 48 points):
+// about 5 bytes per point.
 #include "pipeline/point_sort.hpp"
 
 #include <cstdint>
@@ -40,12 +43,11 @@ struct ExcludedSlab {
 class PointIndex {
  public:
   static constexpr std::uint32_t kLeafPoints = 64;  // most points in a leaf
-  static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 16;
+  static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 16;  // offsets are 16-bit
 
   // Labels per block for `count` points sorted along an axis of length `axis_extent`
   // in a bounding box of `volume`: the points of a slab about 8 mean spacings thick,
-  // within [kMinBlockPoints, kMaxBlockPoints] (the upper bound caps the file pages a
-  // block's build holds: 64 MiB).
+  // within [kMinBlockPoints, kMaxBlockPoints].
   static std::uint32_t block_points_for(std::uint64_t count, double axis_extent, double volume);
 
   PointIndex() = default;
@@ -98,7 +100,7 @@ class PointIndex {
   }
 
   std::size_t memory_bytes() const {
-    return offsets_.capacity() * sizeof(std::uint32_t) + nodes_.capacity() * sizeof(Node) +
+    return offsets_.capacity() * sizeof(std::uint16_t) + nodes_.capacity() * sizeof(Node) +
            blocks_.capacity() * sizeof(Block);
   }
 
@@ -130,7 +132,7 @@ class PointIndex {
   const SortedPoint* points_ = nullptr;
   int axis_ = 0;
   std::uint32_t block_points_ = kMinBlockPoints;
-  std::vector<std::uint32_t> offsets_;  // per block: offsets of its labels, grouped by leaf
+  std::vector<std::uint16_t> offsets_;  // per block: offsets of its labels, grouped by leaf
   std::vector<Node> nodes_;
   std::vector<Block> blocks_;
 };

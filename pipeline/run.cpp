@@ -39,7 +39,7 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 // sorted record and the spatial index, with headroom for the allocator; measured with
 // /usr/bin/time on uniform data (480 overshot 1G by 2% at 10^7 points once the kernel
 // kept its own coordinates: scripts/bench-pipeline --sizes 10000000, peak 1047 MiB).
-constexpr double kWindowBytesPerPoint = 520;
+constexpr double kWindowBytesPerPoint = 480;
 // Bytes per zone point for the emitted tets (ZoneTets: ~6.8 tets of 4 x 4-byte local
 // ids, and 8-byte labels for the zone's window, ~1.2 points per zone point).
 constexpr double kOutputBytesPerPoint = 125;
@@ -396,7 +396,7 @@ RunSummary Job::run() {
   view.axis = sorted.axis;
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
-  view.sample_keys();
+  view.sample_keys(/*release_file_pages=*/true);
   PointIndex index;
   {
     double volume = 1;
@@ -410,10 +410,24 @@ RunSummary Job::run() {
   // The global hull: the hull of the runs' candidates.
   {
     std::vector<double> xyz;
-    for (std::uint64_t label : sorted.hull_labels) xyz.insert(xyz.end(), view.points[label].xyz, view.points[label].xyz + 3);
-    for (std::uint32_t i : hull_vertex_candidates(xyz.data(), sorted.hull_labels.size()))
+    // In label order, handing the pages back every 4 MiB of the file: a shell's hull
+    // candidates are all over it.
+    constexpr std::uint64_t kChunk = std::uint64_t(1) << 17;
+    std::uint64_t released = 0;
+    for (std::uint64_t label : sorted.hull_labels) {
+      if (label >= released + kChunk) {
+        release_mapped_pages(view.points + released, (label / kChunk * kChunk - released) * sizeof(SortedPoint));
+        released = label / kChunk * kChunk;
+      }
+      xyz.insert(xyz.end(), view.points[label].xyz, view.points[label].xyz + 3);
+    }
+    std::vector<std::uint32_t> hull = hull_vertex_candidates(xyz.data(), sorted.hull_labels.size());
+    std::sort(hull.begin(), hull.end());  // candidates are sorted by label: so are these
+    for (std::uint32_t i : hull) {
       view.hull_labels.push_back(sorted.hull_labels[i]);
-    std::sort(view.hull_labels.begin(), view.hull_labels.end());
+      view.hull_xyz.insert(view.hull_xyz.end(), &xyz[3 * std::size_t(i)], &xyz[3 * std::size_t(i) + 3]);
+    }
+    release_mapped_pages(mapping.data(), mapping.size());
     summary.hull_vertices = view.hull_labels.size();
   }
 
@@ -421,7 +435,8 @@ RunSummary Job::run() {
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
   const ZonePlan zone_plan = plan_for_budget(view, double(index.memory_bytes()), options_, threads);
   // Half of the budget's 20% reserve, shared by the workers, for the pages of the
-  // sorted file their queries read (segment.cpp, touch()).
+  // sorted file their queries read (segment.cpp, touch(): a worker holds its share,
+  // more for a while when a run of huge balls needs more).
   view.query_page_bytes = std::max<std::uint64_t>(std::uint64_t(1) << 20, options_.memory_bytes / 10 / std::uint64_t(threads));
   const double buffer_width = zone_plan.buffer_width;
 

@@ -22,10 +22,11 @@ struct RunOptions {
   std::string tmpdir;       // empty: the output's directory
   int threads = 0;          // 0: all cores
   // Buffer thickness in mean point spacings. The paper uses about 3; since hull facets
-  // need no query here, 2 is faster: `tetstream run P.f64 --memory 256M --buffer B` on
-  // 10^6 uniform points took 9.5-10.1 s with B = 2 and 11.2-12.9 s with B = 3 (two
-  // cores, same session), and 17.9 s against 19.0 s on the ellipsoid shell.
-  double buffer_spacings = 2.0;
+  // need no query here, less is faster, down to where the emptiness queries cost more
+  // than the insertions saved. With the thick-block index and the key samples, 1.5
+  // inserts 12-14% redundant points on 10^7 uniform points at --memory 1G, against
+  // 15.6-17.6% for 2, in the same time (37-39 s, two cores; 1.25: 10.8%, no faster).
+  double buffer_spacings = 1.5;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
   // Zones per segment (strips across the sort axis, run.cpp plan_for_budget): 0 picks

@@ -106,7 +106,8 @@ class SegmentWorker {
   // blocks may hold
   // view_.query_page_bytes, or when asked, release_touched_pages() hands the range
   // back to the page cache.
-  static constexpr std::uint64_t kPageBlockPoints = 8192;
+  // 64 KiB of records: the unit a page fault maps (the kernel faults around a miss).
+  static constexpr std::uint64_t kPageBlockPoints = 2048;
   static constexpr std::uint64_t kBlockBytes = kPageBlockPoints * sizeof(SortedPoint);
   void touch(std::uint64_t label) {
     const std::uint64_t b = label / kPageBlockPoints;
@@ -140,6 +141,7 @@ class SegmentWorker {
   core::Delaunay dt_;
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
+  std::vector<std::size_t> hull_extra_;  // load_window's scratch
   std::vector<std::uint64_t> extra_;  // labels outside the window range held anyway (hull, repairs), sorted
   // Zone index of local vertex v (its label minus zone_begin), or -1 outside the zone
   // (outside the segment's labels, or in another worker's strip). One 4-byte load:
@@ -215,9 +217,17 @@ class SegmentWorker {
 void SegmentWorker::load_window() {
   const std::uint64_t w0 = plan_->window_begin, w1 = plan_->window_end;
   // extra_: labels held although outside the window proper (the label range, and the
-  // strip's window inside it): the hull's vertices, later the repair points.
-  for (std::uint64_t h : view_.hull_labels)
-    if (h < w0 || h >= w1 || !in_strip_window(h)) extra_.push_back(h);
+  // strip's window inside it): the hull's vertices, later the repair points. The
+  // hull's coordinates come from the view, not the file: a shell's hull has points
+  // all over the file, and reading them mapped every page of it into each worker.
+  std::vector<std::size_t>& hull_extra = hull_extra_;  // indices into view_.hull_labels
+  hull_extra.clear();
+  for (std::size_t i = 0; i < view_.hull_labels.size(); ++i) {
+    const std::uint64_t h = view_.hull_labels[i];
+    const double* p = &view_.hull_xyz[3 * i];
+    const bool in_strip = strip_.axis < 0 || (p[strip_.axis] >= strip_.window_lo && p[strip_.axis] <= strip_.window_hi);
+    if (h < w0 || h >= w1 || !in_strip) extra_.push_back(h), hull_extra.push_back(i);
+  }
   xyz_.clear();
   labels_.clear();
   auto add = [&](std::uint64_t label) {
@@ -225,12 +235,21 @@ void SegmentWorker::load_window() {
     xyz_.insert(xyz_.end(), p.xyz, p.xyz + 3);
     labels_.push_back(label);
   };
-  for (std::uint64_t label = w0; label < w1; ++label)
-    if (in_strip_window(label)) add(label);
-  // A strip reads its segment's whole window range to pick its points: hand those
-  // pages back now (their points are copied) rather than hold them through the build.
-  if (view_.query_page_bytes > 0) release_mapped_pages(view_.points + w0, (w1 - w0) * sizeof(SortedPoint));
-  for (std::uint64_t label : extra_) add(label);
+  // A strip reads its segment's whole window range to pick its points: the pages of
+  // that range are handed back as the copy goes (kLoadChunk records at a time), so
+  // they never add up in the resident set (two threads loading 50 MiB windows at once
+  // took the mapped pages past their share of the budget).
+  constexpr std::uint64_t kLoadChunk = std::uint64_t(1) << 17;  // 4 MiB of records
+  for (std::uint64_t chunk = w0; chunk < w1; chunk += kLoadChunk) {
+    const std::uint64_t end = std::min(w1, chunk + kLoadChunk);
+    for (std::uint64_t label = chunk; label < end; ++label)
+      if (in_strip_window(label)) add(label);
+    if (view_.query_page_bytes > 0) release_mapped_pages(view_.points + chunk, (end - chunk) * sizeof(SortedPoint));
+  }
+  for (std::size_t i : hull_extra) {
+    xyz_.insert(xyz_.end(), &view_.hull_xyz[3 * i], &view_.hull_xyz[3 * i + 3]);
+    labels_.push_back(view_.hull_labels[i]);
+  }
   const std::size_t total = labels_.size();
   // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
   // spatially coherent numbering keeps those accesses in cache (the labels, not the
@@ -283,21 +302,27 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   // the points of the window's range outside the strip's window.
   const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
   auto enough = [&] { return found >= kEnoughConflicts; };
+  // The searches and the index read the records at both ends of each label range:
+  // those pages are the query's too.
+  auto search = [&](std::uint64_t a, std::uint64_t b, auto&& visit_label, const ExcludedSlab& exclude) {
+    if (a >= b || enough()) return;
+    touch(a);
+    touch(b - 1);
+    view_.index->for_each_candidate(ball.center, ball.radius, a, b, visit_label, enough, exclude);
+  };
   if (!outside_clear) {
-    view_.index->for_each_candidate(ball.center, ball.radius, first, std::min(last, plan_->window_begin), visit, enough);
-    if (!enough())
-      view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_->window_end), last, visit, enough);
+    search(first, std::min(last, plan_->window_begin), visit, ExcludedSlab{});
+    search(std::max(first, plan_->window_end), last, visit, ExcludedSlab{});
   }
-  if (!strip_clear && !enough()) {
+  if (!strip_clear) {
     auto visit_outside_strip = [&](std::uint64_t label) {
       if (in_strip_window(label)) touch(label);
       else visit(label);
     };
     // The strip window's own points are not missing: whole index nodes inside it are
     // skipped, the rest filtered point by point.
-    view_.index->for_each_candidate(ball.center, ball.radius, std::max(first, plan_->window_begin),
-                                    std::min(last, plan_->window_end), visit_outside_strip, enough,
-                                    ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
+    search(std::max(first, plan_->window_begin), std::min(last, plan_->window_end), visit_outside_strip,
+           ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
   }
   release_touched_pages(false);
   return best;
@@ -305,12 +330,15 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
 
 void SegmentWorker::release_touched_pages(bool always) {
   if (touched_ == 0 || view_.query_page_bytes == 0) return;
-  // At most every kQueriesBetweenReleases queries: a run of huge balls (big empty
-  // tets between the dense filaments of a clustered input) can touch more blocks in
-  // one query than the share holds, and handing them back after each would make
-  // every query fault them in again.
+  // Past the share, at most every kQueriesBetweenReleases queries: a run of huge balls
+  // (big empty tets between the dense filaments of a clustered input) can touch more
+  // blocks in one query than the share holds, and handing them back after each would
+  // make every query fault them in again (mixed 10^7: 30% of the time in the OS's
+  // page mapping). Past two shares, at once.
   ++queries_since_release_;
-  if (!always && (touched_ * kBlockBytes < view_.query_page_bytes || queries_since_release_ < kQueriesBetweenReleases))
+  const std::uint64_t held = touched_ * kBlockBytes;
+  if (!always && (held < view_.query_page_bytes ||
+                  (queries_since_release_ < kQueriesBetweenReleases && held < 2 * view_.query_page_bytes)))
     return;
   queries_since_release_ = 0;
   // Whole blocks: a touched block's points may lie anywhere in it.
@@ -560,10 +588,15 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
 }
 
 
-void SortedView::sample_keys() {
+void SortedView::sample_keys(bool release_file_pages) {
   key_samples.clear();
   key_samples.reserve(std::size_t(count / kKeyStride + 1));
-  for (std::uint64_t label = 0; label < count; label += kKeyStride) key_samples.push_back(key(label));
+  constexpr std::uint64_t kChunk = kKeyStride << 10;  // 4 MiB of records
+  for (std::uint64_t chunk = 0; chunk < count; chunk += kChunk) {
+    const std::uint64_t end = std::min(count, chunk + kChunk);
+    for (std::uint64_t label = chunk; label < end; label += kKeyStride) key_samples.push_back(key(label));
+    if (release_file_pages) release_mapped_pages(points + chunk, (end - chunk) * sizeof(SortedPoint));
+  }
 }
 
 namespace {

@@ -36,10 +36,12 @@ struct SortedView {
   int axis = 0;
   double bbox_min[3], bbox_max[3];
   std::vector<std::uint64_t> hull_labels;  // sorted
+  std::vector<double> hull_xyz;            // their coordinates, 3 per label
   const PointIndex* index = nullptr;       // over points[0, count)
   // When `points` is a read-only file mapping: the mapped bytes a worker's emptiness
-  // queries may keep resident before handing them back (0: never hand them back;
-  // anonymous memory must not be, MADV_DONTNEED would zero it).
+  // queries may keep resident before handing them back, up to twice this for a
+  // while (0: never hand them back; anonymous memory must not be, MADV_DONTNEED would
+  // zero it).
   std::uint64_t query_page_bytes = 0;
 
   // The key of every kKeyStride-th label, so that lower_bound and upper_bound search
@@ -47,7 +49,9 @@ struct SortedView {
   // mapped file all over (a cache and TLB miss each: a quarter of the check's time).
   static constexpr std::uint64_t kKeyStride = 128;
   std::vector<double> key_samples;
-  void sample_keys();
+  // Fills key_samples. When `points` is a read-only file mapping, release_file_pages
+  // hands the pages back as it goes (a sample every 4 KiB touches every page).
+  void sample_keys(bool release_file_pages = false);
 
   double key(std::uint64_t label) const { return points[label].xyz[axis]; }
   // First label whose axis coordinate is >= x (count when none).

@@ -60,9 +60,10 @@ TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
           const double* x = p[l].xyz;
           const double d2 = (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]);
           const bool excluded = exclude.axis >= 0 && x[exclude.axis] >= exclude.lo && x[exclude.axis] <= exclude.hi;
-          if (d2 <= r * r && !excluded)
+          if (d2 <= r * r && !excluded) {
             ASSERT_TRUE(seen.count(l)) << "point " << l << " in the ball was not reported (query " << q << ", block "
                                        << block << (coarse ? ", coarse" : "") << ")";
+          }
         }
       }
     }
