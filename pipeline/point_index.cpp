@@ -8,6 +8,18 @@
 
 namespace tetstream::pipeline {
 
+namespace {
+// The largest float <= x, and the smallest float >= x (x finite).
+float float_below(double x) {
+  const float f = float(x);
+  return double(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+float float_above(double x) {
+  const float f = float(x);
+  return double(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
+}  // namespace
+
 std::uint32_t PointIndex::block_points_for(std::uint64_t count, double axis_extent, double volume) {
   constexpr double kSpacings = 8;
   const double n = double(count);
@@ -33,20 +45,23 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
     // Recursive median splits, written in preorder. `next` of a node is set when its
     // subtree is complete: the build recurses on the left half, then the right.
     auto build_node = [&](auto&& self, std::uint32_t begin, std::uint32_t end) -> void {
-      Box box{{inf, inf, inf}, {-inf, -inf, -inf}};
+      double lo[3] = {inf, inf, inf}, hi[3] = {-inf, -inf, -inf};  // the points' box
       for (std::uint32_t j = begin; j < end; ++j)
         for (int k = 0; k < 3; ++k) {
           const double x = points[base + o[j]].xyz[k];
-          box.lo[k] = std::min(box.lo[k], x);
-          box.hi[k] = std::max(box.hi[k], x);
+          lo[k] = std::min(lo[k], x);
+          hi[k] = std::max(hi[k], x);
         }
       const std::uint32_t id = std::uint32_t(nodes_.size());
       const bool leaf = end - begin <= kLeafPoints;
-      nodes_.push_back(Node{box, begin, end, 0, leaf ? 1u : 0u});
+      Node node{};
+      for (int k = 0; k < 3; ++k) node.box.lo[k] = float_below(lo[k]), node.box.hi[k] = float_above(hi[k]);
+      node.begin = begin, node.end = end, node.leaf = leaf ? 1u : 0u;
+      nodes_.push_back(node);
       if (!leaf) {
         int widest = 0;
         for (int k = 1; k < 3; ++k)
-          if (box.hi[k] - box.lo[k] > box.hi[widest] - box.lo[widest]) widest = k;
+          if (hi[k] - lo[k] > hi[widest] - lo[widest]) widest = k;
         const std::uint32_t mid = begin + (end - begin) / 2;
         std::nth_element(o + begin, o + mid, o + end, [&](std::uint16_t a, std::uint16_t b) {
           return points[base + a].xyz[widest] < points[base + b].xyz[widest];
@@ -63,6 +78,20 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
     blocks_.push_back(block);
     if (release_file_pages) release_mapped_pages(points + base, n * sizeof(SortedPoint));
   }
+}
+
+double PointIndex::leaf_spacing_quantile(double q) const {
+  std::vector<double> spacing;
+  for (const Node& node : nodes_) {
+    if (!node.leaf || node.end - node.begin < 8) continue;
+    double volume = 1;
+    for (int k = 0; k < 3; ++k) volume *= double(node.box.hi[k]) - double(node.box.lo[k]);
+    if (volume > 0) spacing.push_back(std::cbrt(volume / double(node.end - node.begin)));
+  }
+  if (spacing.empty()) return 0;
+  const auto nth = spacing.begin() + std::ptrdiff_t(std::clamp(q, 0.0, 1.0) * double(spacing.size() - 1));
+  std::nth_element(spacing.begin(), nth, spacing.end());
+  return *nth;
 }
 
 }  // namespace tetstream::pipeline

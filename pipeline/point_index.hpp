@@ -24,8 +24,8 @@
 // (Before the trees, a fixed 12x12 grid per block put a dense filament into one
 // crowded cell: `mixed` 10^7 took 336 s against 39 s for uniform.)
 //
-// Memory: 2 bytes per point plus 64 bytes per node (about 2 nodes per 48 points):
-// about 5 bytes per point.
+// Memory: 2 bytes per point plus 36 bytes per node (about 2 nodes per 18 points):
+// about 6 bytes per point.
 #include "pipeline/point_sort.hpp"
 
 #include <cstdint>
@@ -42,7 +42,7 @@ struct ExcludedSlab {
 
 class PointIndex {
  public:
-  static constexpr std::uint32_t kLeafPoints = 64;  // most points in a leaf
+  static constexpr std::uint32_t kLeafPoints = 24;  // most points in a leaf
   static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 16;  // offsets are 16-bit
 
   // Labels per block for `count` points sorted along an axis of length `axis_extent`
@@ -99,21 +99,33 @@ class PointIndex {
     }
   }
 
+  // The local point spacing, from the leaves: cbrt(box volume / points) of each leaf
+  // with a solid box, and the q-quantile of those (0 when no leaf has volume: flat
+  // inputs). On uniform points it is about the mean spacing cbrt(volume / n); on a
+  // thin shell or in clusters it is the spacing where the points are, which the
+  // bounding box's mean overestimates many times.
+  double leaf_spacing_quantile(double q) const;
+
   std::size_t memory_bytes() const {
     return offsets_.capacity() * sizeof(std::uint16_t) + nodes_.capacity() * sizeof(Node) +
            blocks_.capacity() * sizeof(Block);
   }
 
  private:
+  // A node's box in floats rounded outward: it contains the points' box, so every
+  // test against it stays conservative, in 36 bytes a node instead of 64 (small
+  // leaves pay for themselves in the queries of clustered inputs, whose huge balls
+  // read every point of every leaf they graze).
   struct Box {
-    double lo[3], hi[3];
+    float lo[3], hi[3];
   };
   struct Node {
     Box box;
     std::uint32_t begin, end;  // range in offsets_, relative to the block's base
-    std::uint32_t next;        // the first node after this one's subtree (absolute)
-    std::uint32_t leaf;        // 1: a leaf, its points are [begin, end)
+    std::uint32_t next : 31;   // the first node after this one's subtree (absolute)
+    std::uint32_t leaf : 1;    // a leaf: its points are [begin, end)
   };
+  static_assert(sizeof(Node) == 36);
   struct Block {
     std::uint32_t first_node, nodes;
   };

@@ -124,7 +124,8 @@ struct ZonePlan {
   double buffer_width = 0;
 };
 
-ZonePlan plan_for_budget(const SortedView& view, double index_bytes, const RunOptions& o, int threads) {
+ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
+  const double index_bytes = double(index.memory_bytes());
   double extent[3], volume = 1;
   for (int k = 0; k < 3; ++k) {
     extent[k] = view.bbox_max[k] - view.bbox_min[k];
@@ -132,7 +133,14 @@ ZonePlan plan_for_budget(const SortedView& view, double index_bytes, const RunOp
   }
   const double n = double(view.count);
   ZonePlan plan;
-  plan.buffer_width = o.buffer_spacings * std::cbrt(volume / n);
+  // The spacing the buffers are measured in: the bounding box's mean spacing, or the
+  // index leaves' 90th percentile when smaller. On uniform points the two agree (the
+  // percentile is 1.00 of the mean at 10^6); on a shell or in clusters the mean is 2-4
+  // times the spacing where the points are, and buffers that thick were a quarter of
+  // the insertions (ellipsoid-shell 10^7: 22%). The 90th percentile rather than the
+  // median keeps the sparse regions of mixed inputs from thin buffers and many queries.
+  const double mean_spacing = std::cbrt(volume / n), leaf_spacing = index.leaf_spacing_quantile(0.9);
+  plan.buffer_width = o.buffer_spacings * (leaf_spacing > 0 ? std::min(leaf_spacing, mean_spacing) : mean_spacing);
   const double w = plan.buffer_width;
   const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[view.axis], 1e-300));
   const double strip_extent = std::max(extent[strip_axis(view)], 1e-300);
@@ -433,7 +441,7 @@ RunSummary Job::run() {
 
   // ---- segment plan from the budget ----
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
-  const ZonePlan zone_plan = plan_for_budget(view, double(index.memory_bytes()), options_, threads);
+  const ZonePlan zone_plan = plan_for_budget(view, index, options_, threads);
   // Half of the budget's 20% reserve, shared by the workers, for the pages of the
   // sorted file their queries read (segment.cpp, touch(): a worker holds its share,
   // more for a while when a run of huge balls needs more).
