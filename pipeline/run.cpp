@@ -110,10 +110,12 @@ class FrameCutter {
 //   window(k) = (S + B) min(1, 1/k + 2w/E_strip [k > 1]) + hull,   zone Z = S / k.
 // Memory: `threads` zones in flight, each window at kWindowBytesPerPoint, and the
 // output of one segment plus threads - 1 zones at kOutputBytesPerPoint:
-//   threads window(k) 520 + (k + threads - 1) Z 220 <= available,
-// available = 80% of the budget less the fixed overhead, the writer's queue and the
-// point index. Of the other 20%, half bounds the mapped pages of the sorted file that
-// the queries read (SortedView::query_page_bytes), half is the allocator's slack.
+//   threads window(k) 480 + (k + threads - 1) Z 125 <= available,
+// available = 75% of the budget less the fixed overhead, the writer's queue and the
+// point index. The other 25% holds the mapped pages of the sorted file that the
+// queries read (SortedView::query_page_bytes: a tenth of the budget, up to two tenths
+// for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
+// MiB sampled, with 961 MiB of file pages at the worst moment.)
 // That is linear in Z; for each k the largest Z follows, and the k with the smallest
 // redundancy (window / Z - 1) wins: thin slabs waste their buffers, narrow strips
 // theirs, and the best zone is about as wide as its slab is thick. --zone-points fixes
@@ -147,7 +149,7 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   const double hull = double(view.hull_labels.size());
   const double t = double(threads);
   const double available =
-      0.8 * double(o.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - index_bytes;
+      0.75 * double(o.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - index_bytes;
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k) + hull;
@@ -442,9 +444,9 @@ RunSummary Job::run() {
   // ---- segment plan from the budget ----
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
   const ZonePlan zone_plan = plan_for_budget(view, index, options_, threads);
-  // Half of the budget's 20% reserve, shared by the workers, for the pages of the
-  // sorted file their queries read (segment.cpp, touch(): a worker holds its share,
-  // more for a while when a run of huge balls needs more).
+  // A tenth of the budget, shared by the workers, for the pages of the sorted file
+  // their queries read (segment.cpp, touch(): a worker holds its share, up to twice
+  // that for a while when a run of huge balls needs more).
   view.query_page_bytes = std::max<std::uint64_t>(std::uint64_t(1) << 20, options_.memory_bytes / 10 / std::uint64_t(threads));
   const double buffer_width = zone_plan.buffer_width;
 

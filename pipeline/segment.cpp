@@ -120,6 +120,7 @@ class SegmentWorker {
     touched_hi_ = std::max(touched_hi_, label + 1);
   }
   void release_touched_pages(bool always);
+  void hand_back_touched_pages();  // now, whatever the share
   std::vector<std::uint64_t> touched_blocks_;  // bitmap over the page blocks
   static constexpr std::uint64_t kQueriesBetweenReleases = 256;
   std::uint64_t queries_since_release_ = 0;
@@ -301,7 +302,14 @@ std::uint64_t SegmentWorker::deepest_missing_conflict(TetId t, const ConflictBal
   // each side of the window, searched through the spatial index; and, for a strip,
   // the points of the window's range outside the strip's window.
   const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
-  auto enough = [&] { return found >= kEnoughConflicts; };
+  // Checked between leaves. A single query can read more than the page share: a huge
+  // ball (a flat tet along the hull, at 10^8 points) mapped 2 GiB of the file in one
+  // go. Past two shares the pages are handed back mid-query; the points already seen
+  // stay seen.
+  auto enough = [&] {
+    if (view_.query_page_bytes > 0 && touched_ * kBlockBytes >= 2 * view_.query_page_bytes) hand_back_touched_pages();
+    return found >= kEnoughConflicts;
+  };
   // The searches and the index read the records at both ends of each label range:
   // those pages are the query's too.
   auto search = [&](std::uint64_t a, std::uint64_t b, auto&& visit_label, const ExcludedSlab& exclude) {
@@ -340,6 +348,10 @@ void SegmentWorker::release_touched_pages(bool always) {
   if (!always && (held < view_.query_page_bytes ||
                   (queries_since_release_ < kQueriesBetweenReleases && held < 2 * view_.query_page_bytes)))
     return;
+  hand_back_touched_pages();
+}
+
+void SegmentWorker::hand_back_touched_pages() {
   queries_since_release_ = 0;
   // Whole blocks: a touched block's points may lie anywhere in it.
   const std::uint64_t first = touched_lo_ / kPageBlockPoints * kPageBlockPoints;
