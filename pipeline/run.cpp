@@ -111,8 +111,8 @@ class FrameCutter {
 // Memory: `threads` zones in flight, each window at kWindowBytesPerPoint, and the
 // output of one segment plus threads - 1 zones at kOutputBytesPerPoint:
 //   threads window(k) 480 + (k + threads - 1) Z 125 <= available,
-// available = 75% of the budget less the fixed overhead, the writer's queue and the
-// point index. The other 25% holds the mapped pages of the sorted file that the
+// available = 75% of what the fixed overhead and the writer's queue leave of the
+// budget, less the point index. The other 25% holds the mapped pages of the sorted file that the
 // queries read (SortedView::query_page_bytes: a tenth of the budget, up to two tenths
 // for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
 // MiB sampled, with 961 MiB of file pages at the worst moment.)
@@ -149,7 +149,7 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   const double hull = double(view.hull_labels.size());
   const double t = double(threads);
   const double available =
-      0.75 * double(o.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes - index_bytes;
+      0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes) - index_bytes;
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k) + hull;
