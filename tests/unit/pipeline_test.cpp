@@ -140,7 +140,9 @@ TEST_F(PipelineTest, BudgetPlansZones) {
     // On uniform points the slabs are thin at this budget and the planner cuts them
     // into strips. The shell's windows each hold its ~5700 hull vertices, a third of a
     // segment: strips would repeat them, and the planner rightly keeps whole segments.
-    if (g.dist == io::Distribution::kUniform) EXPECT_GT(summary.zones, summary.segments) << "the planner cut no zones";
+    if (g.dist == io::Distribution::kUniform) {
+      EXPECT_GT(summary.zones, summary.segments) << "the planner cut no zones";
+    }
     EXPECT_EQ(container_tets(o.output), incore_tets(o.output));
   }
 }
