@@ -180,7 +180,7 @@ class SegmentWorker;
 //
 // The kernel and the buffers keep their capacity from one zone to the next, instead
 // of faulting fresh pages in for each (the OS's zeroing of fresh pages was 10.5% of
-// a run). One object per thread (not thread-safe).
+// a one-thread profile). One object per thread (not thread-safe).
 class ZoneTriangulator {
  public:
   explicit ZoneTriangulator(const SortedView& view, OutputPool* pool = nullptr);
