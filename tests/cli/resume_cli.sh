@@ -104,9 +104,12 @@ cp out.tets.ckpt/state.json saved.json
 sed -i 's/"committed": \([0-9]\)/"committed": 9\1/' out.tets.ckpt/state.json
 expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
 cp saved.json out.tets.ckpt/state.json
-# A truncated partial output is damage too.
+# A partial output shorter than the checkpoint's committed bytes is damage too. (Bytes
+# past the committed ones are the frames in flight at the kill, which --resume drops:
+# cutting only those would not be damage, so the cut goes below the committed end.)
+committed=$(python3 -c "import json; print(json.load(open('out.tets.ckpt/state.json'))['output']['committed'])")
 cp out.tets.partial saved.partial
-truncate -s -100 out.tets.partial
+truncate -s $((committed - 100)) out.tets.partial
 expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
 mv saved.partial out.tets.partial
 "$T" "${opts[@]}" --resume
