@@ -213,23 +213,28 @@ void TetWriter::add_frame(const EncodedFrame& frame) {
 }
 
 template <class L>
-void TetWriter::add_tets_impl(std::span<const L> labels) {
-  if (labels.size() % 4 != 0) throw std::invalid_argument("TetWriter: tet labels must come 4 per tet");
-  const std::vector<std::size_t> bounds = frame_boundaries(labels.size() / 4, options_.frame_tets);
-  const std::size_t frames = bounds.size() - 1;
+void TetWriter::add_tets_impl(std::span<const std::span<const L>> batches) {
+  // Every frame of every batch, in order: each batch is cut as it alone would be.
+  std::vector<std::span<const L>> pieces;
+  for (std::span<const L> labels : batches) {
+    if (labels.size() % 4 != 0) throw std::invalid_argument("TetWriter: tet labels must come 4 per tet");
+    const std::vector<std::size_t> bounds = frame_boundaries(labels.size() / 4, options_.frame_tets);
+    for (std::size_t f = 0; f + 1 < bounds.size(); ++f)
+      pieces.push_back(labels.subspan(4 * bounds[f], 4 * (bounds[f + 1] - bounds[f])));
+  }
+  const std::size_t frames = pieces.size();
   if (frames == 0) return;
   const int threads = int(std::min<std::size_t>(frames, options_.threads > 0 ? options_.threads : omp_get_max_threads()));
   while (encoders_.size() < std::size_t(threads)) encoders_.push_back(std::make_unique<FrameEncoder>(options_.zstd_level));
-  batch_.resize(threads);
+  batch_.resize(std::max<std::size_t>(batch_.size(), std::size_t(threads)));
   // In waves of `threads` frames, so memory stays bounded whatever the batch size.
   for (std::size_t wave = 0; wave < frames; wave += threads) {
     const std::size_t count = std::min<std::size_t>(threads, frames - wave);
     std::exception_ptr error;
 #pragma omp parallel for num_threads(threads) schedule(static, 1) if (count > 1)
     for (std::size_t i = 0; i < count; ++i) {
-      const std::size_t f = wave + i;
       try {
-        encoders_[omp_get_thread_num()]->encode(labels.subspan(4 * bounds[f], 4 * (bounds[f + 1] - bounds[f])), batch_[i]);
+        encoders_[omp_get_thread_num()]->encode(pieces[wave + i], batch_[i]);
       } catch (...) {
 #pragma omp critical(tetstream_writer_error)
         if (!error) error = std::current_exception();
@@ -240,8 +245,13 @@ void TetWriter::add_tets_impl(std::span<const L> labels) {
   }
 }
 
-void TetWriter::add_tets(std::span<const std::uint32_t> labels) { add_tets_impl(labels); }
-void TetWriter::add_tets(std::span<const std::uint64_t> labels) { add_tets_impl(labels); }
+void TetWriter::add_tets(std::span<const std::uint32_t> labels) {
+  add_tets_impl(std::span<const std::span<const std::uint32_t>>(&labels, 1));
+}
+void TetWriter::add_tets(std::span<const std::uint64_t> labels) {
+  add_tets_impl(std::span<const std::span<const std::uint64_t>>(&labels, 1));
+}
+void TetWriter::add_tets(std::span<const std::span<const std::uint64_t>> batches) { add_tets_impl(batches); }
 
 std::uint64_t TetWriter::checkpoint() {
   if (finished_) throw std::logic_error("TetWriter: checkpoint after finish");

@@ -77,6 +77,10 @@ class TetWriter {
   // A batch of tets, 4 labels each (< point_count, distinct, positively oriented).
   void add_tets(std::span<const std::uint32_t> labels);
   void add_tets(std::span<const std::uint64_t> labels);
+  // Several batches at once, written as the same calls one after the other would
+  // write them (the same bytes), but their frames encoded together, options.threads
+  // at a time: a writer stage handed a burst of batches keeps several cores busy.
+  void add_tets(std::span<const std::span<const std::uint64_t>> batches);
   // One frame from FrameEncoder, appended as the next frame.
   void add_frame(const EncodedFrame& frame);
 
@@ -98,7 +102,7 @@ class TetWriter {
   template <class F>
   void add_points_impl(const F* xyz, const std::uint64_t* ids, std::size_t n);
   template <class L>
-  void add_tets_impl(std::span<const L> labels);
+  void add_tets_impl(std::span<const std::span<const L>> batches);
   void write_section_start(std::uint32_t tag, std::uint64_t length);
 
   std::string path_;

@@ -1,6 +1,8 @@
 #include "pipeline/async_tet_writer.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <optional>
 #include <stdexcept>
 #include <utility>
 
@@ -10,8 +12,8 @@ namespace {
 using Clock = std::chrono::steady_clock;
 }  // namespace
 
-AsyncTetWriter::AsyncTetWriter(io::TetWriter& writer, std::size_t capacity)
-    : writer_(writer), capacity_(capacity), queue_(capacity) {
+AsyncTetWriter::AsyncTetWriter(io::TetWriter& writer, std::size_t capacity, std::size_t gather)
+    : writer_(writer), capacity_(capacity), gather_(std::max<std::size_t>(gather, 1)), queue_(capacity) {
   // Reserved now so that handing buffers back never allocates (see recycle()).
   spare_.reserve(spare_limit());
   thread_ = std::thread([this] { run(); });
@@ -20,18 +22,47 @@ AsyncTetWriter::AsyncTetWriter(io::TetWriter& writer, std::size_t capacity)
 AsyncTetWriter::~AsyncTetWriter() { cancel(); }
 
 void AsyncTetWriter::run() noexcept {
-  std::vector<std::uint64_t> batch;
+  // Batches taken together; a checkpoint met while gathering waits in `next`, behind them.
+  std::vector<Item> items;
+  std::optional<Item> next;
+  std::vector<std::span<const std::uint64_t>> spans;
   try {
-    while (queue_.pop(batch)) {
+    for (;;) {
+      items.clear();
+      if (next) {
+        items.push_back(std::move(*next));
+        next.reset();
+      } else {
+        items.emplace_back();
+        if (!queue_.pop(items.back())) break;
+      }
+      if (!items.front().on_committed) {
+        Item more;
+        while (items.size() < gather_ && queue_.try_pop(more)) {
+          if (more.on_committed) {
+            next = std::move(more);
+            break;
+          }
+          items.push_back(std::move(more));
+        }
+      }
       const auto t0 = Clock::now();
-      writer_.add_tets(std::span<const std::uint64_t>(batch));
+      if (items.front().on_committed) {
+        items.front().on_committed(writer_.checkpoint());
+      } else {
+        spans.clear();
+        for (const Item& item : items) spans.emplace_back(item.tets);
+        writer_.add_tets(std::span<const std::span<const std::uint64_t>>(spans));
+      }
       const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
-      batch.clear();
       std::lock_guard lock(mutex_);
       busy_seconds_ += seconds;
-      ++written_;
-      // A full spare list keeps this buffer in `batch`; the next pop() frees it.
-      if (spare_.size() < spare_limit()) spare_.push_back(std::move(batch));
+      written_ += items.size();
+      for (Item& item : items) {
+        item.tets.clear();
+        // A full spare list lets this buffer go with `items`.
+        if (item.tets.capacity() > 0 && spare_.size() < spare_limit()) spare_.push_back(std::move(item.tets));
+      }
       written_cv_.notify_all();
     }
   } catch (...) {
@@ -84,7 +115,17 @@ void AsyncTetWriter::add_tets(std::vector<std::uint64_t>&& batch) {
     recycle(std::move(batch));
     return;
   }
-  if (!queue_.push(std::move(batch))) {
+  push(Item{std::move(batch), nullptr});
+}
+
+void AsyncTetWriter::add_checkpoint(std::function<void(std::uint64_t)> on_committed) {
+  check_usable();
+  if (!on_committed) throw std::invalid_argument("AsyncTetWriter: a checkpoint needs a callback");
+  push(Item{{}, std::move(on_committed)});
+}
+
+void AsyncTetWriter::push(Item&& item) {
+  if (!queue_.push(std::move(item))) {
     // Only the background thread's failure cancels the queue while the producer is
     // still using it (finish() and cancel() are the producer's own calls), and it
     // records the failure first.

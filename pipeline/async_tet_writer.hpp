@@ -8,14 +8,16 @@
 //   std::vector<std::uint64_t> b = out.take_buffer();  ... fill, 4 labels per tet ...
 //   out.add_tets(std::move(b));          ...           // returns at once unless full
 //   std::uint64_t committed = out.checkpoint();        // drains first
+//   out.add_checkpoint([](std::uint64_t c) { ... });   // or later, on the writer's thread
 //   out.finish();                                      // drains, then writer.finish()
 //
 // Bytes: each batch is one TetWriter::add_tets call, in push order, so the file is
 // byte for byte the one that calling the writer directly with the same batches gives.
 //
-// Memory: at most `capacity` batches wait in the queue, one is being written, and the
-// emptied buffers come back through take_buffer() (at most capacity + 2 are kept), so
-// the steady state allocates nothing and holds about capacity + 2 batches' worth.
+// Memory: at most `capacity` batches wait in the queue, `gather` are being written,
+// and the emptied buffers come back through take_buffer() (at most capacity + gather
+// + 1 are kept), so the steady state allocates nothing and holds about that many
+// batches' worth.
 //
 // Ownership of the writer: from the first add_tets() until a drain(), checkpoint() or
 // finish() returns, the background thread drives the writer; the caller must not touch
@@ -44,6 +46,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <span>
 #include <thread>
@@ -53,8 +56,12 @@ namespace tetstream::pipeline {
 
 class AsyncTetWriter {
  public:
-  // Starts the background thread. capacity: batches that may wait (>= 1).
-  explicit AsyncTetWriter(io::TetWriter& writer, std::size_t capacity = 2);
+  // Starts the background thread. capacity: batches that may wait (>= 1). gather: up
+  // to this many queued batches are taken at once and handed to the writer together
+  // (TetWriter::add_tets of several batches: their frames are encoded on the writer's
+  // options.threads), so a burst of batches is compressed on several cores; the
+  // bytes are those of one call per batch.
+  explicit AsyncTetWriter(io::TetWriter& writer, std::size_t capacity = 2, std::size_t gather = 1);
   ~AsyncTetWriter();
   AsyncTetWriter(const AsyncTetWriter&) = delete;
   AsyncTetWriter& operator=(const AsyncTetWriter&) = delete;
@@ -70,7 +77,15 @@ class AsyncTetWriter {
   // The same for labels the caller keeps: copied into a recycled buffer.
   void add_tets(std::span<const std::uint64_t> labels);
 
-  // Waits until every queued batch is written.
+  // Queues a checkpoint behind the batches queued so far and returns (waiting only
+  // while the queue is full): once they are written, the background thread calls
+  // TetWriter::checkpoint() and then on_committed(bytes), on its own thread. So the
+  // producer never waits for the writer to catch up at a checkpoint (a drain per
+  // segment left both cores of a 2-core machine half idle). An exception from either
+  // is the background failure (see above).
+  void add_checkpoint(std::function<void(std::uint64_t committed)> on_committed);
+
+  // Waits until every queued batch and checkpoint is done.
   void drain();
   // drain() + TetWriter::checkpoint(): the byte count to persist for resume().
   std::uint64_t checkpoint();
@@ -82,11 +97,11 @@ class AsyncTetWriter {
   void cancel() noexcept;
 
   bool failed() const;
-  // Seconds the background thread spent in TetWriter::add_tets (compressing, writing).
+  // Seconds the background thread spent in the writer (compressing, writing, checkpoints).
   double busy_seconds() const;
   // The most batches that waited in the queue at once (the one being written aside).
   std::size_t peak_queued() const { return queue_.peak_size(); }
-  std::uint64_t batches_written() const;
+  std::uint64_t batches_written() const;  // batches and checkpoints done
 
  private:
   void run() noexcept;  // the background thread
@@ -96,23 +111,30 @@ class AsyncTetWriter {
   void recycle(std::vector<std::uint64_t>&& buffer);
   // Buffers kept for reuse: enough for a full queue, the batch being written and the
   // one the producer fills; more would only be memory held for nothing.
-  std::size_t spare_limit() const { return capacity_ + 2; }
+  std::size_t spare_limit() const { return capacity_ + gather_ + 1; }
+
+  // What the queue carries: a batch of tets, or (on_committed set) a checkpoint.
+  struct Item {
+    std::vector<std::uint64_t> tets;
+    std::function<void(std::uint64_t)> on_committed;
+  };
+  void push(Item&& item);
 
   io::TetWriter& writer_;
-  const std::size_t capacity_;
-  BoundedQueue<std::vector<std::uint64_t>> queue_;
+  const std::size_t capacity_, gather_;
+  BoundedQueue<Item> queue_;
 
   // Shared with the background thread, under mutex_.
   mutable std::mutex mutex_;
   std::condition_variable written_cv_;        // signalled after every batch and on failure
-  std::uint64_t written_ = 0;                 // batches the writer has taken
+  std::uint64_t written_ = 0;                 // items (batches, checkpoints) done
   std::vector<std::vector<std::uint64_t>> spare_;  // emptied buffers, for take_buffer()
   std::exception_ptr failure_;                // the background thread's first exception
   bool failure_reported_ = false;             // rethrown once already
   double busy_seconds_ = 0;
 
   // Producer-side only.
-  std::uint64_t queued_ = 0;  // batches pushed (written_ catches up with it in drain())
+  std::uint64_t queued_ = 0;  // items pushed (written_ catches up with it in drain())
   bool stopped_ = false;      // finish() or cancel() was called
 
   std::thread thread_;  // last: started once everything above exists

@@ -69,14 +69,13 @@ class BoundedQueue {
   bool pop(T& out) {
     std::unique_lock lock(mutex_);
     not_empty_.wait(lock, [&] { return cancelled_ || closed_ || count_ > 0; });
-    if (cancelled_ || count_ == 0) return false;
-    std::optional<T>& slot = slots_[head_];
-    out = std::move(*slot);
-    slot.reset();
-    head_ = (head_ + 1) % capacity_;
-    --count_;
-    not_full_.notify_one();
-    return true;
+    return take_front(out);
+  }
+
+  // pop() without the wait: false when nothing is queued (or when cancelled).
+  bool try_pop(T& out) {
+    std::lock_guard lock(mutex_);
+    return take_front(out);
   }
 
   // The producers are done: consumers drain what is queued, then pop() returns false.
@@ -118,6 +117,19 @@ class BoundedQueue {
   }
 
  private:
+  // Under mutex_: moves the first item into `out`, unless there is none or the queue
+  // was cancelled.
+  bool take_front(T& out) {
+    if (cancelled_ || count_ == 0) return false;
+    std::optional<T>& slot = slots_[head_];
+    out = std::move(*slot);
+    slot.reset();
+    head_ = (head_ + 1) % capacity_;
+    --count_;
+    not_full_.notify_one();
+    return true;
+  }
+
   bool stopped() const { return closed_ || cancelled_; }
 
   const std::size_t capacity_;

@@ -4,12 +4,96 @@
 #include "core/predicates.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <numeric>
 
 namespace tetstream::pipeline {
 
 namespace {
+
+constexpr double kEps = 0x1p-53;  // the unit roundoff of double
+
+// Direction d of the 26 (dx, dy, dz) in {-1,0,1}^3 \ {0}, enumerated with dx slowest:
+// the index of the axis direction (sign along axis k, zero elsewhere).
+int axis_direction(int k, int sign) {
+  int d[3] = {0, 0, 0};
+  d[k] = sign;
+  const int index = (d[0] + 1) * 9 + (d[1] + 1) * 3 + (d[2] + 1);
+  return index > 13 ? index - 1 : index;  // (0,0,0), index 13, is not a direction
+}
+
+// A facet (a, b, c) of the extremes' hull as a plane, for a fast sign of
+// orient3d(a, b, c, p) = sign n.(p - a), n = (b - a) x (c - a). For p in a box whose
+// extent per axis is `extent`, the value computed in doubles is within `error` of the
+// exact one: the differences, the cross product and the dot product each round
+// (about 8 eps * sum_k N_k |p_k - a_k| with N_k = |n_k|'s two products summed, doubled
+// here for margin). Only inside that margin the exact predicate decides.
+struct FacetPlane {
+  FacetPlane(const double* pa, const double* pb, const double* pc, const double* extent) : a(pa), b(pb), c(pc) {
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    double bound = 0;
+    for (int k = 0; k < 3; ++k) {
+      const int i = (k + 1) % 3, j = (k + 2) % 3;
+      n[k] = u[i] * v[j] - u[j] * v[i];
+      bound += (std::fabs(u[i] * v[j]) + std::fabs(u[j] * v[i])) * extent[k];
+    }
+    error = 16 * kEps * bound * (1 + 16 * kEps);
+  }
+  double value(const double* p) const {
+    return n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]);
+  }
+  // orient3d(a, b, c, p) < 0, exactly.
+  bool strictly_below(const double* p) const {
+    const double g = value(p);
+    if (g < -error) return true;
+    if (g > error) return false;
+    return core::orient3d(a, b, c, p) < 0;
+  }
+  const double *a, *b, *c;
+  double n[3], error;
+};
+
+// An axis-aligned box strictly inside the extremes' hull (all eight corners are,
+// checked exactly; the box is their hull): a point in it needs no facet test. On a
+// cube or a ball most points are in it; on a thin shell none are, and it costs
+// nothing. Empty (contains nothing) when no such box was found.
+struct InnerBox {
+  double lo[3] = {1, 1, 1}, hi[3] = {0, 0, 0};
+  bool contains(const double* p) const {
+    return p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2];
+  }
+};
+
+// The box around the extremes' centroid with the points' box's proportions, as large
+// as the facet planes allow (scaled by 0.99, for the rounding of the planes).
+InnerBox inscribed_box(const std::vector<FacetPlane>& facets, const std::vector<double>& extremes, const double* lo,
+                       const double* hi) {
+  InnerBox box;
+  const std::size_t m = extremes.size() / 3;
+  double center[3] = {0, 0, 0}, half[3];
+  for (std::size_t i = 0; i < m; ++i)
+    for (int k = 0; k < 3; ++k) center[k] += extremes[3 * i + k] / double(m);
+  for (int k = 0; k < 3; ++k) half[k] = (hi[k] - lo[k]) / 2;
+  double scale = 1;
+  for (const FacetPlane& f : facets) {
+    // The corner farthest along n reaches n.(center - a) + scale * sum |n_k| half_k.
+    const double depth = -f.value(center), reach = std::fabs(f.n[0]) * half[0] + std::fabs(f.n[1]) * half[1] +
+                                                      std::fabs(f.n[2]) * half[2];
+    if (!(depth > 0)) return box;
+    if (reach > 0) scale = std::min(scale, depth / reach);
+  }
+  scale *= 0.99;
+  InnerBox candidate;
+  for (int k = 0; k < 3; ++k) candidate.lo[k] = center[k] - scale * half[k], candidate.hi[k] = center[k] + scale * half[k];
+  for (int corner = 0; corner < 8; ++corner) {
+    double q[3];
+    for (int k = 0; k < 3; ++k) q[k] = (corner >> k & 1) ? candidate.hi[k] : candidate.lo[k];
+    for (const FacetPlane& f : facets)
+      if (core::orient3d(f.a, f.b, f.c, q) >= 0) return box;
+  }
+  return candidate;
+}
 
 // Indices of the vertices of the kernel's hull (points incident to an infinite tet),
 // ascending, mapped through `index`.
@@ -51,6 +135,12 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
       if (dot > best_dot[d]) best_dot[d] = dot, best[d] = std::uint32_t(i);
     }
   }
+  double lo[3], hi[3], extent[3];  // the points' box, and a bound on |p - q| per axis
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = -best_dot[axis_direction(k, -1)];
+    hi[k] = best_dot[axis_direction(k, +1)];
+    extent[k] = (hi[k] - lo[k]) * (1 + 4 * kEps);
+  }
   std::vector<std::uint32_t> extreme(best, best + 26);
   std::sort(extreme.begin(), extreme.end());
   extreme.erase(std::unique(extreme.begin(), extreme.end()), extreme.end());
@@ -61,20 +151,23 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   core::Delaunay inner;
   std::vector<std::uint32_t> survivors;
   if (inner.build(ex.data(), nullptr, extreme.size()) == core::BuildStatus::kOk) {
-    // The hull facets of the extremes, as point triples seen with the interior on
-    // their negative side; a point strictly inside all of them is not a vertex.
-    std::vector<const double*> facets;
+    // The hull facets of the extremes, seen with the interior on their negative side;
+    // a point strictly inside all of them is not a vertex.
+    std::vector<FacetPlane> facets;
     for (std::size_t t = 0; t < inner.num_tet_slots(); ++t) {
       if (!inner.is_alive(core::TetId(t)) || !inner.is_infinite(core::TetId(t))) continue;
       int inf = 0;
       while (inner.vertex(core::TetId(t), inf) != core::kInfiniteVertex) ++inf;
-      for (int m = 0; m < 3; ++m) facets.push_back(inner.point(inner.vertex(core::TetId(t), core::kFacetVertex[inf][m])));
+      const double* v[3];
+      for (int m = 0; m < 3; ++m) v[m] = inner.point(inner.vertex(core::TetId(t), core::kFacetVertex[inf][m]));
+      facets.push_back(FacetPlane(v[0], v[1], v[2], extent));
     }
+    const InnerBox box = inscribed_box(facets, ex, lo, hi);
     for (std::size_t i = 0; i < n; ++i) {
       const double* p = xyz + 3 * i;
+      if (box.contains(p)) continue;
       bool strictly_inside = true;
-      for (std::size_t f = 0; f < facets.size() && strictly_inside; f += 3)
-        strictly_inside = core::orient3d(facets[f], facets[f + 1], facets[f + 2], p) < 0;
+      for (std::size_t f = 0; f < facets.size() && strictly_inside; ++f) strictly_inside = facets[f].strictly_below(p);
       if (!strictly_inside) survivors.push_back(std::uint32_t(i));
     }
   } else {

@@ -34,14 +34,19 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   axis_ = axis;
   block_points_ = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
   offsets_.assign(count, 0);
-  nodes_.clear();
-  blocks_.clear();
+  const std::uint64_t block_count = (count + block_points_ - 1) / block_points_;
+  // The blocks are independent: each is built into its own node list (ids local to
+  // the block) on all threads, then the lists are laid end to end. One thread took
+  // 2.7 s at 10^7 points while the other core idled.
+  std::vector<std::vector<Node>> block_nodes(block_count);
   const double inf = std::numeric_limits<double>::infinity();
-  for (std::uint64_t base = 0; base < count; base += block_points_) {
+#pragma omp parallel for schedule(dynamic, 8)
+  for (std::int64_t b = 0; b < std::int64_t(block_count); ++b) {
+    const std::uint64_t base = std::uint64_t(b) * block_points_;
     const std::uint32_t n = std::uint32_t(std::min<std::uint64_t>(block_points_, count - base));
     std::uint16_t* o = &offsets_[base];
     for (std::uint32_t i = 0; i < n; ++i) o[i] = std::uint16_t(i);
-    Block block{std::uint32_t(nodes_.size()), 0};
+    std::vector<Node>& nodes = block_nodes[std::size_t(b)];
     // Recursive median splits, written in preorder. `next` of a node is set when its
     // subtree is complete: the build recurses on the left half, then the right.
     auto build_node = [&](auto&& self, std::uint32_t begin, std::uint32_t end) -> void {
@@ -52,31 +57,44 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
           lo[k] = std::min(lo[k], x);
           hi[k] = std::max(hi[k], x);
         }
-      const std::uint32_t id = std::uint32_t(nodes_.size());
+      const std::uint32_t id = std::uint32_t(nodes.size());
       const bool leaf = end - begin <= kLeafPoints;
       Node node{};
       for (int k = 0; k < 3; ++k) node.box.lo[k] = float_below(lo[k]), node.box.hi[k] = float_above(hi[k]);
       node.begin = begin, node.end = end, node.leaf = leaf ? 1u : 0u;
-      nodes_.push_back(node);
+      nodes.push_back(node);
       if (!leaf) {
         int widest = 0;
         for (int k = 1; k < 3; ++k)
           if (hi[k] - lo[k] > hi[widest] - lo[widest]) widest = k;
         const std::uint32_t mid = begin + (end - begin) / 2;
-        std::nth_element(o + begin, o + mid, o + end, [&](std::uint16_t a, std::uint16_t b) {
-          return points[base + a].xyz[widest] < points[base + b].xyz[widest];
+        std::nth_element(o + begin, o + mid, o + end, [&](std::uint16_t a, std::uint16_t c) {
+          return points[base + a].xyz[widest] < points[base + c].xyz[widest];
         });
         self(self, begin, mid);
         self(self, mid, end);
       } else {
         std::sort(o + begin, o + end);  // a leaf reads its points in file order
       }
-      nodes_[id].next = std::uint32_t(nodes_.size());
+      nodes[id].next = std::uint32_t(nodes.size());
     };
     build_node(build_node, 0, n);
-    block.nodes = std::uint32_t(nodes_.size()) - block.first_node;
-    blocks_.push_back(block);
     if (release_file_pages) release_mapped_pages(points + base, n * sizeof(SortedPoint));
+  }
+  std::size_t total = 0;
+  for (const auto& nodes : block_nodes) total += nodes.size();
+  nodes_.clear();
+  nodes_.reserve(total);
+  blocks_.clear();
+  blocks_.reserve(block_count);
+  for (auto& nodes : block_nodes) {
+    const std::uint32_t first = std::uint32_t(nodes_.size());
+    for (Node node : nodes) {
+      node.next += first;
+      nodes_.push_back(node);
+    }
+    blocks_.push_back(Block{first, std::uint32_t(nodes.size())});
+    std::vector<Node>().swap(nodes);
   }
 }
 

@@ -45,9 +45,15 @@ constexpr double kWindowBytesPerPoint = 480;
 constexpr double kOutputBytesPerPoint = 125;
 // What the budget keeps for everything else: writer buffers, encoders, the runtime.
 constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
-// Frames queued for the writer thread. With one, the segment loop hands over a frame
-// while the previous one is compressed; more only holds memory (8 MiB a frame).
-constexpr std::size_t kWriterQueueFrames = 1;
+// Frames the writer thread compresses at once (on as many threads), and as many wait
+// in its queue. A segment's tets reach the writer in one burst, after its last zone;
+// with one encoder the burst kept the segment loop waiting with a core idle (10^7
+// uniform, 2 threads: the CPU at ~120% for a second after each segment). Capped: each
+// encoder holds ~18 MiB of frames and scratch (writer_queue_bytes), one per 512 MiB of
+// budget at most, and between bursts the encoders idle.
+int writer_encoders(int threads, std::uint64_t memory_bytes) {
+  return std::clamp(std::min<int>(threads, int(memory_bytes >> 29)), 1, 4);
+}
 
 
 // Tets per frame, about: a frame is cut at the first change of minimum label after
@@ -57,10 +63,14 @@ constexpr std::size_t kWriterQueueFrames = 1;
 // the same for any segment plan or thread count: the same budget gives the same
 // bytes, and two budgets give the same frames but for the header's options.
 constexpr std::size_t kFrameTets = std::size_t(1) << 18;
-// The frames alive around the writer thread: the queued ones, the one being
+// The frames alive around the writer thread: the queued ones, those being
 // compressed and the one being filled, each about kFrameTets tets of 4 8-byte labels
 // (a frame ends where its last minimum label's group does: a few tets more).
-constexpr double kWriterQueueBytes = double(kWriterQueueFrames + 2) * kFrameTets * 32 * 1.05;
+// Each encoder has its scratch besides (about 40 bytes per tet, io/tet_writer.hpp).
+double writer_queue_bytes(int threads, std::uint64_t memory_bytes) {
+  const double encoders = writer_encoders(threads, memory_bytes);
+  return ((2 * encoders + 1) * 32 + encoders * 40) * kFrameTets * 1.05;
+}
 
 class FrameCutter {
  public:
@@ -149,7 +159,7 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   const double hull = double(view.hull_labels.size());
   const double t = double(threads);
   const double available =
-      0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - kWriterQueueBytes) - index_bytes;
+      0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - writer_queue_bytes(threads, o.memory_bytes)) - index_bytes;
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k) + hull;
@@ -461,7 +471,7 @@ RunSummary Job::run() {
                         {"duplicates_merged", sorted.duplicates}}
                        .dump();
   io::TetWriterOptions writer_options;
-  writer_options.threads = 1;  // a frame is encoded by one thread: the writer stage's own
+  writer_options.threads = writer_encoders(threads, options_.memory_bytes);  // the writer stage's own team
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
   writer_options.frame_tets = 2 * kFrameTets;
   writer_options.keep_partial = checkpoint_ != nullptr;
@@ -515,25 +525,35 @@ RunSummary Job::run() {
   // Stage 5 on its own thread behind a bounded queue of frames: compression and I/O
   // overlap the segments. Declared after the writer, so destroyed (cancelled, joined)
   // before it on the way out of a failure.
-  AsyncTetWriter writer(*writer_holder, kWriterQueueFrames);
+  const std::size_t encoders = std::size_t(writer_encoders(threads, options_.memory_bytes));
+  AsyncTetWriter writer(*writer_holder, encoders, encoders);
   FrameCutter cutter(writer);
   cutter.restore(std::move(pending));
   std::uint64_t segments_done = summary.segments_resumed;
   // Records that the output holds every tet of the labels below `next_label`: the
-  // writer's committed bytes, the tets of the frame being filled, the counters.
-  auto commit = [&](std::uint64_t next_label) {
+  // writer's committed bytes, the tets of the frame being filled, the counters. The
+  // frame being filled is saved at once (under a name of its own); the state that
+  // names it is saved by the writer's thread once the frames before it are on disk,
+  // so the segments never wait for the writer. A crash in between leaves the previous
+  // state, which names the previous pending file: that one is removed only after.
+  // `wait`: return only when the state is saved (the job's last commit).
+  auto commit = [&](std::uint64_t next_label, bool wait) {
     if (!checkpoint_) return;
-    const std::uint64_t committed = writer.checkpoint();
     const std::string pending_file = "pending-" + std::to_string(segments_done) + ".tets";
     const auto& p = cutter.pending();
     if (!p.empty()) write_file_atomically(dir_, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
     const std::string old_pending = state_.contains("output") ? state_["output"].value("pending_file", "") : "";
-    state_["output"] = {{"committed", committed},  {"next_label", next_label}, {"pending_file", pending_file},
+    state_["output"] = {{"committed", 0},         {"next_label", next_label}, {"pending_file", pending_file},
                         {"pending_tets", p.size() / 4}, {"segments", segments_done}, {"counters", counters_json(work, zone_points_done)}};
-    save();
-    if (!old_pending.empty() && old_pending != pending_file) remove_file(checkpoint_->path(old_pending));
+    const std::string old_path = old_pending.empty() || old_pending == pending_file ? "" : checkpoint_->path(old_pending);
+    writer.add_checkpoint([this, state = state_, old_path](std::uint64_t committed) mutable {
+      state["output"]["committed"] = committed;
+      checkpoint_->save(std::move(state));
+      if (!old_path.empty()) remove_file(old_path);
+    });
+    if (wait) state_["output"]["committed"] = writer.checkpoint();  // drains: the value just saved
   };
-  if (!state_.contains("output")) commit(0);
+  if (!state_.contains("output")) commit(0, false);
 
   auto plans = plan_segments(view, zone_plan.segment_points, buffer_width, first_label);
   struct Unit {
@@ -617,7 +637,7 @@ RunSummary Job::run() {
             zone_points_done += points;
             record_work(work, zone_points_done, summary);
             ++segments_done;
-            commit(plan.zone_end);
+            commit(plan.zone_end, false);
             summary.seconds_write += since(t0);
           } catch (...) {
 #pragma omp critical(tetstream_run_failure)
@@ -647,7 +667,7 @@ RunSummary Job::run() {
     // Every tet is in the partial output; what is left is its index and footer and
     // the rename. A crash after the rename but before the checkpoint is removed
     // leaves this mark, and a resumed job then finds the output complete.
-    commit(view.count);
+    commit(view.count, true);
     if (checkpoint_) {
       state_["output"]["finishing"] = true;
       save();

@@ -385,6 +385,54 @@ TEST_F(AsyncTetWriterTest, WritesTheSameBytesAsTheWriter) {
   }
 }
 
+TEST_F(AsyncTetWriterTest, GatheredBatchesAndQueuedCheckpointsWriteTheSameBytes) {
+  // Batches taken several at a time (their frames encoded on the writer's threads) and
+  // checkpoints queued between them: the bytes of one call per batch, and each
+  // checkpoint reports the bytes the direct writer had at that point.
+  const Job job = make_job(3000, {1000, 1, 0, 299, 300, 301, 2500, 17, 1200, 640, 0, 333}, 4);
+  io::TetWriterOptions o = small_frames();
+  const std::string direct = tmp.path("direct-gather.tets");
+  std::vector<std::uint64_t> direct_checkpoints;
+  {
+    auto w = open_writer(direct, job, o);
+    for (std::size_t i = 0; i < job.batches.size(); ++i) {
+      w->add_tets(std::span<const std::uint64_t>(job.batches[i]));
+      if (i % 3 == 2) direct_checkpoints.push_back(w->checkpoint());
+    }
+    w->finish();
+  }
+  o.threads = 3;
+  for (const std::size_t gather : {1, 2, 3, 5}) {
+    const std::string path = tmp.path("gather-" + std::to_string(gather) + ".tets");
+    auto w = open_writer(path, job, o);
+    AsyncTetWriter out(*w, 4, gather);
+    std::vector<std::uint64_t> seen;  // written by the writer's thread, read after drain()
+    for (std::size_t i = 0; i < job.batches.size(); ++i) {
+      out.add_tets(std::span<const std::uint64_t>(job.batches[i]));
+      if (i % 3 == 2) out.add_checkpoint([&seen](std::uint64_t committed) { seen.push_back(committed); });
+    }
+    out.drain();
+    EXPECT_EQ(seen, direct_checkpoints) << "gather " << gather;
+    out.finish();
+    EXPECT_EQ(slurp(path), slurp(direct)) << "gather " << gather;
+  }
+}
+
+TEST_F(AsyncTetWriterTest, AFailingCheckpointIsReportedOnce) {
+  const Job job = make_job(1000, {400, 400, 400}, 5);
+  auto w = open_writer(tmp.path("failing-checkpoint.tets"), job, small_frames());
+  AsyncTetWriter out(*w, 2, 2);
+  Outcome outcome;
+  record(outcome, [&] { out.add_tets(std::span<const std::uint64_t>(job.batches[0])); });
+  record(outcome, [&] { out.add_checkpoint([](std::uint64_t) { throw IoError("state.json: No space left on device"); }); });
+  record(outcome, [&] { out.drain(); });
+  record(outcome, [&] { out.add_tets(std::span<const std::uint64_t>(job.batches[1])); });
+  record(outcome, [&] { out.finish(); });
+  EXPECT_EQ(outcome.calls, "..ILL");
+  EXPECT_TRUE(out.failed());
+  EXPECT_THROW(out.add_checkpoint(nullptr), std::logic_error);  // used after the failure
+}
+
 TEST_F(AsyncTetWriterTest, RecyclesItsBuffers) {
   const Job job = make_job(1000, {400, 400, 400, 400, 400, 400}, 3);
   auto w = open_writer(tmp.path("recycle.tets"), job, small_frames());
