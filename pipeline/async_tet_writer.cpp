@@ -125,7 +125,10 @@ void AsyncTetWriter::add_checkpoint(std::function<void(std::uint64_t)> on_commit
 }
 
 void AsyncTetWriter::push(Item&& item) {
-  if (!queue_.push(std::move(item))) {
+  const auto t0 = Clock::now();
+  const bool pushed = queue_.push(std::move(item));
+  producer_wait_seconds_ += std::chrono::duration<double>(Clock::now() - t0).count();
+  if (!pushed) {
     // Only the background thread's failure cancels the queue while the producer is
     // still using it (finish() and cancel() are the producer's own calls), and it
     // records the failure first.
@@ -144,10 +147,12 @@ void AsyncTetWriter::add_tets(std::span<const std::uint64_t> labels) {
 
 void AsyncTetWriter::drain() {
   check_usable();
+  const auto t0 = Clock::now();
   {
     std::unique_lock lock(mutex_);
     written_cv_.wait(lock, [&] { return failure_ || written_ == queued_; });
   }
+  producer_wait_seconds_ += std::chrono::duration<double>(Clock::now() - t0).count();
   rethrow_failure_once();
 }
 

@@ -99,6 +99,9 @@ class AsyncTetWriter {
   bool failed() const;
   // Seconds the background thread spent in the writer (compressing, writing, checkpoints).
   double busy_seconds() const;
+  // Seconds the producer waited for the writer: blocked on a full queue, or draining.
+  // The segment loop's time lost to the writer stage (I/O and compression).
+  double producer_wait_seconds() const { return producer_wait_seconds_; }
   // The most batches that waited in the queue at once (the one being written aside).
   std::size_t peak_queued() const { return queue_.peak_size(); }
   std::uint64_t batches_written() const;  // batches and checkpoints done
@@ -136,6 +139,7 @@ class AsyncTetWriter {
   // Producer-side only.
   std::uint64_t queued_ = 0;  // items pushed (written_ catches up with it in drain())
   bool stopped_ = false;      // finish() or cancel() was called
+  double producer_wait_seconds_ = 0;
 
   std::thread thread_;  // last: started once everything above exists
 };

@@ -284,6 +284,8 @@ SortedPoints sorted_from(const json& j, const Checkpoint& ckpt) {
 // final summary describes the whole job.
 json counters_json(const SegmentStats& w, std::uint64_t zone_points) {
   return {{"zone_points", zone_points}, {"window_points", w.window_points}, {"repair_points", w.repair_points},
+          {"segment_buffer_points", w.segment_buffer_points}, {"zone_buffer_points", w.zone_buffer_points},
+          {"hull_points", w.hull_points},
           {"range_failures", w.range_failures}, {"queries", w.queries}, {"query_points", w.query_points},
           {"rounds", w.rounds}, {"tets", w.tets}, {"seconds_build", w.seconds_build}, {"seconds_check", w.seconds_check}};
 }
@@ -291,6 +293,9 @@ void counters_from(const json& j, SegmentStats& w, std::uint64_t& zone_points) {
   zone_points = j.at("zone_points").get<std::uint64_t>();
   w.window_points = j.at("window_points").get<std::uint64_t>();
   w.repair_points = j.at("repair_points").get<std::uint64_t>();
+  w.segment_buffer_points = j.at("segment_buffer_points").get<std::uint64_t>();
+  w.zone_buffer_points = j.at("zone_buffer_points").get<std::uint64_t>();
+  w.hull_points = j.at("hull_points").get<std::uint64_t>();
   w.range_failures = j.at("range_failures").get<std::uint64_t>();
   w.queries = j.at("queries").get<std::uint64_t>();
   w.query_points = j.at("query_points").get<std::uint64_t>();
@@ -303,6 +308,9 @@ void record_work(const SegmentStats& w, std::uint64_t zone_points, RunSummary& s
   s.zone_points = zone_points;
   s.window_points = w.window_points;
   s.repair_points = w.repair_points;
+  s.segment_buffer_points = w.segment_buffer_points;
+  s.zone_buffer_points = w.zone_buffer_points;
+  s.hull_window_points = w.hull_points;
   s.range_failures = w.range_failures;
   s.queries = w.queries;
   s.query_points = w.query_points;
@@ -680,6 +688,7 @@ RunSummary Job::run() {
   writer.finish();
   summary.seconds_write += since(t0);
   summary.seconds_writer_busy = writer.busy_seconds();
+  summary.seconds_writer_wait = writer.producer_wait_seconds();
   summary.output_bytes = writer_holder->bytes_written();
   summary.tet_bytes = io::TetReader(options_.output).tet_bytes();
   summary.seconds_total = since(start_);

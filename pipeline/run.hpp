@@ -53,6 +53,9 @@ struct RunSummary {
   std::uint64_t segments = 0, zones = 0, zone_points = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
   std::uint64_t query_points = 0;   // exact conflict tests the queries made
+  // The redundant insertions by cause (SegmentStats): sort-axis buffers, the strip
+  // buffers of parallel zones, hull vertices outside the window; and repair_points.
+  std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_window_points = 0;
   double seconds_build = 0, seconds_check = 0;  // kernel builds and exactness checks, summed over segments
   std::uint64_t tets = 0, output_bytes = 0;
   std::uint64_t tet_bytes = 0;  // of the tet frames alone (the file also holds the points)
@@ -64,8 +67,16 @@ struct RunSummary {
   double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;
   double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
   double seconds_writer_busy = 0;  // the writer thread compressing and writing (overlapped)
+  double seconds_writer_wait = 0;  // the segment loop blocked on the writer (full queue, drains)
   double redundant_ratio() const {  // points inserted beyond one per point, per point
     return points ? double(window_points + repair_points) / double(points) - 1.0 : 0.0;
+  }
+  // The zones' strip buffers as a share of all insertions: the insertion work that
+  // splitting segments into parallel zones adds (an insertion costs about the same
+  // wherever its point lies).
+  double zone_buffer_share() const {
+    const double inserted = double(window_points + repair_points);
+    return inserted > 0 ? double(zone_buffer_points) / inserted : 0.0;
   }
 };
 

@@ -560,10 +560,15 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
   zone_of_.assign(labels_.size(), kNoZone);
   for (VertexId v = 0; v < labels_.size(); ++v) {
     const std::uint64_t l = labels_[v];
-    if (l < plan_->zone_begin || l >= plan_->zone_end) continue;
-    if (strip_.axis >= 0) {
-      const double c = xyz_[3 * std::size_t(v) + std::size_t(strip_.axis)];
-      if (!(c >= strip_.lo && c < strip_.hi)) continue;
+    const bool in_strip =
+        strip_.axis < 0 || (xyz_[3 * std::size_t(v) + std::size_t(strip_.axis)] >= strip_.lo &&
+                            xyz_[3 * std::size_t(v) + std::size_t(strip_.axis)] < strip_.hi);
+    const bool in_range = l >= plan_->zone_begin && l < plan_->zone_end;
+    if (!in_range || !in_strip) {
+      if (std::binary_search(extra_.begin(), extra_.end(), l)) ++stats_.hull_points;
+      else if (!in_strip) ++stats_.zone_buffer_points;
+      else ++stats_.segment_buffer_points;
+      continue;
     }
     const std::uint64_t z = l - plan_->zone_begin;
     zone_of_[v] = std::uint32_t(z);

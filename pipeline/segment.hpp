@@ -125,6 +125,11 @@ void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones);
 
 struct SegmentStats {
   std::uint64_t window_points = 0;  // zone + buffers + hull vertices, before repairs
+  // Where the window's points beyond the zone's own come from: the segment's buffers
+  // along the sort axis (inside the zone's strip), the strip buffers that cutting the
+  // segment into zones adds (everything outside the strip: the price of parallel
+  // zones), and the hull's vertices from elsewhere.
+  std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_points = 0;
   std::uint64_t repair_points = 0;  // inserted by the emptiness queries
   std::uint64_t range_failures = 0; // star tets the range test could not clear
   std::uint64_t queries = 0;        // emptiness queries run
@@ -137,6 +142,8 @@ struct SegmentStats {
   // Sums another worker's counters into these (rounds: the larger).
   SegmentStats& operator+=(const SegmentStats& o) {
     window_points += o.window_points, repair_points += o.repair_points, range_failures += o.range_failures;
+    segment_buffer_points += o.segment_buffer_points, zone_buffer_points += o.zone_buffer_points;
+    hull_points += o.hull_points;
     queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
     kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
     return *this;

@@ -26,9 +26,11 @@ void run_run(RunArgs& args, Context& ctx) {
                s.duplicates, s.tets, s.segments, s.zones, pipeline::human_bytes(double(s.output_bytes)),
                s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0);
   spdlog::info("time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
-               "{:.1f}%, {} repair points, {} queries ({} exact tests); segments: build {:.1f}s, check {:.1f}s (summed)",
+               "{:.1f}% (segment buffers {}, zone buffers {} = {:.1f}% of insertions, hull {}, repairs {}), {} queries "
+               "({} exact tests); segments: build {:.1f}s, check {:.1f}s (summed)",
                s.seconds_sort, s.seconds_triangulate, s.seconds_write, s.seconds_total,
-               pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.repair_points, s.queries,
+               pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.segment_buffer_points,
+               s.zone_buffer_points, 100 * s.zone_buffer_share(), s.hull_window_points, s.repair_points, s.queries,
                s.query_points, s.seconds_build, s.seconds_check);
   ctx.summary = {{"command", "run"},
                  {"input", o.input},
@@ -46,6 +48,11 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"queries", s.queries},
                  {"query_points", s.query_points},
                  {"redundant_ratio", s.redundant_ratio()},
+                 {"redundant_points", {{"segment_buffers", s.segment_buffer_points},
+                                       {"zone_buffers", s.zone_buffer_points},
+                                       {"hull", s.hull_window_points},
+                                       {"repairs", s.repair_points}}},
+                 {"zone_buffer_share", s.zone_buffer_share()},
                  {"tets", s.tets},
                  {"output_bytes", s.output_bytes},
                  {"tet_bytes", s.tet_bytes},
@@ -57,6 +64,7 @@ void run_run(RunArgs& args, Context& ctx) {
                               {"triangulate", s.seconds_triangulate},
                               {"write", s.seconds_write},
                               {"writer_thread_busy", s.seconds_writer_busy},
+                              {"waiting_for_writer", s.seconds_writer_wait},
                               {"total", s.seconds_total}}},
                  {"tets_per_second", tets_per_s},
                  {"resumed", s.resumed},
