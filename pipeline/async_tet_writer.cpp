@@ -22,7 +22,7 @@ AsyncTetWriter::AsyncTetWriter(io::TetWriter& writer, std::size_t capacity, std:
 AsyncTetWriter::~AsyncTetWriter() { cancel(); }
 
 void AsyncTetWriter::run() noexcept {
-  // Batches taken together; a checkpoint met while gathering waits in `next`, behind them.
+  // Batches taken together; a task met while gathering waits in `next`, behind them.
   std::vector<Item> items;
   std::optional<Item> next;
   std::vector<std::span<const std::uint64_t>> spans;
@@ -36,10 +36,10 @@ void AsyncTetWriter::run() noexcept {
         items.emplace_back();
         if (!queue_.pop(items.back())) break;
       }
-      if (!items.front().on_committed) {
+      if (!items.front().task) {
         Item more;
         while (items.size() < gather_ && queue_.try_pop(more)) {
-          if (more.on_committed) {
+          if (more.task) {
             next = std::move(more);
             break;
           }
@@ -47,8 +47,8 @@ void AsyncTetWriter::run() noexcept {
         }
       }
       const auto t0 = Clock::now();
-      if (items.front().on_committed) {
-        items.front().on_committed(writer_.checkpoint());
+      if (items.front().task) {
+        items.front().task(writer_);
       } else {
         spans.clear();
         for (const Item& item : items) spans.emplace_back(item.tets);
@@ -121,7 +121,13 @@ void AsyncTetWriter::add_tets(std::vector<std::uint64_t>&& batch) {
 void AsyncTetWriter::add_checkpoint(std::function<void(std::uint64_t)> on_committed) {
   check_usable();
   if (!on_committed) throw std::invalid_argument("AsyncTetWriter: a checkpoint needs a callback");
-  push(Item{{}, std::move(on_committed)});
+  add_task([on_committed = std::move(on_committed)](io::TetWriter& w) { on_committed(w.checkpoint()); });
+}
+
+void AsyncTetWriter::add_task(std::function<void(io::TetWriter&)> task) {
+  check_usable();
+  if (!task) throw std::invalid_argument("AsyncTetWriter: an empty task");
+  push(Item{{}, std::move(task)});
 }
 
 void AsyncTetWriter::push(Item&& item) {

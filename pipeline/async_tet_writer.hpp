@@ -84,6 +84,10 @@ class AsyncTetWriter {
   // segment left both cores of a 2-core machine half idle). An exception from either
   // is the background failure (see above).
   void add_checkpoint(std::function<void(std::uint64_t committed)> on_committed);
+  // Queues any other use of the writer, run on the background thread in queue order
+  // (e.g. the points section, written while the first zones are triangulated). Its
+  // exception is the background failure.
+  void add_task(std::function<void(io::TetWriter&)> task);
 
   // Waits until every queued batch and checkpoint is done.
   void drain();
@@ -116,10 +120,10 @@ class AsyncTetWriter {
   // one the producer fills; more would only be memory held for nothing.
   std::size_t spare_limit() const { return capacity_ + gather_ + 1; }
 
-  // What the queue carries: a batch of tets, or (on_committed set) a checkpoint.
+  // What the queue carries: a batch of tets, or (task set) a use of the writer.
   struct Item {
     std::vector<std::uint64_t> tets;
-    std::function<void(std::uint64_t)> on_committed;
+    std::function<void(io::TetWriter&)> task;
   };
   void push(Item&& item);
 
