@@ -12,8 +12,6 @@ namespace tetstream::pipeline {
 
 namespace {
 
-constexpr double kEps = 0x1p-53;  // the unit roundoff of double
-
 // Direction d of the 26 (dx, dy, dz) in {-1,0,1}^3 \ {0}, enumerated with dx slowest:
 // the index of the axis direction (sign along axis k, zero elsewhere).
 int axis_direction(int k, int sign) {
@@ -22,37 +20,6 @@ int axis_direction(int k, int sign) {
   const int index = (d[0] + 1) * 9 + (d[1] + 1) * 3 + (d[2] + 1);
   return index > 13 ? index - 1 : index;  // (0,0,0), index 13, is not a direction
 }
-
-// A facet (a, b, c) of the extremes' hull as a plane, for a fast sign of
-// orient3d(a, b, c, p) = sign n.(p - a), n = (b - a) x (c - a). For p in a box whose
-// extent per axis is `extent`, the value computed in doubles is within `error` of the
-// exact one: the differences, the cross product and the dot product each round
-// (about 8 eps * sum_k N_k |p_k - a_k| with N_k = |n_k|'s two products summed, doubled
-// here for margin). Only inside that margin the exact predicate decides.
-struct FacetPlane {
-  FacetPlane(const double* pa, const double* pb, const double* pc, const double* extent) : a(pa), b(pb), c(pc) {
-    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-    double bound = 0;
-    for (int k = 0; k < 3; ++k) {
-      const int i = (k + 1) % 3, j = (k + 2) % 3;
-      n[k] = u[i] * v[j] - u[j] * v[i];
-      bound += (std::fabs(u[i] * v[j]) + std::fabs(u[j] * v[i])) * extent[k];
-    }
-    error = 16 * kEps * bound * (1 + 16 * kEps);
-  }
-  double value(const double* p) const {
-    return n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]);
-  }
-  // orient3d(a, b, c, p) < 0, exactly.
-  bool strictly_below(const double* p) const {
-    const double g = value(p);
-    if (g < -error) return true;
-    if (g > error) return false;
-    return core::orient3d(a, b, c, p) < 0;
-  }
-  const double *a, *b, *c;
-  double n[3], error;
-};
 
 // An axis-aligned box strictly inside the extremes' hull (all eight corners are,
 // checked exactly; the box is their hull): a point in it needs no facet test. On a
@@ -139,7 +106,7 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   for (int k = 0; k < 3; ++k) {
     lo[k] = -best_dot[axis_direction(k, -1)];
     hi[k] = best_dot[axis_direction(k, +1)];
-    extent[k] = (hi[k] - lo[k]) * (1 + 4 * kEps);
+    extent[k] = (hi[k] - lo[k]) * (1 + 0x1p-50);
   }
   std::vector<std::uint32_t> extreme(best, best + 26);
   std::sort(extreme.begin(), extreme.end());

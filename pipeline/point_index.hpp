@@ -66,6 +66,15 @@ class PointIndex {
   template <class Visit, class Stop>
   void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last,
                           Visit&& visit, Stop&& stop, const ExcludedSlab& exclude = {}) const {
+    for_each_candidate_where([&](const double* lo, const double* hi) { return box_meets_ball(lo, hi, center, radius); },
+                             first, last, visit, stop, exclude);
+  }
+
+  // The same for any region: may_meet(lo, hi) says whether the box [lo, hi] may hold
+  // a point of it (conservatively: never false when it does).
+  template <class MayMeet, class Visit, class Stop>
+  void for_each_candidate_where(MayMeet&& may_meet, std::uint64_t first, std::uint64_t last, Visit&& visit,
+                                Stop&& stop, const ExcludedSlab& exclude = {}) const {
     if (first >= last) return;
     // The labels [first, last) have axis coordinates in [axis_lo, axis_hi] (the file
     // is sorted): a node entirely outside that interval holds none of them.
@@ -79,7 +88,9 @@ class PointIndex {
       const std::uint32_t end = blocks_[b].first_node + blocks_[b].nodes;
       for (std::uint32_t i = blocks_[b].first_node; i < end;) {
         const Node& node = nodes_[i];
-        if (!box_meets_ball(node.box, center, radius) || node.box.hi[axis_] < axis_lo ||
+        const double lo[3] = {node.box.lo[0], node.box.lo[1], node.box.lo[2]};
+        const double hi[3] = {node.box.hi[0], node.box.hi[1], node.box.hi[2]};
+        if (!may_meet(lo, hi) || node.box.hi[axis_] < axis_lo ||
             node.box.lo[axis_] > axis_hi ||
             (exclude.axis >= 0 && node.box.lo[exclude.axis] >= exclude.lo && node.box.hi[exclude.axis] <= exclude.hi)) {
           i = node.next;
@@ -111,6 +122,19 @@ class PointIndex {
            blocks_.capacity() * sizeof(Block);
   }
 
+  // Whether the box [lo, hi] meets the closed ball (c, r). Conservative: rounding may
+  // only say "meets" when it does not.
+  static bool box_meets_ball(const double* lo, const double* hi, const double* c, double r) {
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      double d = 0;
+      if (c[k] < lo[k]) d = lo[k] - c[k];
+      else if (c[k] > hi[k]) d = c[k] - hi[k];
+      d2 += d * d;
+    }
+    return d2 <= r * r * (1 + 1e-12);
+  }
+
  private:
   // A node's box in floats rounded outward: it contains the points' box, so every
   // test against it stays conservative, in 36 bytes a node instead of 64 (small
@@ -129,18 +153,6 @@ class PointIndex {
   struct Block {
     std::uint32_t first_node, nodes;
   };
-  // Conservative: rounding may only say "meets" when it does not.
-  static bool box_meets_ball(const Box& b, const double* c, double r) {
-    double d2 = 0;
-    for (int k = 0; k < 3; ++k) {
-      double d = 0;
-      if (c[k] < b.lo[k]) d = b.lo[k] - c[k];
-      else if (c[k] > b.hi[k]) d = c[k] - b.hi[k];
-      d2 += d * d;
-    }
-    return d2 <= r * r * (1 + 1e-12);
-  }
-
   const SortedPoint* points_ = nullptr;
   int axis_ = 0;
   std::uint32_t block_points_ = kMinBlockPoints;

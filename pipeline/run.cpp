@@ -117,12 +117,12 @@ class FrameCutter {
 // axis; its window adds the two axis buffers, B = 2 w n / E_axis points for the whole
 // cross-section. Cut into k zones (strips along strip_axis, of width E_strip / k),
 // each zone's window is the share 1/k + 2 w / E_strip of the segment's window:
-//   window(k) = (S + B) min(1, 1/k + 2w/E_strip [k > 1]) + hull,   zone Z = S / k.
+//   window(k) = (S + B) min(1, 1/k + 2w/E_strip [k > 1]),   zone Z = S / k.
 // Memory: `threads` zones in flight, each window at kWindowBytesPerPoint, and the
 // output of one segment plus threads - 1 zones at kOutputBytesPerPoint:
 //   threads window(k) 480 + (k + threads - 1) Z 125 <= available,
 // available = 75% of what the fixed overhead and the writer's queue leave of the
-// budget, less the point index. The other 25% holds the mapped pages of the sorted file that the
+// budget, less the point indexes (and the hull's points). The other 25% holds the mapped pages of the sorted file that the
 // queries read (SortedView::query_page_bytes: a tenth of the budget, up to two tenths
 // for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
 // MiB sampled, with 961 MiB of file pages at the worst moment.)
@@ -137,7 +137,9 @@ struct ZonePlan {
 };
 
 ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
-  const double index_bytes = double(index.memory_bytes());
+  const double index_bytes =
+      double(index.memory_bytes()) + double(view.hull_points.capacity() * sizeof(SortedPoint)) +
+      (view.hull_index ? double(view.hull_index->memory_bytes()) : 0.0);
   double extent[3], volume = 1;
   for (int k = 0; k < 3; ++k) {
     extent[k] = view.bbox_max[k] - view.bbox_min[k];
@@ -156,13 +158,12 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   const double w = plan.buffer_width;
   const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[view.axis], 1e-300));
   const double strip_extent = std::max(extent[strip_axis(view)], 1e-300);
-  const double hull = double(view.hull_labels.size());
   const double t = double(threads);
   const double available =
       0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - writer_queue_bytes(threads, o.memory_bytes)) - index_bytes;
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
-    const double window = (segment_points + axis_buffers) * share(k) + hull;
+    const double window = (segment_points + axis_buffers) * share(k);
     const double zone = segment_points / k;
     const double memory =
         t * window * kWindowBytesPerPoint + (double(k) + t - 1) * zone * kOutputBytesPerPoint;
@@ -187,8 +188,8 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   if (plan.segment_points == 0)
     throw UsageError("--memory " + std::to_string(o.memory_bytes >> 20) +
                      "M is too small for this input: each window needs about " +
-                     std::to_string(std::uint64_t((axis_buffers + hull) * kWindowBytesPerPoint) >> 20) +
-                     "M for its buffers and hull alone");
+                     std::to_string(std::uint64_t(axis_buffers * kWindowBytesPerPoint) >> 20) +
+                     "M for its buffers alone");
   return plan;
 }
 
@@ -449,11 +450,23 @@ RunSummary Job::run() {
     std::sort(hull.begin(), hull.end());  // candidates are sorted by label: so are these
     for (std::uint32_t i : hull) {
       view.hull_labels.push_back(sorted.hull_labels[i]);
-      view.hull_xyz.insert(view.hull_xyz.end(), &xyz[3 * std::size_t(i)], &xyz[3 * std::size_t(i) + 3]);
+      SortedPoint p;
+      std::copy_n(&xyz[3 * std::size_t(i)], 3, p.xyz);
+      p.original = sorted.hull_labels[i];
+      view.hull_points.push_back(p);
     }
     release_mapped_pages(mapping.data(), mapping.size());
     summary.hull_vertices = view.hull_labels.size();
   }
+  PointIndex hull_index;
+  if (!view.hull_points.empty()) {
+    const std::uint64_t h = view.hull_points.size();
+    double volume = 1;
+    for (int k = 0; k < 3; ++k) volume *= view.bbox_max[k] - view.bbox_min[k];
+    hull_index.build(view.hull_points.data(), h, view.axis,
+                     PointIndex::block_points_for(h, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume));
+  }
+  view.hull_index = &hull_index;
 
   // ---- segment plan from the budget ----
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();

@@ -4,14 +4,16 @@
 // minimum vertex filter.
 //
 // Segment s owns the labels [zone_begin, zone_end) (its insertion zone). Its window
-// holds those points, buffer points on each side along the sort axis, and the global
-// convex hull's vertices (so the window's hull is the global hull). A zone vertex is
-// *final* when every tet of its star is Delaunay with respect to all points:
+// holds those points and buffer points on each side along the sort axis. A zone
+// vertex is *final* when every tet of its star is Delaunay with respect to all points:
 //   (a) range test: the tet's circumball, clipped to the global bounding box in the
 //       other two axes, lies strictly between the last missing point on the left and
-//       the first on the right along the axis (with rigorous error margins), or
+//       the first on the right along the axis (with rigorous error margins); for an
+//       infinite tet (a hull facet of the window), the half-space beyond the facet
+//       misses the parts of the bounding box where missing points lie; or
 //   (b) emptiness query: no missing point is in conflict with the tet under the
-//       kernel's own exact, perturbed predicates.
+//       kernel's own exact, perturbed predicates (for a hull facet, it suffices to
+//       search the global hull's boundary points: see check_hull_facet).
 // A query that finds points inserts the deepest one into the window, and the zone's
 // unfinished vertices are checked again (a final vertex stays final: its tets have
 // empty balls, so no insertion touches them). Then each finite tet of a zone vertex's
@@ -36,8 +38,13 @@ struct SortedView {
   std::uint64_t count = 0;
   int axis = 0;
   double bbox_min[3], bbox_max[3];
-  std::vector<std::uint64_t> hull_labels;  // sorted
-  std::vector<double> hull_xyz;            // their coordinates, 3 per label
+  // Every point on the boundary of the convex hull (hull.hpp), by increasing label:
+  // their labels, and records of them (coordinates, and the label in `original`)
+  // with a spatial index of their own. A window's hull facet is a facet of the global
+  // hull exactly when none of these points conflicts with it.
+  std::vector<std::uint64_t> hull_labels;
+  std::vector<SortedPoint> hull_points;
+  const PointIndex* hull_index = nullptr;  // over hull_points
   const PointIndex* index = nullptr;       // over points[0, count)
   // When `points` is a read-only file mapping: the mapped bytes a worker's emptiness
   // queries may keep resident before handing them back, up to twice this for a
