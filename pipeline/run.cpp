@@ -48,11 +48,13 @@ constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
 // Frames the writer thread compresses at once (on as many threads), and as many wait
 // in its queue. A segment's tets reach the writer in one burst, after its last zone;
 // with one encoder the burst kept the segment loop waiting with a core idle (10^7
-// uniform, 2 threads: the CPU at ~120% for a second after each segment). Capped: each
-// encoder holds ~18 MiB of frames and scratch (writer_queue_bytes), one per 512 MiB of
-// budget at most, and between bursts the encoders idle.
-int writer_encoders(int threads, std::uint64_t memory_bytes) {
-  return std::clamp(std::min<int>(threads, int(memory_bytes >> 29)), 1, 4);
+// uniform, 2 threads: the CPU at ~120% for a second after each segment). As many as
+// the machine has cores, whatever --threads (with one worker thread, one encoder left
+// a core idle in every burst: 10^8 points waited 77 s of 629 s for the writer).
+// Capped: each encoder holds ~18 MiB of frames and scratch (writer_queue_bytes), one
+// per 512 MiB of budget at most, and between bursts the encoders idle.
+int writer_encoders(std::uint64_t memory_bytes) {
+  return std::clamp(std::min<int>(omp_get_num_procs(), int(memory_bytes >> 29)), 1, 4);
 }
 
 
@@ -67,8 +69,8 @@ constexpr std::size_t kFrameTets = std::size_t(1) << 18;
 // compressed and the one being filled, each about kFrameTets tets of 4 8-byte labels
 // (a frame ends where its last minimum label's group does: a few tets more).
 // Each encoder has its scratch besides (about 40 bytes per tet, io/tet_writer.hpp).
-double writer_queue_bytes(int threads, std::uint64_t memory_bytes) {
-  const double encoders = writer_encoders(threads, memory_bytes);
+double writer_queue_bytes(std::uint64_t memory_bytes) {
+  const double encoders = writer_encoders(memory_bytes);
   return ((2 * encoders + 1) * 32 + encoders * 40) * kFrameTets * 1.05;
 }
 
@@ -160,7 +162,7 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   const double strip_extent = std::max(extent[strip_axis(view)], 1e-300);
   const double t = double(threads);
   const double available =
-      0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - writer_queue_bytes(threads, o.memory_bytes)) - index_bytes;
+      0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - writer_queue_bytes(o.memory_bytes)) - index_bytes;
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k);
@@ -492,7 +494,7 @@ RunSummary Job::run() {
                         {"duplicates_merged", sorted.duplicates}}
                        .dump();
   io::TetWriterOptions writer_options;
-  writer_options.threads = writer_encoders(threads, options_.memory_bytes);  // the writer stage's own team
+  writer_options.threads = writer_encoders(options_.memory_bytes);  // the writer stage's own team
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
   writer_options.frame_tets = 2 * kFrameTets;
   writer_options.keep_partial = checkpoint_ != nullptr;
@@ -531,7 +533,7 @@ RunSummary Job::run() {
   // Stage 5 on its own thread behind a bounded queue of frames: compression and I/O
   // overlap the segments. Declared after the writer, so destroyed (cancelled, joined)
   // before it on the way out of a failure.
-  const std::size_t encoders = std::size_t(writer_encoders(threads, options_.memory_bytes));
+  const std::size_t encoders = std::size_t(writer_encoders(options_.memory_bytes));
   AsyncTetWriter writer(*writer_holder, encoders, encoders);
   if (!state_.contains("output")) {
     // The points section, in label order, on the writer's thread while the first
