@@ -12,15 +12,6 @@ namespace tetstream::pipeline {
 
 namespace {
 
-// Direction d of the 26 (dx, dy, dz) in {-1,0,1}^3 \ {0}, enumerated with dx slowest:
-// the index of the axis direction (sign along axis k, zero elsewhere).
-int axis_direction(int k, int sign) {
-  int d[3] = {0, 0, 0};
-  d[k] = sign;
-  const int index = (d[0] + 1) * 9 + (d[1] + 1) * 3 + (d[2] + 1);
-  return index > 13 ? index - 1 : index;  // (0,0,0), index 13, is not a direction
-}
-
 // An axis-aligned box strictly inside the extremes' hull (all eight corners are,
 // checked exactly; the box is their hull): a point in it needs no facet test. On a
 // cube or a ball most points are in it; on a thin shell none are, and it costs
@@ -102,12 +93,17 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
       if (dot > best_dot[d]) best_dot[d] = dot, best[d] = std::uint32_t(i);
     }
   }
-  double lo[3], hi[3], extent[3];  // the points' box, and a bound on |p - q| per axis
-  for (int k = 0; k < 3; ++k) {
-    lo[k] = -best_dot[axis_direction(k, -1)];
-    hi[k] = best_dot[axis_direction(k, +1)];
-    extent[k] = (hi[k] - lo[k]) * (1 + 0x1p-50);
+  // The points' box, from the extremes along the axes (their dot products are the
+  // coordinates, exactly), and a bound on |p_k - q_k| for the facet planes.
+  double lo[3], hi[3], extent[3];
+  for (int d = 0; d < nd; ++d) {
+    const int nonzero = std::abs(dir[d][0]) + std::abs(dir[d][1]) + std::abs(dir[d][2]);
+    if (nonzero != 1) continue;
+    const int k = dir[d][0] != 0 ? 0 : dir[d][1] != 0 ? 1 : 2;
+    if (dir[d][k] > 0) hi[k] = best_dot[d];
+    else lo[k] = -best_dot[d];
   }
+  for (int k = 0; k < 3; ++k) extent[k] = (hi[k] - lo[k]) * (1 + 0x1p-50);
   std::vector<std::uint32_t> extreme(best, best + 26);
   std::sort(extreme.begin(), extreme.end());
   extreme.erase(std::unique(extreme.begin(), extreme.end()), extreme.end());

@@ -428,14 +428,17 @@ RunSummary Job::run() {
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
   view.sample_keys(/*release_file_pages=*/true);
-  PointIndex index;
-  {
+  // An index over sorted records spread in the job's bounding box (its blocks' size
+  // from their count in that box).
+  auto build_index = [&view](PointIndex& index, const SortedPoint* points, std::uint64_t count, bool release_pages) {
     double volume = 1;
     for (int k = 0; k < 3; ++k) volume *= view.bbox_max[k] - view.bbox_min[k];
-    index.build(view.points, view.count, view.axis,
-                PointIndex::block_points_for(view.count, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume),
-                /*release_file_pages=*/true);
-  }
+    index.build(points, count, view.axis,
+                PointIndex::block_points_for(count, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume),
+                release_pages);
+  };
+  PointIndex index;
+  build_index(index, view.points, view.count, /*release_pages=*/true);
   view.index = &index;
 
   // The global hull: the hull of the runs' candidates.
@@ -451,23 +454,16 @@ RunSummary Job::run() {
     std::vector<std::uint32_t> hull = hull_vertex_candidates(xyz.data(), sorted.hull_labels.size());
     std::sort(hull.begin(), hull.end());  // candidates are sorted by label: so are these
     for (std::uint32_t i : hull) {
-      view.hull_labels.push_back(sorted.hull_labels[i]);
       SortedPoint p;
       std::copy_n(&xyz[3 * std::size_t(i)], 3, p.xyz);
       p.original = sorted.hull_labels[i];
       view.hull_points.push_back(p);
     }
     release_mapped_pages(mapping.data(), mapping.size());
-    summary.hull_vertices = view.hull_labels.size();
+    summary.hull_vertices = view.hull_points.size();
   }
   PointIndex hull_index;
-  if (!view.hull_points.empty()) {
-    const std::uint64_t h = view.hull_points.size();
-    double volume = 1;
-    for (int k = 0; k < 3; ++k) volume *= view.bbox_max[k] - view.bbox_min[k];
-    hull_index.build(view.hull_points.data(), h, view.axis,
-                     PointIndex::block_points_for(h, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume));
-  }
+  if (!view.hull_points.empty()) build_index(hull_index, view.hull_points.data(), view.hull_points.size(), false);
   view.hull_index = &hull_index;
 
   // ---- segment plan from the budget ----
@@ -537,7 +533,8 @@ RunSummary Job::run() {
   AsyncTetWriter writer(*writer_holder, encoders, encoders);
   if (!state_.contains("output")) {
     // The points section, in label order, on the writer's thread while the first
-    // zones are triangulated (one pass over the sorted file: 10^8 points took ~10 s).
+    // zones are triangulated (a pass over the whole sorted file, which used to hold
+    // the first segment back).
     writer.add_task([&view](io::TetWriter& w) {
       constexpr std::size_t kChunk = 1 << 16;
       std::vector<double> xyz(3 * kChunk);
@@ -574,12 +571,17 @@ RunSummary Job::run() {
     state_["output"] = {{"committed", 0},         {"next_label", next_label}, {"pending_file", pending_file},
                         {"pending_tets", p.size() / 4}, {"segments", segments_done}, {"counters", counters_json(work, zone_points_done)}};
     const std::string old_path = old_pending.empty() || old_pending == pending_file ? "" : checkpoint_->path(old_pending);
-    writer.add_checkpoint([this, state = state_, old_path](std::uint64_t committed) mutable {
+    auto persist = [this, old_path](json state, std::uint64_t committed) {
       state["output"]["committed"] = committed;
       checkpoint_->save(std::move(state));
       if (!old_path.empty()) remove_file(old_path);
-    });
-    if (wait) state_["output"]["committed"] = writer.checkpoint();  // drains: the value just saved
+    };
+    if (wait) {
+      state_["output"]["committed"] = writer.checkpoint();  // drains first
+      persist(state_, state_["output"]["committed"].get<std::uint64_t>());
+    } else {
+      writer.add_checkpoint([persist, state = state_](std::uint64_t committed) { persist(state, committed); });
+    }
   };
   if (!state_.contains("output")) commit(0, false);
 
@@ -602,7 +604,7 @@ RunSummary Job::run() {
   spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
                plans.size(), plans.empty() ? 0 : plans[0].zone_end - plans[0].zone_begin, units.size(),
                plans.empty() ? 0 : (plans[0].zone_end - plans[0].zone_begin) / plans[0].zones.size(), buffer_width,
-               options_.buffer_spacings, view.hull_labels.size());
+               options_.buffer_spacings, view.hull_points.size());
 
   // ---- stages 2-5: zones, `threads` at a time, written in segment order ----
   // Each thread triangulates whole zones (they are independent given the sorted

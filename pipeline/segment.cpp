@@ -72,6 +72,20 @@ void clipped_extent(const ConflictBall& b, const SortedView& view, int axis, dou
   hi += std::fabs(hi) * 1e-15;
 }
 
+// The best-scored of the first few conflicting points a query finds (a lower score
+// is a better repair). A region that holds points (a tet of the window's ragged edge)
+// can hold thousands: the query stops after a few conflicts. Any conflicting point is
+// a correct repair; the best of a sample converges nearly as fast.
+struct BestConflict {
+  static constexpr std::uint64_t kEnough = 16;
+  std::uint64_t found = 0, label = std::numeric_limits<std::uint64_t>::max();  // max: none
+  double score = std::numeric_limits<double>::infinity();
+  void offer(std::uint64_t l, double s) {
+    if (found++ == 0 || s < score) score = s, label = l;
+  }
+  bool enough() const { return found >= kEnough; }
+};
+
 }  // namespace
 
 // The state of one thread's zone triangulations. It lives across zones: the kernel
@@ -146,10 +160,14 @@ class SegmentWorker {
   std::uint64_t touched_ = 0, touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
   // Whether the point with this label, inside the window's label range, is in the
   // strip's window (always, without strips).
-  bool in_strip_window(std::uint64_t label) const {
-    if (strip_.axis < 0) return true;
-    const double c = view_.points[label].xyz[strip_.axis];
-    return c >= strip_.window_lo && c <= strip_.window_hi;
+  bool in_strip_window(std::uint64_t label) const { return in_strip_window(view_.points[label].xyz); }
+  bool in_strip_window(const double* xyz) const {
+    return strip_.axis < 0 || (xyz[strip_.axis] >= strip_.window_lo && xyz[strip_.axis] <= strip_.window_hi);
+  }
+  // Whether the point (label, xyz) is in the window proper: its label range, and the
+  // strip's window inside it.
+  bool in_window(std::uint64_t label, const double* xyz) const {
+    return label >= plan_->window_begin && label < plan_->window_end && in_strip_window(xyz);
   }
 
   static constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
@@ -242,13 +260,11 @@ void SegmentWorker::load_window(bool with_hull) {
   // vertices. The hull's coordinates come from the view, not the file: a shell's
   // hull has points all over the file, and reading them mapped every page of it.
   extra_.clear();
-  std::vector<std::size_t>& hull_extra = hull_extra_;  // indices into view_.hull_labels
+  std::vector<std::size_t>& hull_extra = hull_extra_;  // indices into view_.hull_points
   hull_extra.clear();
-  for (std::size_t i = 0; with_hull && i < view_.hull_labels.size(); ++i) {
-    const std::uint64_t h = view_.hull_labels[i];
-    const double* p = view_.hull_points[i].xyz;
-    const bool in_strip = strip_.axis < 0 || (p[strip_.axis] >= strip_.window_lo && p[strip_.axis] <= strip_.window_hi);
-    if (h < w0 || h >= w1 || !in_strip) extra_.push_back(h), hull_extra.push_back(i);
+  for (std::size_t i = 0; with_hull && i < view_.hull_points.size(); ++i) {
+    const SortedPoint& h = view_.hull_points[i];
+    if (!in_window(h.original, h.xyz)) extra_.push_back(h.original), hull_extra.push_back(i);
   }
   xyz_.clear();
   labels_.clear();
@@ -269,7 +285,7 @@ void SegmentWorker::load_window(bool with_hull) {
   }
   for (std::size_t i : hull_extra) {
     xyz_.insert(xyz_.end(), view_.hull_points[i].xyz, view_.hull_points[i].xyz + 3);
-    labels_.push_back(view_.hull_labels[i]);
+    labels_.push_back(view_.hull_points[i].original);
   }
   const std::size_t total = labels_.size();
   // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
@@ -293,21 +309,12 @@ template <class MayMeet, class Conflict>
 std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&& conflict, double lo, double hi,
                                                    bool outside_clear, bool strip_clear) {
   ++stats_.queries;
-  std::uint64_t best = kNone;
-  double best_score = std::numeric_limits<double>::infinity();
-  // The query proves a region empty by visiting all its candidates, but a region that
-  // holds points (a tet of the window's ragged edge) can hold thousands: stop after
-  // a few conflicts and insert the best of those. Any conflicting point is a correct
-  // repair; the best of a sample converges nearly as fast.
-  constexpr std::uint64_t kEnoughConflicts = 16;
-  std::uint64_t found = 0;
+  BestConflict best;
   auto visit = [&](std::uint64_t label) {
     touch(label);
     if (std::binary_search(extra_.begin(), extra_.end(), label)) return;  // in the window already
     const double score = conflict(label, view_.points[label].xyz);
-    if (std::isnan(score)) return;
-    ++found;
-    if (score < best_score || best == kNone) best_score = score, best = label;
+    if (!std::isnan(score)) best.offer(label, score);
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
   // each side of the window, searched through the spatial index; and, for a strip,
@@ -319,7 +326,7 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
   // stay seen.
   auto enough = [&] {
     if (view_.query_page_bytes > 0 && touched_ * kBlockBytes >= 2 * view_.query_page_bytes) hand_back_touched_pages();
-    return found >= kEnoughConflicts;
+    return best.enough();
   };
   // The searches and the index read the records at both ends of each label range:
   // those pages are the query's too.
@@ -344,7 +351,7 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
            ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
   }
   release_touched_pages(false);
-  return best;
+  return best.label;
 }
 
 void SegmentWorker::release_touched_pages(bool always) {
@@ -482,30 +489,25 @@ bool SegmentWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repair
   const std::uint64_t la = dt_.label(f[0]), lb = dt_.label(f[1]), lc = dt_.label(f[2]);
   double centroid[3];
   for (int k = 0; k < 3; ++k) centroid[k] = (a[k] + b[k] + c[k]) / 3;
-  constexpr std::uint64_t kEnoughConflicts = 16;
-  std::uint64_t found = 0, nearest = kNone;
-  double nearest_d2 = std::numeric_limits<double>::infinity();
+  BestConflict nearest;
   auto visit = [&](std::uint64_t i) {
     const SortedPoint& h = view_.hull_points[i];
     const std::uint64_t label = h.original;
-    const bool in_window = label >= w0 && label < w1 &&
-                           (strip_.axis < 0 || (h.xyz[strip_.axis] >= strip_.window_lo && h.xyz[strip_.axis] <= strip_.window_hi));
-    if (in_window || std::binary_search(extra_.begin(), extra_.end(), label)) return;
+    if (in_window(label, h.xyz) || std::binary_search(extra_.begin(), extra_.end(), label)) return;
     ++stats_.query_points;
     if (core::infinite_conflict_sos(a, b, c, h.xyz, la, lb, lc, label) <= 0) return;
-    ++found;
     double d2 = 0;
     for (int k = 0; k < 3; ++k) d2 += (h.xyz[k] - centroid[k]) * (h.xyz[k] - centroid[k]);
-    if (d2 < nearest_d2 || nearest == kNone) nearest_d2 = d2, nearest = label;
+    nearest.offer(label, d2);
   };
   view_.hull_index->for_each_candidate_where(
       [&](const double* box_lo, const double* box_hi) { return plane.box_may_reach(box_lo, box_hi); }, 0,
-      view_.hull_points.size(), visit, [&] { return found >= kEnoughConflicts; });
-  if (nearest == kNone) {
+      view_.hull_points.size(), visit, [&] { return nearest.enough(); });
+  if (nearest.found == 0) {
     proved_empty_.insert(key_a, key_b);
     return true;
   }
-  repairs.push_back(nearest);
+  repairs.push_back(nearest.label);
   return false;
 }
 

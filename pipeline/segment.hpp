@@ -39,10 +39,9 @@ struct SortedView {
   int axis = 0;
   double bbox_min[3], bbox_max[3];
   // Every point on the boundary of the convex hull (hull.hpp), by increasing label:
-  // their labels, and records of them (coordinates, and the label in `original`)
-  // with a spatial index of their own. A window's hull facet is a facet of the global
-  // hull exactly when none of these points conflicts with it.
-  std::vector<std::uint64_t> hull_labels;
+  // its coordinates, and its label in `original`, with a spatial index of their own.
+  // A window's hull facet is a facet of the global hull exactly when none of these
+  // points conflicts with it.
   std::vector<SortedPoint> hull_points;
   const PointIndex* hull_index = nullptr;  // over hull_points
   const PointIndex* index = nullptr;       // over points[0, count)
