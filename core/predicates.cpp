@@ -440,8 +440,8 @@ bool circumcentre_offset_int(const double* const* p, int low, double x[3]) {
 //   N_k: |u|^2 has n = 5, (v x w)_k n = 4, product 10, two sums: n = 12, and
 //        P <= 3 * 3M^2 * 2M^2: |dN| <= 18 gamma_12 M^4 / (1-u)^4.
 // For x = N/D and x~ = N~/D~ (computed N, D): x - x~ = x dD/D~ - dN/D~, so with
-// r = |dD|/|D~| < 1: |x - x~| <= (|x~| r + |dN|/|D~|) / (1 - r). The division adds
-// u|x~|, the final a + X adds u|center|. The radius |X| has relative error
+// r = |dD|/|D~| < 1: |x - x~| <= (|x~| r + |dN|/|D~|) / (1 - r). Multiplying by the
+// rounded 1/D~ adds at most 3u|x~|, the final a + X adds u|center|. The radius |X| has relative error
 // <= gamma_3 / 2 + u < 4u, and |sqrt(r2*) - |X|| <= |x* - X|_2 <= sqrt(3) max_k
 // |x*_k - X_k|. The bound itself is evaluated in floating point with a few dozen
 // roundings, covered by the final factor (1 + 2^-20), which also absorbs underflow
@@ -507,13 +507,18 @@ Circumsphere circumsphere(const double* a, const double* b, const double* c, con
     const double err_n = 18 * gamma12 * m3 * m / ((1 - u) * (1 - u) * (1 - u) * (1 - u));
     const double abs_d = std::fabs(det2);
     if (err_d <= 0.5 * abs_d) {
-      const double ratio = err_d / abs_d;
-      const double x[3] = {(uu * vwx + vv * wux + ww * uvx) / det2, (uu * vwy + vv * wuy + ww * uvy) / det2,
-                           (uu * vwz + vv * wuz + ww * uvz) / det2};
+      // One division: x_k = N_k * (1 / det2) rounds twice, |fl - N_k / det2| <=
+      // (2u + u^2) |N_k / det2|, covered by 3u |x_k| and |N_k / det2| <= (1 + 3u) |x_k|.
+      // And 1 / (1 - ratio) <= 1 + 2 ratio for ratio <= 1/2. (The pipeline computes one
+      // circumsphere per tet of every window: one division instead of six.)
+      const double inv = 1.0 / det2, inv_abs = std::fabs(inv);
+      const double ratio = err_d * inv_abs;
+      const double x[3] = {(uu * vwx + vv * wux + ww * uvx) * inv, (uu * vwy + vv * wuy + ww * uvy) * inv,
+                           (uu * vwz + vv * wuz + ww * uvz) * inv};
       double e[3];
       for (int k = 0; k < 3; ++k) {
-        const double ax = std::fabs(x[k]) * (1 + 2 * u);  // >= |x~_k|
-        e[k] = (ax * ratio + err_n / abs_d) / (1 - ratio) + 2 * u * std::fabs(x[k]);
+        const double ax = std::fabs(x[k]) * (1 + 3 * u);  // >= |N_k / det2|
+        e[k] = (ax * ratio + err_n * inv_abs) * (1 + 2 * ratio) + 3 * u * std::fabs(x[k]);
       }
       if (std::max({e[0], e[1], e[2]}) <= 0x1p-36 * m) {
         finish(x, e);

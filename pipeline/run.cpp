@@ -76,40 +76,42 @@ double writer_queue_bytes(std::uint64_t memory_bytes) {
 
 class FrameCutter {
  public:
-  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer) {}
+  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer), frame_(writer.take_buffer()) {}
 
-  // Appends `count` tets, in increasing minimum-label order (a group may go on in the
-  // next call).
-  void add(const std::uint64_t* tets, std::size_t count) {
-    pending_.insert(pending_.end(), tets, tets + 4 * count);
-    std::size_t begin = 0;
-    const std::size_t n = pending_.size() / 4;
-    while (n - begin > kFrameTets) {
-      std::size_t cut = begin + kFrameTets;
-      while (cut < n && min_label(cut) == min_label(cut - 1)) ++cut;
-      if (cut == n) break;  // the group may continue in the next batch
-      write(begin, cut);
-      begin = cut;
+  // Appends the tets [begin, end) of a zone's output, translated to labels straight
+  // into the frame being filled (they come in increasing minimum-label order; a group
+  // may go on in the next call). A frame is handed to the writer, not copied, at the
+  // first change of minimum label after kFrameTets tets.
+  void add(const ZoneTets& part, std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const std::uint64_t q[4] = {part.label(i, 0), part.label(i, 1), part.label(i, 2), part.label(i, 3)};
+      const std::uint64_t m = tet_min_label(q);
+      if (frame_.size() >= 4 * kFrameTets && m != last_min_) write();
+      frame_.insert(frame_.end(), q, q + 4);
+      last_min_ = m;
     }
-    pending_.erase(pending_.begin(), pending_.begin() + std::ptrdiff_t(4 * begin));
   }
   void flush() {
-    if (!pending_.empty()) write(0, pending_.size() / 4);
-    pending_.clear();
+    if (!frame_.empty()) write();
   }
   // The tets of the frame being filled: a checkpoint saves them, a resumed job
   // restores them, and its frames come out as an uninterrupted job's.
-  const std::vector<std::uint64_t>& pending() const { return pending_; }
-  void restore(std::vector<std::uint64_t> pending) { pending_ = std::move(pending); }
+  const std::vector<std::uint64_t>& pending() const { return frame_; }
+  void restore(std::vector<std::uint64_t> pending) {
+    frame_ = std::move(pending);
+    if (!frame_.empty()) last_min_ = tet_min_label(&frame_[frame_.size() - 4]);
+  }
 
  private:
-  std::uint64_t min_label(std::size_t t) const { return tet_min_label(&pending_[4 * t]); }
-  void write(std::size_t begin, std::size_t end) {
-    writer_.add_tets(std::span<const std::uint64_t>(pending_.data() + 4 * begin, 4 * (end - begin)));
+  void write() {
+    writer_.add_tets(std::move(frame_));
+    frame_ = writer_.take_buffer();
+    frame_.reserve(4 * kFrameTets + 4096);
   }
 
   AsyncTetWriter& writer_;
-  std::vector<std::uint64_t> pending_;
+  std::vector<std::uint64_t> frame_;
+  std::uint64_t last_min_ = ~std::uint64_t(0);
 };
 
 // The segment size and the zones per segment for the budget.
@@ -662,7 +664,7 @@ RunSummary Job::run() {
           try {
             const auto t0 = Clock::now();
             maybe_inject_fault("write", segments_done);
-            merge_by_min_label(parts, [&](const std::uint64_t* t, std::size_t n) { cutter.add(t, n); });
+            merge_by_min_label(parts, [&](const ZoneTets& part, std::size_t b, std::size_t e) { cutter.add(part, b, e); });
             work += segment_work;
             zone_points_done += points;
             record_work(work, zone_points_done, summary);

@@ -172,6 +172,10 @@ class SegmentWorker {
 
   static constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
   double extent_[3];
+  // Along the sort axis, the missing points of the zone being triangulated have
+  // coordinates <= clear_lo_ (left of the window's label range) or >= clear_hi_
+  // (right of it); infinite when there are none on that side.
+  double clear_lo_ = 0, clear_hi_ = 0;
 
   const SortedView& view_;
   OutputPool* const pool_;
@@ -394,13 +398,27 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
   bool outside_clear = false, strip_clear = strip_.axis < 0;
   if (ball.valid) {
+    // Most balls lie well inside the window: their whole (unclipped) extent along
+    // each axis clears the missing points, with no clipping to the bounding box
+    // (clipped_extent was 2.3% of a 10^7-point run's samples, a sixth of the checks').
+    // The widening by 1e-15 covers the rounding of c -/+ r.
+    {
+      const double r = ball.radius;
+      const double c = ball.center[view_.axis];
+      const double a_lo = (c - r) - std::fabs(c - r) * 1e-15, a_hi = (c + r) + std::fabs(c + r) * 1e-15;
+      bool clear = a_lo > clear_lo_ && a_hi < clear_hi_;
+      if (clear && strip_.axis >= 0) {
+        const double cs = ball.center[strip_.axis];
+        const double s_lo = (cs - r) - std::fabs(cs - r) * 1e-15, s_hi = (cs + r) + std::fabs(cs + r) * 1e-15;
+        clear = s_lo >= strip_.window_lo && s_hi <= strip_.window_hi;
+      }
+      if (clear) return true;
+    }
     clipped_extent(ball, view_, view_.axis, lo, hi);
     if (lo > hi) return true;
     // Missing points on the left have axis coordinates <= key(window_begin - 1), on
     // the right >= key(window_end).
-    const bool left_clear = plan_->window_begin == 0 || lo > view_.key(plan_->window_begin - 1);
-    const bool right_clear = plan_->window_end == view_.count || hi < view_.key(plan_->window_end);
-    outside_clear = left_clear && right_clear;
+    outside_clear = lo > clear_lo_ && hi < clear_hi_;
     if (!strip_clear) {
       // Missing points of the window's range lie outside [window_lo, window_hi]
       // along the strip's axis.
@@ -635,6 +653,8 @@ void SegmentWorker::emit(ZoneTets& out) {
 SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip, ZoneTets& out) {
   plan_ = &plan;
   strip_ = strip;
+  clear_lo_ = plan.window_begin == 0 ? -std::numeric_limits<double>::infinity() : view_.key(plan.window_begin - 1);
+  clear_hi_ = plan.window_end == view_.count ? std::numeric_limits<double>::infinity() : view_.key(plan.window_end);
   stats_ = SegmentStats{};
   pending_.clear();
   proved_empty_.clear();

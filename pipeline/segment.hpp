@@ -211,16 +211,14 @@ inline std::uint64_t tet_min_label(const std::uint64_t* q) {
 }
 
 // Merges the outputs of a segment's zones into one stream grouped by minimum label in
-// increasing order: calls sink(tets, count) with runs of whole groups, as labels (4 a
-// tet), at most kMergeChunk tets a call.
-inline constexpr std::size_t kMergeChunk = 1 << 14;
+// increasing order: calls sink(part, begin, end) for each run [begin, end) of whole
+// groups of one part (a group is one label's tets, and a label is in one zone), in
+// stream order. The sink reads the labels itself: no intermediate copy.
 template <class Sink>
 void merge_by_min_label(const std::vector<ZoneTets>& parts, Sink&& sink) {
   constexpr std::uint64_t kDone = ~std::uint64_t(0);
   std::vector<std::size_t> at(parts.size(), 0);  // next tet of each part
   auto next_label = [&](std::size_t p) { return at[p] < parts[p].size() ? parts[p].min_label(at[p]) : kDone; };
-  std::vector<std::uint64_t> chunk;
-  chunk.reserve(4 * kMergeChunk);
   for (;;) {
     // The part with the smallest next label, and the smallest next label of the others.
     std::size_t best = 0;
@@ -231,14 +229,12 @@ void merge_by_min_label(const std::vector<ZoneTets>& parts, Sink&& sink) {
       else limit = std::min(limit, l);
     }
     if (best_label == kDone) return;
-    // That part's run of groups below every other part's next label, translated to
-    // labels a chunk at a time.
+    // That part's run of groups below every other part's next label.
     const ZoneTets& part = parts[best];
-    for (std::size_t& i = at[best]; i < part.size() && part.min_label(i) < limit; ++i) {
-      for (int k = 0; k < 4; ++k) chunk.push_back(part.label(i, k));
-      if (chunk.size() == 4 * kMergeChunk) sink(static_cast<const std::uint64_t*>(chunk.data()), kMergeChunk), chunk.clear();
-    }
-    if (!chunk.empty()) sink(static_cast<const std::uint64_t*>(chunk.data()), chunk.size() / 4), chunk.clear();
+    const std::size_t begin = at[best];
+    std::size_t& i = at[best];
+    while (i < part.size() && part.min_label(i) < limit) ++i;
+    sink(part, begin, i);
   }
 }
 
