@@ -494,6 +494,19 @@ void Delaunay::star(VertexId v, std::vector<TetId>& out) const {
   for (std::size_t i = first; i < out.size(); ++i) marks_.clear(out[i]);
 }
 
+bool Delaunay::strictly_inside(const double* p, TetId& hint) {
+  const TetId t = locate(p, hint);
+  hint = t;
+  const VertexId* v = tets_[t].v;
+  if (has_infinite_vertex(v)) return false;
+  // The walk stopped where no facet has p strictly beyond it: p is in the closed tet.
+  for (int f = 0; f < 4; ++f) {
+    const int* fv = kFacetVertex[f];
+    if (orient3d(ipoint(v[fv[0]]), ipoint(v[fv[1]]), ipoint(v[fv[2]]), p) <= 0) return false;
+  }
+  return true;
+}
+
 Circumsphere Delaunay::tet_circumsphere(TetId t) const {
   const VertexId* v = tets_[t].v;
   return circumsphere(ipoint(v[0]), ipoint(v[1]), ipoint(v[2]), ipoint(v[3]));

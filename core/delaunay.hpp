@@ -154,6 +154,12 @@ class Delaunay {
 
   Circumsphere tet_circumsphere(TetId t) const;
 
+  // Whether p lies strictly inside a finite tet, hence strictly inside the convex
+  // hull of the vertices (false on any tet's boundary, or outside the hull). Found by
+  // a walk from `hint` (kNoTet: the last tet created), which is set to the tet the
+  // walk ends in: queries in spatial order walk a few steps each.
+  bool strictly_inside(const double* p, TetId& hint);
+
   const DelaunayStats& stats() const { return stats_; }
   std::size_t memory_bytes() const;  // bytes held by the kernel's own arrays
 

@@ -2,6 +2,7 @@
 
 #include "core/delaunay.hpp"
 #include "core/predicates.hpp"
+#include "core/spatial_sort.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -69,9 +70,38 @@ std::vector<std::uint32_t> kernel_hull_vertices(const core::Delaunay& dt, const 
   return out;
 }
 
+// The survivors of the extremes' filter that are not strictly inside the hull of a
+// sample of them: a point strictly inside one of the sample's tets is strictly inside
+// conv(points). On a thin shell most points pass the extremes' filter (377,852 of a
+// piece of 419,430 on the 10^7-point ellipsoid shell), and triangulating them all
+// made the sort phase 16.3 s (8.6 s with this filter, which keeps 36,382): a
+// sample's hull hugs the shell's outer side, and a walk in its triangulation (the
+// points in Hilbert order: 3.5 steps each) costs a fraction of an insertion.
+// (The default sample, 16384 points, triangulates in a few MiB.)
+std::vector<std::uint32_t> outside_sample_hull(const double* xyz, const std::vector<std::uint32_t>& survivors,
+                                               std::size_t sample_points) {
+  const std::size_t m = survivors.size();
+  if (sample_points == 0 || m < 4 * sample_points) return survivors;
+  const std::size_t stride = m / sample_points;
+  std::vector<double> sample;
+  sample.reserve(3 * (m / stride + 1));
+  for (std::size_t i = 0; i < m; i += stride) sample.insert(sample.end(), xyz + 3 * std::size_t(survivors[i]), xyz + 3 * std::size_t(survivors[i]) + 3);
+  core::Delaunay dt;
+  if (dt.build(sample.data(), nullptr, sample.size() / 3) != core::BuildStatus::kOk) return survivors;
+  std::vector<double> sv(3 * m);
+  for (std::size_t i = 0; i < m; ++i) std::copy_n(xyz + 3 * std::size_t(survivors[i]), 3, &sv[3 * i]);
+  std::vector<std::uint8_t> keep(m, 1);
+  core::TetId hint = core::kNoTet;
+  for (const std::uint32_t i : core::hilbert_order(sv.data(), m)) keep[i] = !dt.strictly_inside(&sv[3 * std::size_t(i)], hint);
+  std::vector<std::uint32_t> out;
+  for (std::size_t i = 0; i < m; ++i)
+    if (keep[i]) out.push_back(survivors[i]);
+  return out;
+}
+
 }  // namespace
 
-std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t n) {
+std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t n, std::size_t sample_points) {
   std::vector<std::uint32_t> all(n);
   std::iota(all.begin(), all.end(), 0u);
   if (n < 4) return all;
@@ -136,6 +166,7 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   } else {
     survivors = all;
   }
+  survivors = outside_sample_hull(xyz, survivors, sample_points);
 
   std::vector<double> sv(3 * survivors.size());
   for (std::size_t i = 0; i < survivors.size(); ++i)

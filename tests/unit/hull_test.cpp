@@ -41,10 +41,15 @@ std::vector<std::array<double, 3>> coordinates(const Points& p, const std::vecto
   return out;
 }
 
+// With the default sample (the filter of a sample's hull applies from 65,536
+// survivors on) and with a sample of 64 points, so that it filters every shape here.
 void expect_same_hull(const Points& p, const std::string& what) {
-  const std::vector<std::uint32_t> got = pipeline::hull_vertex_candidates(p.data(), test::count(p));
-  EXPECT_TRUE(std::is_sorted(got.begin(), got.end())) << what;
-  EXPECT_EQ(coordinates(p, got), coordinates(p, unfiltered_hull(p))) << what;
+  const auto expected = coordinates(p, unfiltered_hull(p));
+  for (std::size_t sample : {pipeline::kHullSamplePoints, std::size_t(64)}) {
+    const std::vector<std::uint32_t> got = pipeline::hull_vertex_candidates(p.data(), test::count(p), sample);
+    EXPECT_TRUE(std::is_sorted(got.begin(), got.end())) << what << ", sample " << sample;
+    EXPECT_EQ(coordinates(p, got), expected) << what << ", sample " << sample;
+  }
 }
 
 Points shifted(Points p, double offset) {
@@ -67,6 +72,9 @@ TEST(HullCandidates, EqualTheKernelsHullOnEveryShape) {
     expect_same_hull(shifted(test::uniform_cube(20000, seed), 1e6), "offset cube seed " + std::to_string(seed));
     expect_same_hull(shifted(test::coarse(20000, seed, 30), 5e5), "offset coarse seed " + std::to_string(seed));
   }
+  // A shell large enough for the default sample's filter (most points pass the
+  // extremes' filter).
+  expect_same_hull(test::ellipsoid_shell(100000, 4), "shell 100000");
   // A grid: every point of the six faces is on the boundary.
   expect_same_hull(test::grid(20), "grid 20^3");
   expect_same_hull(test::coplanar_layers(5000, 4, 9, 8), "coplanar layers");

@@ -380,6 +380,39 @@ TEST(Kernel, StarIsTheSetOfIncidentTets) {
   }
 }
 
+// strictly_inside: true exactly for points in the open hull. The unit cube's 8
+// corners and its centre: the hull is the cube; points on its faces, edges and
+// corners, and on the internal faces of the tets (the centre's, the diagonals'), are
+// not strictly inside any tet.
+TEST(Kernel, StrictlyInsideIsTheOpenHullMinusTheTetsBoundaries) {
+  tp::Points p;
+  for (int i = 0; i < 8; ++i) tp::push(p, i & 1, i >> 1 & 1, i >> 2 & 1);
+  tp::push(p, 0.5, 0.5, 0.5);
+  Delaunay dt;
+  ASSERT_EQ(dt.build(p.data(), nullptr, 9), BuildStatus::kOk);
+  TetId hint = kNoTet;
+  auto inside = [&](double x, double y, double z) {
+    const double q[3] = {x, y, z};
+    return dt.strictly_inside(q, hint);
+  };
+  EXPECT_FALSE(inside(2, 0.5, 0.5));     // outside
+  EXPECT_FALSE(inside(-1e-300, 0.5, 0.5));
+  EXPECT_FALSE(inside(0, 0.3, 0.6));     // on a face of the hull
+  EXPECT_FALSE(inside(0.5, 0, 0));       // on an edge of the hull
+  EXPECT_FALSE(inside(1, 1, 1));         // a vertex
+  EXPECT_FALSE(inside(0.5, 0.5, 0.5));   // the inner vertex
+  // Random points of the open cube miss the tets' internal faces.
+  tp::Rng rng(5);
+  int yes = 0;
+  for (int k = 0; k < 2000; ++k) {
+    const double q[3] = {rng.uniform(0.01, 0.99), rng.uniform(0.01, 0.99), rng.uniform(0.01, 0.99)};
+    yes += dt.strictly_inside(q, hint);
+  }
+  EXPECT_EQ(yes, 2000);
+  // On the internal face (centre, (0,0,0), (0,0,1)), shared by two tets.
+  EXPECT_FALSE(inside(0.25, 0.25, 0.5));
+}
+
 TEST(Kernel, CircumsphereBoundHoldsAtTheVertices) {
   const tp::Points p = tp::uniform_ball(2000, 12);
   Delaunay dt;
