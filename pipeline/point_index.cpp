@@ -44,8 +44,8 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   for (std::int64_t b = 0; b < std::int64_t(block_count); ++b) {
     const std::uint64_t base = std::uint64_t(b) * block_points_;
     const std::uint32_t n = std::uint32_t(std::min<std::uint64_t>(block_points_, count - base));
-    std::uint16_t* o = &offsets_[base];
-    for (std::uint32_t i = 0; i < n; ++i) o[i] = std::uint16_t(i);
+    std::uint32_t* o = &offsets_[base];
+    for (std::uint32_t i = 0; i < n; ++i) o[i] = i;
     std::vector<Node>& nodes = block_nodes[std::size_t(b)];
     // Recursive median splits, written in preorder. `next` of a node is set when its
     // subtree is complete: the build recurses on the left half, then the right.
@@ -68,7 +68,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
         for (int k = 1; k < 3; ++k)
           if (hi[k] - lo[k] > hi[widest] - lo[widest]) widest = k;
         const std::uint32_t mid = begin + (end - begin) / 2;
-        std::nth_element(o + begin, o + mid, o + end, [&](std::uint16_t a, std::uint16_t c) {
+        std::nth_element(o + begin, o + mid, o + end, [&](std::uint32_t a, std::uint32_t c) {
           return points[base + a].xyz[widest] < points[base + c].xyz[widest];
         });
         self(self, begin, mid);

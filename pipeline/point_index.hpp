@@ -8,7 +8,7 @@
 // axis, each a few point spacings thick (block_points_for). Each block holds a kd-tree:
 // median splits on the widest side of the box, down to leaves of at most kLeafPoints
 // points, every node with the tight box of its points, the leaves' labels stored as
-// 16-bit offsets in the block. A query visits the blocks of its label range, and in
+// 32-bit offsets in the block. A query visits the blocks of its label range, and in
 // each the nodes whose box meets the ball (and, along the axis, the coordinates of
 // that label range), skipping a whole subtree when its box does not; it tests only
 // the points of the leaves it reaches.
@@ -18,14 +18,19 @@
 // crossed some 20 of them, descending 20 trees to reach leaves that were flat tiles
 // of 64 points, most of them outside the ball. A block a few spacings thick is
 // crossed by one or two balls' worth, and its leaves are compact cells. Why at most
-// 2^16 labels: a leaf's points are scattered over its block's span of the file, and
-// over a 2 MiB span they stay within reach of the cache and the TLB (2^21-label blocks
-// made the strip queries, which filter leaf points one by one, miss on every point).
+// 2^18 labels: the huge balls of clustered inputs and shells cross many blocks, and
+// each block's tree is descended from its root: at 10^7 points, 2^16-label blocks
+// visited 845 M nodes on `mixed` and 805 M on the ellipsoid shell, 2^18-label blocks
+// 467 M and 536 M (the shell's checks 38.3 -> 28.0 s summed), 2^20 411 M on `mixed`
+// but more leaf points outside the label range, and no faster; a leaf's points are
+// scattered over its block's span of the file (8 MiB at 2^18), and 2^21-label blocks
+// once made the strip queries, which filter leaf points one by one, miss on every
+// point.
 // (Before the trees, a fixed 12x12 grid per block put a dense filament into one
 // crowded cell: `mixed` 10^7 took 336 s against 39 s for uniform.)
 //
-// Memory: 2 bytes per point plus 36 bytes per node (about 2 nodes per 18 points):
-// about 6 bytes per point.
+// Memory: 4 bytes per point plus 36 bytes per node (about 2 nodes per 18 points):
+// about 8 bytes per point.
 #include "pipeline/point_sort.hpp"
 
 #include <cstdint>
@@ -43,7 +48,7 @@ struct ExcludedSlab {
 class PointIndex {
  public:
   static constexpr std::uint32_t kLeafPoints = 24;  // most points in a leaf
-  static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 16;  // offsets are 16-bit
+  static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 18;
 
   // Labels per block for `count` points sorted along an axis of length `axis_extent`
   // in a bounding box of `volume`: the points of a slab about 8 mean spacings thick,
@@ -118,7 +123,7 @@ class PointIndex {
   double leaf_spacing_quantile(double q) const;
 
   std::size_t memory_bytes() const {
-    return offsets_.capacity() * sizeof(std::uint16_t) + nodes_.capacity() * sizeof(Node) +
+    return offsets_.capacity() * sizeof(std::uint32_t) + nodes_.capacity() * sizeof(Node) +
            blocks_.capacity() * sizeof(Block);
   }
 
@@ -156,7 +161,7 @@ class PointIndex {
   const SortedPoint* points_ = nullptr;
   int axis_ = 0;
   std::uint32_t block_points_ = kMinBlockPoints;
-  std::vector<std::uint16_t> offsets_;  // per block: offsets of its labels, grouped by leaf
+  std::vector<std::uint32_t> offsets_;  // per block: offsets of its labels, grouped by leaf
   std::vector<Node> nodes_;
   std::vector<Block> blocks_;
 };
