@@ -33,7 +33,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   points_ = points;
   axis_ = axis;
   block_points_ = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
-  offsets_.assign(count, 0);
+  entries_.assign(count, 0);
   const std::uint64_t block_count = (count + block_points_ - 1) / block_points_;
   // The blocks are independent: each is built into its own node list (ids local to
   // the block) on all threads, then the lists are laid end to end. On one thread it
@@ -44,7 +44,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   for (std::int64_t b = 0; b < std::int64_t(block_count); ++b) {
     const std::uint64_t base = std::uint64_t(b) * block_points_;
     const std::uint32_t n = std::uint32_t(std::min<std::uint64_t>(block_points_, count - base));
-    std::uint32_t* o = &offsets_[base];
+    std::uint32_t* o = &entries_[base];  // the offsets alone until a leaf adds the cells
     for (std::uint32_t i = 0; i < n; ++i) o[i] = i;
     std::vector<Node>& nodes = block_nodes[std::size_t(b)];
     // Recursive median splits, written in preorder. `next` of a node is set when its
@@ -75,6 +75,8 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
         self(self, mid, end);
       } else {
         std::sort(o + begin, o + end);  // a leaf reads its points in file order
+        const CellGrid grid(node.box);
+        for (std::uint32_t j = begin; j < end; ++j) o[j] |= grid.cell_of(points[base + o[j]].xyz) << kOffsetBits;
       }
       nodes[id].next = std::uint32_t(nodes.size());
     };

@@ -129,7 +129,8 @@ class FrameCutter {
 // budget, less the point indexes (and the hull's points). The other 25% holds the mapped pages of the sorted file that the
 // queries read (SortedView::query_page_bytes: a tenth of the budget, up to two tenths
 // for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
-// MiB sampled, with 961 MiB of file pages at the worst moment.)
+// MiB sampled, with 961 MiB of file pages at the worst moment; and 10^7 at 512M at
+// 523 MiB even with the index's cells, which spare the queries most file reads.)
 // That is linear in Z; for each k the largest Z follows, and the k with the smallest
 // redundancy (window / Z - 1) wins: thin slabs waste their buffers, narrow strips
 // theirs, and the best zone is about as wide as its slab is thick. --zone-points fixes
