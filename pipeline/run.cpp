@@ -127,8 +127,8 @@ class FrameCutter {
 //   threads window(k) 480 + (k + threads - 1) Z 125 <= available,
 // available = 75% of what the fixed overhead and the writer's queue leave of the
 // budget, less the point indexes (and the hull's points). The other 25% holds the mapped pages of the sorted file that the
-// queries read (SortedView::query_page_bytes: a tenth of the budget, up to two tenths
-// for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
+// queries read (SortedView::query_page_bytes: a twentieth of the budget, up to a
+// tenth for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
 // MiB sampled, with 961 MiB of file pages at the worst moment; and 10^7 at 512M at
 // 523 MiB even with the index's cells, which spare the queries most file reads.)
 // That is linear in Z; for each k the largest Z follows, and the k with the smallest
@@ -472,10 +472,12 @@ RunSummary Job::run() {
   // ---- segment plan from the budget ----
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
   const ZonePlan zone_plan = plan_for_budget(view, index, options_, threads);
-  // A tenth of the budget, shared by the workers, for the pages of the sorted file
-  // their queries read (segment.cpp, touch(): a worker holds its share, up to twice
-  // that for a while when a run of huge balls needs more).
-  view.query_page_bytes = std::max<std::uint64_t>(std::uint64_t(1) << 20, options_.memory_bytes / 10 / std::uint64_t(threads));
+  // A twentieth of the budget, shared by the workers, for the pages of the sorted
+  // file their queries read (segment.cpp, touch(): a worker holds its share, up to
+  // twice that for a while when a run of huge balls needs more). It was a tenth until
+  // the index kept the points' cells, which spare the queries most reads; with a tenth
+  // and the cells, 10^8 uniform points at 4G peaked at 4127 MiB.
+  view.query_page_bytes = std::max<std::uint64_t>(std::uint64_t(1) << 20, options_.memory_bytes / 20 / std::uint64_t(threads));
   const double buffer_width = zone_plan.buffer_width;
 
   // ---- writer: header and points (or the checkpoint's partial output) ----
