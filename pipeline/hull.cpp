@@ -70,6 +70,13 @@ std::vector<std::uint32_t> kernel_hull_vertices(const core::Delaunay& dt, const 
   return out;
 }
 
+// The coordinates of the points `indices` of xyz, packed (3 doubles each).
+std::vector<double> gather(const double* xyz, const std::vector<std::uint32_t>& indices) {
+  std::vector<double> out(3 * indices.size());
+  for (std::size_t i = 0; i < indices.size(); ++i) std::copy_n(xyz + 3 * std::size_t(indices[i]), 3, &out[3 * i]);
+  return out;
+}
+
 // The survivors of the extremes' filter that are not strictly inside the hull of a
 // sample of them: a point strictly inside one of the sample's tets is strictly inside
 // conv(points). On a thin shell most points pass the extremes' filter (377,852 of a
@@ -82,14 +89,12 @@ std::vector<std::uint32_t> outside_sample_hull(const double* xyz, const std::vec
                                                std::size_t sample_points) {
   const std::size_t m = survivors.size();
   if (sample_points == 0 || m < 4 * sample_points) return survivors;
-  const std::size_t stride = m / sample_points;
-  std::vector<double> sample;
-  sample.reserve(3 * (m / stride + 1));
-  for (std::size_t i = 0; i < m; i += stride) sample.insert(sample.end(), xyz + 3 * std::size_t(survivors[i]), xyz + 3 * std::size_t(survivors[i]) + 3);
+  const std::vector<double> sv = gather(xyz, survivors);
+  std::vector<std::uint32_t> picks;  // every stride-th survivor, by its position in sv
+  for (std::size_t i = 0, stride = m / sample_points; i < m; i += stride) picks.push_back(std::uint32_t(i));
+  const std::vector<double> sample = gather(sv.data(), picks);
   core::Delaunay dt;
-  if (dt.build(sample.data(), nullptr, sample.size() / 3) != core::BuildStatus::kOk) return survivors;
-  std::vector<double> sv(3 * m);
-  for (std::size_t i = 0; i < m; ++i) std::copy_n(xyz + 3 * std::size_t(survivors[i]), 3, &sv[3 * i]);
+  if (dt.build(sample.data(), nullptr, picks.size()) != core::BuildStatus::kOk) return survivors;
   std::vector<std::uint8_t> keep(m, 1);
   core::TetId hint = core::kNoTet;
   for (const std::uint32_t i : core::hilbert_order(sv.data(), m)) keep[i] = !dt.strictly_inside(&sv[3 * std::size_t(i)], hint);
@@ -136,11 +141,9 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   for (int k = 0; k < 3; ++k) extent[k] = (hi[k] - lo[k]) * (1 + 0x1p-50);
   std::vector<std::uint32_t> extreme(best, best + 26);
   std::sort(extreme.begin(), extreme.end());
-  extreme.erase(std::unique(extreme.begin(), extreme.end()), extreme.end());
+  extreme.resize(std::size_t(std::unique(extreme.begin(), extreme.end()) - extreme.begin()));
 
-  std::vector<double> ex(3 * extreme.size());
-  for (std::size_t i = 0; i < extreme.size(); ++i)
-    std::copy_n(xyz + 3 * std::size_t(extreme[i]), 3, &ex[3 * i]);
+  const std::vector<double> ex = gather(xyz, extreme);
   core::Delaunay inner;
   std::vector<std::uint32_t> survivors;
   if (inner.build(ex.data(), nullptr, extreme.size()) == core::BuildStatus::kOk) {
@@ -168,9 +171,7 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   }
   survivors = outside_sample_hull(xyz, survivors, sample_points);
 
-  std::vector<double> sv(3 * survivors.size());
-  for (std::size_t i = 0; i < survivors.size(); ++i)
-    std::copy_n(xyz + 3 * std::size_t(survivors[i]), 3, &sv[3 * i]);
+  const std::vector<double> sv = gather(xyz, survivors);
   core::Delaunay dt;
   if (dt.build(sv.data(), nullptr, survivors.size()) != core::BuildStatus::kOk) return survivors;
   return kernel_hull_vertices(dt, survivors);

@@ -8,7 +8,7 @@
 // axis, each a few point spacings thick (block_points_for). Each block holds a kd-tree:
 // median splits on the widest side of the box, down to leaves of at most kLeafPoints
 // points, every node with the tight box of its points, the leaves' labels stored as
-// 32-bit offsets in the block. A query visits the blocks of its label range, and in
+// offsets in the block (with each point's cell, below). A query visits the blocks of its label range, and in
 // each the nodes whose box meets the ball (and, along the axis, the coordinates of
 // that label range), skipping a whole subtree when its box does not; it tests only
 // the points of the leaves it reaches.
@@ -36,12 +36,11 @@
 // the balls, and reading them all from the mapped file (a cache miss each, and the
 // OS's page mapping as the pages came and went) made the checks 48 s of 90 (summed).
 //
-// Memory: 4 bytes per point plus 36 bytes per node (about 2 nodes per 36 points):
-// about 6 bytes per point.
+// Memory, by the layout: a 4-byte entry per point plus a 36-byte node per 16 points
+// (2^18-label blocks split into leaves of 32): about 6 bytes per point.
 #include "pipeline/point_sort.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -53,13 +52,16 @@ namespace tetstream::pipeline {
 struct ExcludedSlab {
   int axis = -1;
   double lo = 0, hi = 0;
+  bool contains(const double* box_lo, const double* box_hi) const {
+    return axis >= 0 && box_lo[axis] >= lo && box_hi[axis] <= hi;
+  }
 };
 
 class PointIndex {
  public:
   // Most points in a leaf. With the cells a leaf's points cost little: leaves of 48
-  // rather than 24 halve the nodes (2 bytes a point) and the queries did not slow
-  // (mixed 10^7: 37.6 s against 37.9).
+  // rather than 24 halve the nodes (about 2 bytes a point) and the queries did not
+  // slow (mixed 10^7, with an earlier 3-byte form of the cells: 37.6 s against 37.9).
   static constexpr std::uint32_t kLeafPoints = 48;
   static constexpr std::uint32_t kMinBlockPoints = 1u << 13, kMaxBlockPoints = 1u << 18;
 
@@ -108,9 +110,7 @@ class PointIndex {
         const Node& node = nodes_[i];
         const double lo[3] = {node.box.lo[0], node.box.lo[1], node.box.lo[2]};
         const double hi[3] = {node.box.hi[0], node.box.hi[1], node.box.hi[2]};
-        if (!may_meet(lo, hi) || node.box.hi[axis_] < axis_lo ||
-            node.box.lo[axis_] > axis_hi ||
-            (exclude.axis >= 0 && node.box.lo[exclude.axis] >= exclude.lo && node.box.hi[exclude.axis] <= exclude.hi)) {
+        if (!may_meet(lo, hi) || hi[axis_] < axis_lo || lo[axis_] > axis_hi || exclude.contains(lo, hi)) {
           i = node.next;
           continue;
         }
@@ -128,10 +128,7 @@ class PointIndex {
           if (label < first || label >= last) continue;
           double cell_lo[3], cell_hi[3];
           grid.cell(entry >> kOffsetBits, cell_lo, cell_hi);
-          if (!may_meet(cell_lo, cell_hi) ||
-              (exclude.axis >= 0 && cell_lo[exclude.axis] >= exclude.lo && cell_hi[exclude.axis] <= exclude.hi))
-            continue;
-          visit(label);
+          if (may_meet(cell_lo, cell_hi) && !exclude.contains(cell_lo, cell_hi)) visit(label);
         }
         i = node.next;
       }

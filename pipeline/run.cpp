@@ -76,7 +76,7 @@ double writer_queue_bytes(std::uint64_t memory_bytes) {
 
 class FrameCutter {
  public:
-  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer), frame_(writer.take_buffer()) {}
+  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer), frame_(next_frame()) {}
 
   // Appends the tets [begin, end) of a zone's output, translated to labels straight
   // into the frame being filled (they come in increasing minimum-label order; a group
@@ -105,8 +105,14 @@ class FrameCutter {
  private:
   void write() {
     writer_.add_tets(std::move(frame_));
-    frame_ = writer_.take_buffer();
-    frame_.reserve(4 * kFrameTets + 4096);
+    frame_ = next_frame();
+  }
+  // An empty frame with room for kFrameTets tets and a group's overrun (a recycled
+  // buffer keeps its capacity).
+  std::vector<std::uint64_t> next_frame() {
+    std::vector<std::uint64_t> f = writer_.take_buffer();
+    f.reserve(4 * kFrameTets + 4096);
+    return f;
   }
 
   AsyncTetWriter& writer_;
@@ -129,8 +135,8 @@ class FrameCutter {
 // budget, less the point indexes (and the hull's points). The other 25% holds the mapped pages of the sorted file that the
 // queries read (SortedView::query_page_bytes: a twentieth of the budget, up to a
 // tenth for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
-// MiB sampled, with 961 MiB of file pages at the worst moment; and 10^7 at 512M at
-// 523 MiB even with the index's cells, which spare the queries most file reads.)
+// MiB sampled, with 961 MiB of file pages at the worst moment; and, with the index's
+// cells, which spare the queries most file reads, 10^7 points at 512M at 523 MiB.)
 // That is linear in Z; for each k the largest Z follows, and the k with the smallest
 // redundancy (window / Z - 1) wins: thin slabs waste their buffers, narrow strips
 // theirs, and the best zone is about as wide as its slab is thick. --zone-points fixes

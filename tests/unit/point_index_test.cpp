@@ -34,45 +34,48 @@ std::vector<SortedPoint> sorted_points(std::size_t n, int axis, bool coarse, uns
 // leaves are narrow beside the coordinates' magnitude), and with balls through a
 // point (on the sphere, up to rounding).
 TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
-  for (const double offset : {0.0, 1e6})
-  for (const bool coarse : {false, true}) {
-    for (const std::uint32_t block : {PointIndex::kMinBlockPoints, 1000u, 20000u}) {
-      const int axis = 2;
-      std::vector<SortedPoint> p = sorted_points(20000, axis, coarse, 7 + block);
-      for (SortedPoint& q : p)
-        for (double& x : q.xyz) x += offset;
-      PointIndex index;
-      index.build(p.data(), p.size(), axis, block);
-      std::mt19937_64 rng(block);
-      std::uniform_real_distribution<double> u(-1.2, 1.2);
-      std::uniform_int_distribution<std::uint64_t> label(0, p.size());
-      for (int q = 0; q < 300; ++q) {
-        const double c[3] = {offset + u(rng), offset + 3 * u(rng), offset + u(rng)};
-        double r = q % 10 == 0 ? 2.0 : 0.02 + 0.2 * std::abs(u(rng));
-        if (q % 4 == 1) {  // through a point
-          const double* x = p[std::size_t(label(rng)) % p.size()].xyz;
-          r = std::sqrt((x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]));
-        }
-        std::uint64_t first = label(rng), last = label(rng);
-        if (first > last) std::swap(first, last);
-        ExcludedSlab exclude;
-        if (q % 3 == 0) exclude = ExcludedSlab{0, offset + u(rng) - 0.3, offset + u(rng) + 0.3};
-        std::set<std::uint64_t> seen;
-        index.for_each_candidate(
-            c, r, first, last,
-            [&](std::uint64_t l) {
-              EXPECT_GE(l, first);
-              EXPECT_LT(l, last);
-              EXPECT_TRUE(seen.insert(l).second) << "label " << l << " reported twice";
-            },
-            [] { return false; }, exclude);
-        for (std::uint64_t l = first; l < last; ++l) {
-          const double* x = p[l].xyz;
-          const double d2 = (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]);
-          const bool excluded = exclude.axis >= 0 && x[exclude.axis] >= exclude.lo && x[exclude.axis] <= exclude.hi;
-          if (d2 <= r * r && !excluded) {
-            ASSERT_TRUE(seen.count(l)) << "point " << l << " in the ball was not reported (query " << q << ", block "
-                                       << block << (coarse ? ", coarse" : "") << ", offset " << offset << ")";
+  for (const double offset : {0.0, 1e6}) {
+    for (const bool coarse : {false, true}) {
+      for (const std::uint32_t block : {PointIndex::kMinBlockPoints, 1000u, 20000u}) {
+        const int axis = 2;
+        std::vector<SortedPoint> p = sorted_points(20000, axis, coarse, 7 + block);
+        for (SortedPoint& q : p)
+          for (double& x : q.xyz) x += offset;
+        PointIndex index;
+        index.build(p.data(), p.size(), axis, block);
+        std::mt19937_64 rng(block);
+        std::uniform_real_distribution<double> u(-1.2, 1.2);
+        std::uniform_int_distribution<std::uint64_t> label(0, p.size());
+        for (int q = 0; q < 300; ++q) {
+          const double c[3] = {offset + u(rng), offset + 3 * u(rng), offset + u(rng)};
+          double r = q % 10 == 0 ? 2.0 : 0.02 + 0.2 * std::abs(u(rng));
+          if (q % 4 == 1) {  // through a point
+            const double* x = p[std::size_t(label(rng)) % p.size()].xyz;
+            r = std::sqrt((x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) +
+                          (x[2] - c[2]) * (x[2] - c[2]));
+          }
+          std::uint64_t first = label(rng), last = label(rng);
+          if (first > last) std::swap(first, last);
+          ExcludedSlab exclude;
+          if (q % 3 == 0) exclude = ExcludedSlab{0, offset + u(rng) - 0.3, offset + u(rng) + 0.3};
+          std::set<std::uint64_t> seen;
+          index.for_each_candidate(
+              c, r, first, last,
+              [&](std::uint64_t l) {
+                EXPECT_GE(l, first);
+                EXPECT_LT(l, last);
+                EXPECT_TRUE(seen.insert(l).second) << "label " << l << " reported twice";
+              },
+              [] { return false; }, exclude);
+          for (std::uint64_t l = first; l < last; ++l) {
+            const double* x = p[l].xyz;
+            const double d2 =
+                (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) + (x[2] - c[2]) * (x[2] - c[2]);
+            const bool excluded = exclude.contains(x, x);
+            if (d2 <= r * r && !excluded) {
+              ASSERT_TRUE(seen.count(l)) << "point " << l << " in the ball was not reported (query " << q << ", block "
+                                         << block << (coarse ? ", coarse" : "") << ", offset " << offset << ")";
+            }
           }
         }
       }
