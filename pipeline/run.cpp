@@ -132,11 +132,12 @@ class FrameCutter {
 // output of one segment plus threads - 1 zones at kOutputBytesPerPoint:
 //   threads window(k) 480 + (k + threads - 1) Z 125 <= available,
 // available = 75% of what the fixed overhead and the writer's queue leave of the
-// budget, less the point indexes (and the hull's points). The other 25% holds the mapped pages of the sorted file that the
-// queries read (SortedView::query_page_bytes: a twentieth of the budget, up to a
-// tenth for a while) and the allocator's slack. (At 80%, 10^8 points at 4G peaked at 3819
-// MiB sampled, with 961 MiB of file pages at the worst moment; and, with the index's
-// cells, which spare the queries most file reads, 10^7 points at 512M at 523 MiB.)
+// budget, less the point indexes (and the hull's points). The other 25% holds the
+// mapped pages of the sorted file that the queries read (SortedView::query_regions:
+// an eighth of the budget), those of the window loads (ReleaseBehind: two 4 MiB chunks
+// a thread) and the allocator's slack. (At 80%, before the queries' pages were
+// counted in the regions a read maps, 10^8 points at 4G peaked at 3819 MiB sampled,
+// with 961 MiB of file pages at the worst moment.)
 // That is linear in Z; for each k the largest Z follows, and the k with the smallest
 // redundancy (window / Z - 1) wins: thin slabs waste their buffers, narrow strips
 // theirs, and the best zone is about as wide as its slab is thick. --zone-points fixes
@@ -478,12 +479,15 @@ RunSummary Job::run() {
   // ---- segment plan from the budget ----
   const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
   const ZonePlan zone_plan = plan_for_budget(view, index, options_, threads);
-  // A twentieth of the budget, shared by the workers, for the pages of the sorted
-  // file their queries read (segment.cpp, touch(): a worker holds its share, up to
-  // twice that for a while when a run of huge balls needs more). It was a tenth until
-  // the index kept the points' cells, which spare the queries most reads; with a tenth
-  // and the cells, 10^8 uniform points at 4G peaked at 4127 MiB.
-  view.query_page_bytes = std::max<std::uint64_t>(std::uint64_t(1) << 20, options_.memory_bytes / 20 / std::uint64_t(threads));
+  // An eighth of the budget, shared by the workers, for the pages of the sorted file
+  // their queries read, counted in the 2 MiB regions that a read may map
+  // (MappedRegions). The queries of a zone read the file along the sort axis, and a
+  // share that holds their sweep saves faulting regions in again: on 10^7 points at
+  // 256M (uniform) and 512M (mixed), a twentieth of the budget took 77 s and 60 s, a
+  // tenth 61 s and 60 s, an eighth 56 s and 50 s, the same as before the regions
+  // were counted (51 s and 49 s, with 283 and 522 MB peaks: over the budget).
+  MappedRegions query_regions(mapping.data(), mapping.size(), options_.memory_bytes / 8 / MappedRegions::kRegionBytes);
+  view.query_regions = &query_regions;
   const double buffer_width = zone_plan.buffer_width;
 
   // ---- writer: header and points (or the checkpoint's partial output) ----
@@ -720,6 +724,7 @@ RunSummary Job::run() {
   auto t0 = Clock::now();
   writer.finish();
   summary.seconds_write += since(t0);
+  summary.query_region_releases = query_regions.releases();
   summary.seconds_writer_busy = writer.busy_seconds();
   summary.seconds_writer_wait = writer.producer_wait_seconds();
   summary.output_bytes = writer_holder->bytes_written();

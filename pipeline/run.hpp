@@ -53,6 +53,9 @@ struct RunSummary {
   std::uint64_t segments = 0, zones = 0, zone_points = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
   std::uint64_t query_points = 0;   // exact conflict tests the queries made
+  // 2 MiB regions of the sorted file that the queries' reads mapped and that were
+  // handed back to keep them within their share of the budget (this process's)
+  std::uint64_t query_region_releases = 0;
   // The redundant insertions by cause (SegmentStats): sort-axis buffers, the strip
   // buffers of parallel zones, hull vertices outside the window; and repair_points.
   std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_window_points = 0;

@@ -98,7 +98,6 @@ struct BestConflict {
 class SegmentWorker {
  public:
   SegmentWorker(const SortedView& view, OutputPool* pool) : view_(view), pool_(pool) {
-    touched_blocks_.assign((view.count / kPageBlockPoints + 64) / 64, 0);
     // What |p_k - q_k| can reach for points p, q in the index's boxes (floats rounded
     // outward from the bounding box), for the hull facets' error bounds.
     for (int k = 0; k < 3; ++k)
@@ -118,7 +117,25 @@ class SegmentWorker {
   // many zone vertices remain pending.
   std::size_t check_round(std::vector<std::uint64_t>& repairs);
   void emit(ZoneTets& out);
+  // Whether tet t passes the range test (or is a hull facet that its query clears, or
+  // was proved empty before). A finite tet that fails it goes to queued_, and
+  // query_tet() settles it once the round has queued all of them.
   bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
+  // The emptiness query of a queued tet: true when no missing point conflicts with it,
+  // else false with the repair point pushed.
+  bool query_tet(TetId t, std::vector<std::uint64_t>& repairs);
+  // The range of the sort axis a finite tet's query reads, clipped ball and all:
+  // [lo, hi] (lo > hi: empty), and whether the missing points outside the window's
+  // label range (outside_clear) or outside the strip's window inside it (strip_clear)
+  // are out of its reach. Returns false when the ball has no usable bound (then the
+  // query reads everything).
+  bool query_extent(TetId t, ConflictBall& ball, double& lo, double& hi, bool& outside_clear, bool& strip_clear) const;
+  // A round's tets that failed the range test, by the low end of their extent along
+  // the sort axis: queried in that order, they read the file from one end to the
+  // other (in the kernel's order they jumped all over the window's label range, and
+  // holding the pages they mapped within the budget meant faulting them in again
+  // and again).
+  std::vector<std::pair<double, TetId>> queued_;
   // The same for an infinite tet: its facet is a facet of the global hull when no
   // missing point conflicts with it (lies beyond its plane, or on it inside its
   // circumcircle under the perturbation).
@@ -136,31 +153,12 @@ class SegmentWorker {
   std::uint64_t best_missing_conflict(MayMeet&& may_meet, Conflict&& conflict, double lo, double hi,
                                       bool outside_clear, bool strip_clear);
   // The queries read points of the mapped sorted file all over it, and mapped pages
-  // count in the resident set until they are handed back. touch() records the blocks
-  // of kPageBlockPoints labels whose points were read (a block's points span
-  // kBlockBytes, so that bounds the pages they hold) and the label range; once those
-  // blocks may hold
-  // view_.query_page_bytes, or when asked, release_touched_pages() hands the range
-  // back to the page cache.
-  // 64 KiB of records: the unit a page fault maps (the kernel faults around a miss).
-  static constexpr std::uint64_t kPageBlockPoints = 2048;
-  static constexpr std::uint64_t kBlockBytes = kPageBlockPoints * sizeof(SortedPoint);
+  // count in the resident set until they are handed back: every read of the file
+  // outside the sequential window load goes through touch(), which keeps the regions
+  // it maps within their share of the budget (nothing without a mapping).
   void touch(std::uint64_t label) {
-    const std::uint64_t b = label / kPageBlockPoints;
-    std::uint64_t& word = touched_blocks_[b >> 6];
-    const std::uint64_t bit = std::uint64_t(1) << (b & 63);
-    if (word & bit) return;
-    word |= bit;
-    ++touched_;
-    touched_lo_ = std::min(touched_lo_, label);
-    touched_hi_ = std::max(touched_hi_, label + 1);
+    if (view_.query_regions) view_.query_regions->touch(view_.points + label);
   }
-  void release_touched_pages(bool always);
-  void hand_back_touched_pages();  // now, whatever the share
-  std::vector<std::uint64_t> touched_blocks_;  // bitmap over the page blocks
-  static constexpr std::uint64_t kQueriesBetweenReleases = 256;
-  std::uint64_t queries_since_release_ = 0;
-  std::uint64_t touched_ = 0, touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
   // Whether the point with this label, inside the window's label range, is in the
   // strip's window (always, without strips).
   bool in_strip_window(std::uint64_t label) const { return in_strip_window(view_.points[label].xyz); }
@@ -284,7 +282,7 @@ void SegmentWorker::load_window(bool with_hull) {
   // that range are handed back as the copy goes (two threads loading 50 MiB windows at
   // once took the mapped pages past their share of the budget).
   {
-    ReleaseBehind release(view_.points, w0, view_.query_page_bytes > 0);
+    ReleaseBehind release(view_.points, w0, view_.query_regions != nullptr);
     for (std::uint64_t label = w0; label < w1; ++label) {
       if (in_strip_window(label)) add(label);
       release.reached(label);
@@ -325,16 +323,13 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
   // each side of the window, searched through the spatial index; and, for a strip,
-  // the points of the window's range outside the strip's window.
-  const std::uint64_t first = view_.lower_bound(lo), last = view_.upper_bound(hi);
-  // Checked between leaves. A single query can read more than the page share: a huge
-  // ball (a flat tet along the hull, at 10^8 points) mapped 2 GiB of the file in one
-  // go. Past two shares the pages are handed back mid-query; the points already seen
-  // stay seen.
-  auto enough = [&] {
-    if (view_.query_page_bytes > 0 && touched_ * kBlockBytes >= 2 * view_.query_page_bytes) hand_back_touched_pages();
-    return best.enough();
-  };
+  // the points of the window's range outside the strip's window. The label range is
+  // taken from the key samples alone: up to a stride wider on each side, whose
+  // points the ball test drops, and no probes of the file (the exact searches were
+  // 40% of the page faults of uniform 10^7 at 256M, and their pages were nobody's
+  // share of the budget).
+  const std::uint64_t first = view_.lower_bound_below(lo), last = view_.upper_bound_above(hi);
+  auto enough = [&] { return best.enough(); };
   // The searches and the index read the records at both ends of each label range:
   // those pages are the query's too.
   auto search = [&](std::uint64_t a, std::uint64_t b, auto&& visit_label, const ExcludedSlab& exclude) {
@@ -357,35 +352,7 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
     search(std::max(first, plan_->window_begin), std::min(last, plan_->window_end), visit_outside_strip,
            ExcludedSlab{strip_.axis, strip_.window_lo, strip_.window_hi});
   }
-  release_touched_pages(false);
   return best.label;
-}
-
-void SegmentWorker::release_touched_pages(bool always) {
-  if (touched_ == 0 || view_.query_page_bytes == 0) return;
-  // Past the share, at most every kQueriesBetweenReleases queries: a run of huge balls
-  // (big empty tets between the dense filaments of a clustered input) can touch more
-  // blocks in one query than the share holds, and handing them back after each would
-  // make every query fault them in again (mixed 10^7: 30% of the time in the OS's
-  // page mapping). Past two shares, at once.
-  ++queries_since_release_;
-  const std::uint64_t held = touched_ * kBlockBytes;
-  if (!always && (held < view_.query_page_bytes ||
-                  (queries_since_release_ < kQueriesBetweenReleases && held < 2 * view_.query_page_bytes)))
-    return;
-  hand_back_touched_pages();
-}
-
-void SegmentWorker::hand_back_touched_pages() {
-  queries_since_release_ = 0;
-  // Whole blocks: a touched block's points may lie anywhere in it.
-  const std::uint64_t first = touched_lo_ / kPageBlockPoints * kPageBlockPoints;
-  const std::uint64_t last =
-      std::min(view_.count, (touched_hi_ + kPageBlockPoints - 1) / kPageBlockPoints * kPageBlockPoints);
-  release_mapped_pages(view_.points + first, (last - first) * sizeof(SortedPoint));
-  std::fill(touched_blocks_.begin(), touched_blocks_.end(), 0);
-  touched_ = 0;
-  touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
 }
 
 std::pair<std::uint64_t, std::uint64_t> SegmentWorker::tet_key(TetId t) const {
@@ -395,33 +362,48 @@ std::pair<std::uint64_t, std::uint64_t> SegmentWorker::tet_key(TetId t) const {
   return {std::uint64_t(v[1]) << 32 | v[0], std::uint64_t(v[3]) << 32 | v[2]};
 }
 
+bool SegmentWorker::query_extent(TetId t, ConflictBall& ball, double& lo, double& hi, bool& outside_clear,
+                                 bool& strip_clear) const {
+  ball = conflict_ball(dt_, t);
+  lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
+  outside_clear = false, strip_clear = strip_.axis < 0;
+  if (!ball.valid) return false;
+  clipped_extent(ball, view_, view_.axis, lo, hi);
+  if (lo > hi) return true;
+  // Missing points on the left have axis coordinates <= key(window_begin - 1), on
+  // the right >= key(window_end).
+  outside_clear = lo > clear_lo_ && hi < clear_hi_;
+  if (!strip_clear) {
+    // Missing points of the window's range lie outside [window_lo, window_hi]
+    // along the strip's axis.
+    double lo2, hi2;
+    clipped_extent(ball, view_, strip_.axis, lo2, hi2);
+    strip_clear = lo2 > hi2 || (lo2 >= strip_.window_lo && hi2 <= strip_.window_hi);
+  }
+  return true;
+}
+
 bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   if (dt_.is_infinite(t)) return check_hull_facet(t, repairs);
-  const ConflictBall ball = conflict_ball(dt_, t);
-  double lo = -std::numeric_limits<double>::infinity(), hi = std::numeric_limits<double>::infinity();
-  bool outside_clear = false, strip_clear = strip_.axis < 0;
-  if (ball.valid) {
-    clipped_extent(ball, view_, view_.axis, lo, hi);
-    if (lo > hi) return true;
-    // Missing points on the left have axis coordinates <= key(window_begin - 1), on
-    // the right >= key(window_end).
-    outside_clear = lo > clear_lo_ && hi < clear_hi_;
-    if (!strip_clear) {
-      // Missing points of the window's range lie outside [window_lo, window_hi]
-      // along the strip's axis.
-      double lo2, hi2;
-      clipped_extent(ball, view_, strip_.axis, lo2, hi2);
-      strip_clear = lo2 > hi2 || (lo2 >= strip_.window_lo && hi2 <= strip_.window_hi);
-    }
-    if (outside_clear && strip_clear) return true;
-  }
+  ConflictBall ball;
+  double lo, hi;
+  bool outside_clear, strip_clear;
+  if (query_extent(t, ball, lo, hi, outside_clear, strip_clear) && (lo > hi || (outside_clear && strip_clear)))
+    return true;
   ++stats_.range_failures;
+  queued_.emplace_back(lo, t);
+  return true;
+}
+
+bool SegmentWorker::query_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   // A tet proved empty stays empty for the rest of the segment: later repairs insert
   // only points that were missing, and none of those is in its ball.
   const auto [key_a, key_b] = tet_key(t);
   if (proved_empty_.contains(key_a, key_b)) return true;
-  ConflictBall query_ball = ball;
-  if (!ball.valid) {
+  ConflictBall query_ball;
+  double lo, hi;
+  bool outside_clear, strip_clear;
+  if (!query_extent(t, query_ball, lo, hi, outside_clear, strip_clear)) {
     // No usable bound: the query examines every missing point exactly.
     query_ball.radius = std::numeric_limits<double>::infinity();
     query_ball.center[0] = query_ball.center[1] = query_ball.center[2] = 0;
@@ -550,6 +532,12 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
         if (!check_tet(t, repairs)) block_pending(t);
     }
   }
+  // The queries, along the sort axis (a tet of several pending stars once).
+  std::sort(queued_.begin(), queued_.end());
+  queued_.erase(std::unique(queued_.begin(), queued_.end()), queued_.end());
+  for (const auto& [lo, t] : queued_)
+    if (!query_tet(t, repairs)) block_pending(t);
+  queued_.clear();
   pending_.clear();
   for (std::size_t z = 0; z < zone_state_.size(); ++z) {
     std::uint8_t& state = zone_state_[z];
@@ -645,12 +633,6 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
   stats_ = SegmentStats{};
   pending_.clear();
   proved_empty_.clear();
-  if (touched_ > 0) {  // never handed back (no mapped file)
-    std::fill(touched_blocks_.begin(), touched_blocks_.end(), 0);
-    touched_ = 0;
-    touched_lo_ = std::numeric_limits<std::uint64_t>::max(), touched_hi_ = 0;
-  }
-  queries_since_release_ = 0;
   auto t0 = Clock::now();
   // A window is triangulated on its own points; its hull facets are checked like its
   // other tets. A window too flat for a triangulation (a slab of a planar region)
@@ -697,6 +679,7 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     // Append the repair points to the window and insert them.
     const std::size_t old_n = labels_.size();
     for (std::uint64_t label : repairs) {
+      touch(label);
       const SortedPoint& p = view_.points[label];
       xyz_.insert(xyz_.end(), p.xyz, p.xyz + 3);
       labels_.push_back(label);
@@ -707,7 +690,6 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
     stats_.repair_points += repairs.size();
   }
-  release_touched_pages(true);
   emit(out);
   stats_.seconds_check = since(t0);
   stats_.kernel_bytes = dt_.memory_bytes();
@@ -726,20 +708,25 @@ void SortedView::sample_keys(bool release_file_pages) {
 }
 
 namespace {
-// The first label in [0, count) for which `after(key)` holds (keys are sorted, and
-// `after` is monotone along them): first among the samples, then within one stride.
+// The labels in [0, count) between which the first one for which `after(key)` holds
+// lies (keys are sorted, and `after` is monotone along them), from the samples alone:
+// [lo, hi], at most one stride apart.
+template <class After>
+std::pair<std::uint64_t, std::uint64_t> sample_bracket(const SortedView& view, After after) {
+  if (view.key_samples.empty()) return {0, view.count};
+  // Sample s is label s * kKeyStride: the answer lies after the last sample that is
+  // not `after`, and at or before the first that is.
+  const auto s = std::size_t(std::partition_point(view.key_samples.begin(), view.key_samples.end(),
+                                                  [&](double k) { return !after(k); }) -
+                             view.key_samples.begin());
+  return {s == 0 ? 0 : (s - 1) * SortedView::kKeyStride + 1, std::min(view.count, s * SortedView::kKeyStride)};
+}
+
+// The first label for which `after(key)` holds: the samples' bracket, then a binary
+// search of the file within it.
 template <class After>
 std::uint64_t partition_point(const SortedView& view, After after) {
-  std::uint64_t lo = 0, hi = view.count;
-  if (!view.key_samples.empty()) {
-    // Sample s is label s * kKeyStride: the answer lies after the last sample that is
-    // not `after`, and at or before the first that is.
-    const auto s = std::size_t(std::partition_point(view.key_samples.begin(), view.key_samples.end(),
-                                                    [&](double k) { return !after(k); }) -
-                               view.key_samples.begin());
-    lo = s == 0 ? 0 : (s - 1) * SortedView::kKeyStride + 1;
-    hi = std::min(view.count, s * SortedView::kKeyStride);
-  }
+  auto [lo, hi] = sample_bracket(view, after);
   while (lo < hi) {
     const std::uint64_t mid = lo + (hi - lo) / 2;
     if (after(view.key(mid))) hi = mid;
@@ -747,15 +734,18 @@ std::uint64_t partition_point(const SortedView& view, After after) {
   }
   return lo;
 }
+auto at_or_after(double x) {
+  return [x](double k) { return k >= x; };
+}
+auto after(double x) {
+  return [x](double k) { return k > x; };
+}
 }  // namespace
 
-std::uint64_t SortedView::lower_bound(double x) const {
-  return partition_point(*this, [x](double k) { return k >= x; });
-}
-
-std::uint64_t SortedView::upper_bound(double x) const {
-  return partition_point(*this, [x](double k) { return k > x; });
-}
+std::uint64_t SortedView::lower_bound(double x) const { return partition_point(*this, at_or_after(x)); }
+std::uint64_t SortedView::upper_bound(double x) const { return partition_point(*this, after(x)); }
+std::uint64_t SortedView::lower_bound_below(double x) const { return sample_bracket(*this, at_or_after(x)).first; }
+std::uint64_t SortedView::upper_bound_above(double x) const { return sample_bracket(*this, after(x)).second; }
 
 int strip_axis(const SortedView& view) {
   const int a1 = (view.axis + 1) % 3, a2 = (view.axis + 2) % 3;

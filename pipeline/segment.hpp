@@ -45,11 +45,11 @@ struct SortedView {
   std::vector<SortedPoint> hull_points;
   const PointIndex* hull_index = nullptr;  // over hull_points
   const PointIndex* index = nullptr;       // over points[0, count)
-  // When `points` is a read-only file mapping: the mapped bytes a worker's emptiness
-  // queries may keep resident before handing them back, up to twice this for a
-  // while (0: never hand them back; anonymous memory must not be, MADV_DONTNEED would
-  // zero it).
-  std::uint64_t query_page_bytes = 0;
+  // When `points` is a read-only file mapping: the tracker that keeps the regions the
+  // workers' emptiness queries map within their share of the budget, and hands them
+  // back. Null for points in memory (anonymous memory must never be handed back:
+  // MADV_DONTNEED would zero it).
+  MappedRegions* query_regions = nullptr;
 
   // The key of every kKeyStride-th label, so that lower_bound and upper_bound search
   // a small in-memory table and then one stride of the file, instead of probing the
@@ -65,6 +65,11 @@ struct SortedView {
   std::uint64_t lower_bound(double x) const;
   // First label whose axis coordinate is > x.
   std::uint64_t upper_bound(double x) const;
+  // The same from the key samples alone, without reading the points: a label at most
+  // lower_bound(x), and one at least upper_bound(x), each within kKeyStride of it
+  // (0 and count without samples).
+  std::uint64_t lower_bound_below(double x) const;
+  std::uint64_t upper_bound_above(double x) const;
 };
 
 // Hands back the pages of the sorted file behind a scan that reads labels in

@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
@@ -55,6 +56,56 @@ void release_mapped_pages(const void* data, std::size_t bytes) {
   const auto begin = reinterpret_cast<std::uintptr_t>(data);
   const std::uintptr_t aligned = begin & ~(page - 1);
   madvise(reinterpret_cast<void*>(aligned), bytes + (begin - aligned), MADV_DONTNEED);
+}
+
+MappedRegions::MappedRegions(const void* data, std::size_t bytes, std::size_t max_regions)
+    : base_(static_cast<const char*>(data)), bytes_(bytes), max_regions_(std::max<std::size_t>(1, max_regions)) {
+  const std::size_t regions = (bytes >> kRegionShift) + 1;
+  last_read_ = std::make_unique<std::atomic<std::uint64_t>[]>(regions);
+  for (std::size_t r = 0; r < regions; ++r) last_read_[r].store(0, std::memory_order_relaxed);
+  held_.reserve(max_regions_ + 1);
+}
+
+void MappedRegions::hold(std::size_t region) {
+  std::lock_guard lock(mutex_);
+  const std::uint64_t now = clock_.fetch_add(1, std::memory_order_relaxed) + 1;
+  if (last_read_[region].load(std::memory_order_relaxed) != 0) {  // another thread held it meanwhile
+    last_read_[region].store(now, std::memory_order_relaxed);
+    return;
+  }
+  if (held_.size() >= max_regions_) {
+    // The least recently read: a linear scan, as there are few (and this runs once
+    // per region faulted in, not per read).
+    std::size_t oldest = 0;
+    for (std::size_t i = 1; i < held_.size(); ++i)
+      if (last_read_[held_[i]].load(std::memory_order_relaxed) < last_read_[held_[oldest]].load(std::memory_order_relaxed))
+        oldest = i;
+    const std::size_t r = held_[oldest];
+    last_read_[r].store(0, std::memory_order_relaxed);
+    held_[oldest] = held_.back();
+    held_.pop_back();
+    const std::size_t first = r << kRegionShift;
+    release_mapped_pages(base_ + first, std::min(kRegionBytes, bytes_ - first));
+    releases_.fetch_add(1, std::memory_order_relaxed);
+  }
+  last_read_[region].store(now, std::memory_order_relaxed);
+  held_.push_back(region);
+}
+
+void MappedRegions::release_all() {
+  std::lock_guard lock(mutex_);
+  for (const std::size_t r : held_) {
+    last_read_[r].store(0, std::memory_order_relaxed);
+    const std::size_t first = r << kRegionShift;
+    release_mapped_pages(base_ + first, std::min(kRegionBytes, bytes_ - first));
+  }
+  releases_.fetch_add(held_.size(), std::memory_order_relaxed);
+  held_.clear();
+}
+
+std::size_t MappedRegions::held() const {
+  std::lock_guard lock(mutex_);
+  return held_.size();
 }
 
 BinaryFile::BinaryFile(const std::string& path, const char* mode) : path_(path) {

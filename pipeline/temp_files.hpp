@@ -1,9 +1,14 @@
 #pragma once
 // Temporary files of a job: one private directory under --tmpdir, removed with
 // everything in it when the job ends, whether it succeeds or fails.
+#include <atomic>
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
+#include <memory>
+#include <mutex>
 #include <string>
+#include <vector>
 
 namespace tetstream::pipeline {
 
@@ -30,6 +35,58 @@ void sync_directory(const std::string& dir);
 // cache (madvise MADV_DONTNEED), so that a linear pass over a mapped file larger than
 // memory keeps a bounded resident set; a later access faults them back in.
 void release_mapped_pages(const void* data, std::size_t bytes);
+
+// Bounds what scattered reads of a read-only file mapping keep resident. A read that
+// faults can map much more than its page: the kernel maps the whole folio of the page
+// cache around it, and a file written in large chunks sits in folios of up to 2 MiB
+// (here one byte read mapped 2048 KiB; 64 KiB, the fault-around window, elsewhere in
+// the same file). So the unit of residency is the 2 MiB region of the file (folios
+// are aligned in the file, at most 2 MiB on x86-64): touch() records the region of
+// each read, and when a read needs a region beyond max_regions, the least recently
+// read one is handed back first.
+//
+// Shared by the threads that read the mapping: a region that several read is held
+// once, and one thread's release never leaves the others' pages unaccounted for long.
+// (One tracker per thread, each a share, made the threads release each other's
+// regions: the zones of a segment read the same label range, and at 256M the
+// TLB shootdowns of the releases took a third of the run.) A read is a relaxed load
+// and, once per epoch, a compare-and-swap; a new region takes a lock. The clock is an epoch
+// that each new region advances, so "least recently read" is by epochs. A read that
+// races with the release of its region maps pages that count again at the next read
+// of that region: a few regions at most, until the next release_all().
+class MappedRegions {
+ public:
+  static constexpr int kRegionShift = 21;
+  static constexpr std::size_t kRegionBytes = std::size_t(1) << kRegionShift;
+  // `data` is the mapping's start (file offset 0), `bytes` its length.
+  MappedRegions(const void* data, std::size_t bytes, std::size_t max_regions);
+
+  void touch(const void* p) {
+    const std::size_t r = std::size_t(static_cast<const char*>(p) - base_) >> kRegionShift;
+    const std::uint64_t now = clock_.load(std::memory_order_relaxed);
+    std::uint64_t last = last_read_[r].load(std::memory_order_relaxed);
+    // A compare-and-swap, not a store: a store could bring back a region that another
+    // thread has just released (set to 0), which would then be marked held but never
+    // released again (10^7 points at 256M held 28 regions for a cap of 6 that way).
+    while (last != now) {
+      if (last == 0) return hold(r);
+      if (last_read_[r].compare_exchange_weak(last, now, std::memory_order_relaxed)) return;
+    }
+  }
+  // Hands every held region back (between jobs' phases: none is being read).
+  void release_all();
+  std::size_t held() const;
+  std::uint64_t releases() const { return releases_.load(std::memory_order_relaxed); }
+
+ private:
+  void hold(std::size_t region);  // makes room first, unless another thread held it meanwhile
+  const char* base_;
+  std::size_t bytes_, max_regions_;
+  std::unique_ptr<std::atomic<std::uint64_t>[]> last_read_;  // per region: epoch of its last read, 0 when not held
+  std::atomic<std::uint64_t> clock_{1}, releases_{0};
+  mutable std::mutex mutex_;     // over held_ and the holds and releases
+  std::vector<std::size_t> held_;  // the regions with last_read_ != 0
+};
 
 // A binary file with checked I/O: every failure (ENOSPC, EIO) throws IoError naming
 // the file, so no stage carries on with a short write.

@@ -47,6 +47,7 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"range_failures", s.range_failures},
                  {"queries", s.queries},
                  {"query_points", s.query_points},
+                 {"query_region_releases", s.query_region_releases},
                  {"redundant_ratio", s.redundant_ratio()},
                  {"redundant_points", {{"segment_buffers", s.segment_buffer_points},
                                        {"zone_buffers", s.zone_buffer_points},
