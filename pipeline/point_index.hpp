@@ -57,6 +57,11 @@ struct ExcludedSlab {
   }
 };
 
+// Bounds on the sort-axis keys of a label range: lo <= every key <= hi.
+struct KeyRange {
+  double lo, hi;
+};
+
 class PointIndex {
  public:
   // Most points in a leaf. With the cells a leaf's points cost little: leaves of 48
@@ -92,13 +97,16 @@ class PointIndex {
 
   // The same for any region: may_meet(lo, hi) says whether the box [lo, hi] may hold
   // a point of it (conservatively: never false when it does).
+  // `keys`, when given, bounds the keys of [first, last) (otherwise they are read
+  // from the points at both ends).
   template <class MayMeet, class Visit, class Stop>
   void for_each_candidate_where(MayMeet&& may_meet, std::uint64_t first, std::uint64_t last, Visit&& visit,
-                                Stop&& stop, const ExcludedSlab& exclude = {}) const {
+                                Stop&& stop, const ExcludedSlab& exclude = {}, const KeyRange* keys = nullptr) const {
     if (first >= last) return;
     // The labels [first, last) have axis coordinates in [axis_lo, axis_hi] (the file
     // is sorted): a node entirely outside that interval holds none of them.
-    const double axis_lo = points_[first].xyz[axis_], axis_hi = points_[last - 1].xyz[axis_];
+    const double axis_lo = keys ? keys->lo : points_[first].xyz[axis_];
+    const double axis_hi = keys ? keys->hi : points_[last - 1].xyz[axis_];
     const std::uint64_t b0 = first / block_points_, b1 = (last - 1) / block_points_;
     for (std::uint64_t b = b0; b <= b1; ++b) {
       const std::uint64_t base = b * block_points_;

@@ -486,7 +486,8 @@ RunSummary Job::run() {
   // 256M (uniform) and 512M (mixed), a twentieth of the budget took 77 s and 60 s, a
   // tenth 61 s and 60 s, an eighth 56 s and 50 s, the same as before the regions
   // were counted (51 s and 49 s, with 283 and 522 MB peaks: over the budget).
-  MappedRegions query_regions(mapping.data(), mapping.size(), options_.memory_bytes / 8 / MappedRegions::kRegionBytes);
+  MappedRegions query_regions(mapping.data(), mapping.size(), options_.memory_bytes / 8 / MappedRegions::kRegionBytes,
+                              sorted.path);
   view.query_regions = &query_regions;
   const double buffer_width = zone_plan.buffer_width;
 

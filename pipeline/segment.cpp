@@ -155,9 +155,12 @@ class SegmentWorker {
   // The queries read points of the mapped sorted file all over it, and mapped pages
   // count in the resident set until they are handed back: every read of the file
   // outside the sequential window load goes through touch(), which keeps the regions
-  // it maps within their share of the budget (nothing without a mapping).
-  void touch(std::uint64_t label) {
-    if (view_.query_regions) view_.query_regions->touch(view_.points + label);
+  // it maps within their share of the budget (nothing without a mapping), or reads
+  // them without mapping them when they are few and far between.
+  const double* query_point(std::uint64_t label, SortedPoint& scratch) const {
+    if (!view_.query_regions) return view_.points[label].xyz;
+    view_.query_regions->read(view_.points + label, &scratch, sizeof(SortedPoint));
+    return scratch.xyz;
   }
   // Whether the point with this label, inside the window's label range, is in the
   // strip's window (always, without strips).
@@ -315,11 +318,15 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
                                                    bool outside_clear, bool strip_clear) {
   ++stats_.queries;
   BestConflict best;
-  auto visit = [&](std::uint64_t label) {
-    touch(label);
+  SortedPoint scratch;
+  auto offer = [&](std::uint64_t label, const double* xyz) {
     if (std::binary_search(extra_.begin(), extra_.end(), label)) return;  // in the window already
-    const double score = conflict(label, view_.points[label].xyz);
+    const double score = conflict(label, xyz);
     if (!std::isnan(score)) best.offer(label, score);
+  };
+  auto visit = [&](std::uint64_t label) {
+    if (std::binary_search(extra_.begin(), extra_.end(), label)) return;
+    offer(label, query_point(label, scratch));
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
   // each side of the window, searched through the spatial index; and, for a strip,
@@ -330,13 +337,12 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
   // share of the budget).
   const std::uint64_t first = view_.lower_bound_below(lo), last = view_.upper_bound_above(hi);
   auto enough = [&] { return best.enough(); };
-  // The searches and the index read the records at both ends of each label range:
-  // those pages are the query's too.
+  // The index prunes its nodes by the range's keys: bounds from the samples, so that
+  // it reads no record of the file itself.
   auto search = [&](std::uint64_t a, std::uint64_t b, auto&& visit_label, const ExcludedSlab& exclude) {
     if (a >= b || enough()) return;
-    touch(a);
-    touch(b - 1);
-    view_.index->for_each_candidate_where(may_meet, a, b, visit_label, enough, exclude);
+    const KeyRange keys = view_.key_range(a, b);
+    view_.index->for_each_candidate_where(may_meet, a, b, visit_label, enough, exclude, &keys);
   };
   if (!outside_clear) {
     search(first, std::min(last, plan_->window_begin), visit, ExcludedSlab{});
@@ -344,8 +350,8 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
   }
   if (!strip_clear) {
     auto visit_outside_strip = [&](std::uint64_t label) {
-      if (in_strip_window(label)) touch(label);
-      else visit(label);
+      const double* xyz = query_point(label, scratch);
+      if (!in_strip_window(xyz)) offer(label, xyz);
     };
     // The strip window's own points are not missing: whole index nodes inside it are
     // skipped, the rest filtered point by point.
@@ -678,10 +684,10 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
     // Append the repair points to the window and insert them.
     const std::size_t old_n = labels_.size();
+    SortedPoint scratch;
     for (std::uint64_t label : repairs) {
-      touch(label);
-      const SortedPoint& p = view_.points[label];
-      xyz_.insert(xyz_.end(), p.xyz, p.xyz + 3);
+      const double* p = query_point(label, scratch);
+      xyz_.insert(xyz_.end(), p, p + 3);
       labels_.push_back(label);
       extra_.insert(std::upper_bound(extra_.begin(), extra_.end(), label), label);
     }
@@ -744,6 +750,15 @@ auto after(double x) {
 
 std::uint64_t SortedView::lower_bound(double x) const { return partition_point(*this, at_or_after(x)); }
 std::uint64_t SortedView::upper_bound(double x) const { return partition_point(*this, after(x)); }
+KeyRange SortedView::key_range(std::uint64_t first, std::uint64_t last) const {
+  if (key_samples.empty()) return {key(first), key(last - 1)};
+  // Sample i is label i * kKeyStride, and keys grow with labels: the sample at or
+  // before `first`, and the one at or after `last` - 1 (none: no bound).
+  const std::size_t after = std::size_t((last - 1 + kKeyStride - 1) / kKeyStride);
+  return {key_samples[std::size_t(first / kKeyStride)],
+          after < key_samples.size() ? key_samples[after] : std::numeric_limits<double>::infinity()};
+}
+
 std::uint64_t SortedView::lower_bound_below(double x) const { return sample_bracket(*this, at_or_after(x)).first; }
 std::uint64_t SortedView::upper_bound_above(double x) const { return sample_bracket(*this, after(x)).second; }
 

@@ -70,6 +70,9 @@ struct SortedView {
   // (0 and count without samples).
   std::uint64_t lower_bound_below(double x) const;
   std::uint64_t upper_bound_above(double x) const;
+  // Bounds on the keys of the labels [first, last) (first < last), from the samples
+  // alone when there are any.
+  KeyRange key_range(std::uint64_t first, std::uint64_t last) const;
 };
 
 // Hands back the pages of the sorted file behind a scan that reads labels in

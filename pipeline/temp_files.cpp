@@ -58,12 +58,57 @@ void release_mapped_pages(const void* data, std::size_t bytes) {
   madvise(reinterpret_cast<void*>(aligned), bytes + (begin - aligned), MADV_DONTNEED);
 }
 
-MappedRegions::MappedRegions(const void* data, std::size_t bytes, std::size_t max_regions)
-    : base_(static_cast<const char*>(data)), bytes_(bytes), max_regions_(std::max<std::size_t>(1, max_regions)) {
+MappedRegions::MappedRegions(const void* data, std::size_t bytes, std::size_t max_regions, const std::string& path)
+    : base_(static_cast<const char*>(data)), bytes_(bytes), max_regions_(std::max<std::size_t>(1, max_regions)), path_(path) {
+  if (!path.empty()) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) throw IoError(path + ": cannot open: " + errno_text());
+  }
   const std::size_t regions = (bytes >> kRegionShift) + 1;
   last_read_ = std::make_unique<std::atomic<std::uint64_t>[]>(regions);
-  for (std::size_t r = 0; r < regions; ++r) last_read_[r].store(0, std::memory_order_relaxed);
+  cold_reads_ = std::make_unique<std::atomic<std::uint64_t>[]>(regions);
+  for (std::size_t r = 0; r < regions; ++r) {
+    last_read_[r].store(0, std::memory_order_relaxed);
+    cold_reads_[r].store(0, std::memory_order_relaxed);
+  }
   held_.reserve(max_regions_ + 1);
+}
+
+MappedRegions::~MappedRegions() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void MappedRegions::read(const void* p, void* out, std::size_t bytes) {
+  const std::size_t offset = std::size_t(static_cast<const char*>(p) - base_);
+  const std::size_t r = offset >> kRegionShift;
+  if (fd_ < 0 || last_read_[r].load(std::memory_order_relaxed) != 0) {
+    touch(p);
+    std::memcpy(out, p, bytes);
+    return;
+  }
+  // Not held: count the read in this stretch of epochs, and map the region once it
+  // has been read often enough (a sweep through it) rather than here and there.
+  const std::uint64_t now = clock_.load(std::memory_order_relaxed);
+  std::uint64_t c = cold_reads_[r].load(std::memory_order_relaxed), next;
+  do {
+    const std::uint64_t since = c >> 24, count = c & 0xFFFFFF;
+    next = since + max_regions_ >= now && count > 0 ? c + 1 : (now << 24 | 1);
+  } while (!cold_reads_[r].compare_exchange_weak(c, next, std::memory_order_relaxed));
+  if ((next & 0xFFFFFF) >= kAdmitReads) {
+    cold_reads_[r].store(0, std::memory_order_relaxed);
+    touch(p);
+    std::memcpy(out, p, bytes);
+    return;
+  }
+  char* dst = static_cast<char*>(out);
+  std::size_t done = 0;
+  while (done < bytes) {
+    const ssize_t n = ::pread(fd_, dst + done, bytes - done, off_t(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) throw IoError(path_ + ": read failed at offset " + std::to_string(offset + done) + ": " +
+                              (n < 0 ? errno_text() : std::string("unexpected end of file")));
+    done += std::size_t(n);
+  }
 }
 
 void MappedRegions::hold(std::size_t region) {

@@ -4,6 +4,8 @@
 // folios of the page cache.
 #include "pipeline/temp_files.hpp"
 
+#include "core/error.hpp"
+
 #include <gtest/gtest.h>
 
 #include <boost/iostreams/device/mapped_file.hpp>
@@ -107,6 +109,42 @@ TEST_F(MappedRegionsTest, ThreadsShareTheCap) {
   // A read racing with the release of its region may map pages that count again
   // only at that region's next read: a region per thread at most.
   EXPECT_LE(rss_file_bytes(), before + (6 + 2 + 1) * MappedRegions::kRegionBytes);
+}
+
+TEST_F(MappedRegionsTest, ScatteredReadsBypassTheMapping) {
+  // Distinct bytes, so that a read from the wrong place shows.
+  {
+    std::vector<char> chunk(MappedRegions::kRegionBytes);
+    std::ofstream out(path_, std::ios::binary | std::ios::in | std::ios::out);
+    for (std::size_t r = 0; r < kRegions; ++r) {
+      for (std::size_t i = 0; i < chunk.size(); ++i) chunk[i] = char((r * 7 + i) & 0x7F);
+      out.write(chunk.data(), std::streamsize(chunk.size()));
+    }
+  }
+  MappedRegions regions(mapping_.data(), mapping_.size(), 4, path_);
+  const std::size_t before = rss_file_bytes();
+  // One read a region, in every region: none is mapped.
+  for (std::size_t r = 0; r < kRegions; ++r) {
+    const std::size_t offset = r * MappedRegions::kRegionBytes + 4096 * (r % 7) + 5;
+    char got[8];
+    regions.read(mapping_.data() + offset, got, sizeof got);
+    for (std::size_t i = 0; i < sizeof got; ++i) EXPECT_EQ(got[i], char((r * 7 + (offset % MappedRegions::kRegionBytes) + i) & 0x7F));
+  }
+  EXPECT_EQ(regions.held(), 0u);
+  EXPECT_EQ(regions.releases(), 0u);
+  EXPECT_LE(rss_file_bytes(), before + MappedRegions::kRegionBytes / 2);
+  // A sweep through one region maps it after kAdmitReads reads.
+  for (std::uint32_t k = 0; k < MappedRegions::kAdmitReads; ++k) {
+    char got;
+    regions.read(mapping_.data() + 3 * MappedRegions::kRegionBytes + 64 * k, &got, 1);
+    EXPECT_EQ(got, char((3 * 7 + 64 * k) & 0x7F));
+  }
+  EXPECT_EQ(regions.held(), 1u);
+}
+
+TEST(MappedRegions, AMissingFileIsAnError) {
+  char byte = 0;
+  EXPECT_THROW(MappedRegions(&byte, 1, 1, "/nonexistent/tetstream-sorted.points"), IoError);
 }
 
 }  // namespace
