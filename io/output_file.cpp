@@ -109,17 +109,22 @@ void OutputFile::sync() {
   if (::fsync(fd_) != 0) fail("fsync failed", partial_);
 }
 
-void OutputFile::read_at(std::uint64_t offset, void* data, std::size_t n) const {
+bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset) {
   char* p = static_cast<char*>(data);
   while (n > 0) {
-    const ssize_t r = ::pread(fd_, p, n, off_t(offset));
+    const ssize_t r = ::pread(fd, p, n, off_t(offset));
     if (r < 0 && errno == EINTR) continue;
     if (r <= 0) {
       if (r == 0) errno = EIO;
-      fail("read back failed", partial_);
+      return false;
     }
     p += r, n -= std::size_t(r), offset += std::uint64_t(r);
   }
+  return true;
+}
+
+void OutputFile::read_at(std::uint64_t offset, void* data, std::size_t n) const {
+  if (!pread_exactly(fd_, data, n, offset)) fail("read back failed", partial_);
 }
 
 void OutputFile::commit(bool do_sync) {

@@ -17,6 +17,10 @@
 
 namespace tetstream::io {
 
+// Reads exactly n bytes at `offset` of fd (retrying short reads and EINTR). False,
+// with errno set (EIO at the end of the file), when it cannot.
+bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset);
+
 class OutputFile {
  public:
   // Creates (truncates) PATH.partial. Throws IoError.

@@ -482,10 +482,11 @@ RunSummary Job::run() {
   // An eighth of the budget, shared by the workers, for the pages of the sorted file
   // their queries read, counted in the 2 MiB regions that a read may map
   // (MappedRegions). The queries of a zone read the file along the sort axis, and a
-  // share that holds their sweep saves faulting regions in again: on 10^7 points at
-  // 256M (uniform) and 512M (mixed), a twentieth of the budget took 77 s and 60 s, a
-  // tenth 61 s and 60 s, an eighth 56 s and 50 s, the same as before the regions
-  // were counted (51 s and 49 s, with 283 and 522 MB peaks: over the budget).
+  // share that holds their sweep saves faulting regions in again. Measured before
+  // scattered reads bypassed the mapping, on 10^7 points: uniform at 256M took 77 s
+  // with a twentieth of the budget, 61 s with a tenth, 56 s with an eighth (53 s before
+  // the regions were counted, peaking over the budget); mixed at 512M 60 s with a
+  // tenth, 50 s with an eighth, 41 s with a fifth (49 s before, over the budget).
   MappedRegions query_regions(mapping.data(), mapping.size(), options_.memory_bytes / 8 / MappedRegions::kRegionBytes,
                               sorted.path);
   view.query_regions = &query_regions;

@@ -154,9 +154,10 @@ class SegmentWorker {
                                       bool outside_clear, bool strip_clear);
   // The queries read points of the mapped sorted file all over it, and mapped pages
   // count in the resident set until they are handed back: every read of the file
-  // outside the sequential window load goes through touch(), which keeps the regions
-  // it maps within their share of the budget (nothing without a mapping), or reads
-  // them without mapping them when they are few and far between.
+  // outside the sequential window load goes through the view's MappedRegions, which
+  // keeps the regions it maps within their share of the budget, or reads the points
+  // without mapping them when they are few and far between (points in memory: read
+  // directly).
   const double* query_point(std::uint64_t label, SortedPoint& scratch) const {
     if (!view_.query_regions) return view_.points[label].xyz;
     view_.query_regions->read(view_.points + label, &scratch, sizeof(SortedPoint));
@@ -319,14 +320,13 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
   ++stats_.queries;
   BestConflict best;
   SortedPoint scratch;
+  auto in_window_already = [&](std::uint64_t label) { return std::binary_search(extra_.begin(), extra_.end(), label); };
   auto offer = [&](std::uint64_t label, const double* xyz) {
-    if (std::binary_search(extra_.begin(), extra_.end(), label)) return;  // in the window already
     const double score = conflict(label, xyz);
     if (!std::isnan(score)) best.offer(label, score);
   };
   auto visit = [&](std::uint64_t label) {
-    if (std::binary_search(extra_.begin(), extra_.end(), label)) return;
-    offer(label, query_point(label, scratch));
+    if (!in_window_already(label)) offer(label, query_point(label, scratch));
   };
   // Missing points with an axis coordinate in [lo, hi]: two label ranges, one on
   // each side of the window, searched through the spatial index; and, for a strip,
@@ -351,7 +351,7 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
   if (!strip_clear) {
     auto visit_outside_strip = [&](std::uint64_t label) {
       const double* xyz = query_point(label, scratch);
-      if (!in_strip_window(xyz)) offer(label, xyz);
+      if (!in_strip_window(xyz) && !in_window_already(label)) offer(label, xyz);
     };
     // The strip window's own points are not missing: whole index nodes inside it are
     // skipped, the rest filtered point by point.
@@ -406,6 +406,8 @@ bool SegmentWorker::query_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   // only points that were missing, and none of those is in its ball.
   const auto [key_a, key_b] = tet_key(t);
   if (proved_empty_.contains(key_a, key_b)) return true;
+  // The extent again (check_tet computed it): cheaper than holding a ball for each
+  // queued tet, as about one tet in a hundred fails the range test.
   ConflictBall query_ball;
   double lo, hi;
   bool outside_clear, strip_clear;

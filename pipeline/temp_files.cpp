@@ -1,6 +1,7 @@
 #include "pipeline/temp_files.hpp"
 
 #include "core/error.hpp"
+#include "io/output_file.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -80,12 +81,17 @@ MappedRegions::~MappedRegions() {
 
 void MappedRegions::read(const void* p, void* out, std::size_t bytes) {
   const std::size_t offset = std::size_t(static_cast<const char*>(p) - base_);
-  const std::size_t r = offset >> kRegionShift;
-  if (fd_ < 0 || last_read_[r].load(std::memory_order_relaxed) != 0) {
-    touch(p);
-    std::memcpy(out, p, bytes);
+  if (fd_ >= 0 && !worth_mapping(offset >> kRegionShift)) {
+    if (!io::pread_exactly(fd_, out, bytes, offset))
+      throw IoError(path_ + ": read failed at offset " + std::to_string(offset) + ": " + errno_text());
     return;
   }
+  touch(p);
+  std::memcpy(out, p, bytes);
+}
+
+bool MappedRegions::worth_mapping(std::size_t r) {
+  if (last_read_[r].load(std::memory_order_relaxed) != 0) return true;  // held
   // Not held: count the read in this stretch of epochs, and map the region once it
   // has been read often enough (a sweep through it) rather than here and there.
   const std::uint64_t now = clock_.load(std::memory_order_relaxed);
@@ -94,21 +100,9 @@ void MappedRegions::read(const void* p, void* out, std::size_t bytes) {
     const std::uint64_t since = c >> 24, count = c & 0xFFFFFF;
     next = since + max_regions_ >= now && count > 0 ? c + 1 : (now << 24 | 1);
   } while (!cold_reads_[r].compare_exchange_weak(c, next, std::memory_order_relaxed));
-  if ((next & 0xFFFFFF) >= kAdmitReads) {
-    cold_reads_[r].store(0, std::memory_order_relaxed);
-    touch(p);
-    std::memcpy(out, p, bytes);
-    return;
-  }
-  char* dst = static_cast<char*>(out);
-  std::size_t done = 0;
-  while (done < bytes) {
-    const ssize_t n = ::pread(fd_, dst + done, bytes - done, off_t(offset + done));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw IoError(path_ + ": read failed at offset " + std::to_string(offset + done) + ": " +
-                              (n < 0 ? errno_text() : std::string("unexpected end of file")));
-    done += std::size_t(n);
-  }
+  if ((next & 0xFFFFFF) < kAdmitReads) return false;
+  cold_reads_[r].store(0, std::memory_order_relaxed);
+  return true;
 }
 
 void MappedRegions::hold(std::size_t region) {
@@ -125,26 +119,24 @@ void MappedRegions::hold(std::size_t region) {
     for (std::size_t i = 1; i < held_.size(); ++i)
       if (last_read_[held_[i]].load(std::memory_order_relaxed) < last_read_[held_[oldest]].load(std::memory_order_relaxed))
         oldest = i;
-    const std::size_t r = held_[oldest];
-    last_read_[r].store(0, std::memory_order_relaxed);
+    release_region(held_[oldest]);
     held_[oldest] = held_.back();
     held_.pop_back();
-    const std::size_t first = r << kRegionShift;
-    release_mapped_pages(base_ + first, std::min(kRegionBytes, bytes_ - first));
-    releases_.fetch_add(1, std::memory_order_relaxed);
   }
   last_read_[region].store(now, std::memory_order_relaxed);
   held_.push_back(region);
 }
 
+void MappedRegions::release_region(std::size_t r) {
+  last_read_[r].store(0, std::memory_order_relaxed);
+  const std::size_t first = r << kRegionShift;
+  release_mapped_pages(base_ + first, std::min(kRegionBytes, bytes_ - first));
+  releases_.fetch_add(1, std::memory_order_relaxed);
+}
+
 void MappedRegions::release_all() {
   std::lock_guard lock(mutex_);
-  for (const std::size_t r : held_) {
-    last_read_[r].store(0, std::memory_order_relaxed);
-    const std::size_t first = r << kRegionShift;
-    release_mapped_pages(base_ + first, std::min(kRegionBytes, bytes_ - first));
-  }
-  releases_.fetch_add(held_.size(), std::memory_order_relaxed);
+  for (const std::size_t r : held_) release_region(r);
   held_.clear();
 }
 

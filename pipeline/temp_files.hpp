@@ -52,12 +52,13 @@ void release_mapped_pages(const void* data, std::size_t bytes);
 // Shared by the threads that read the mapping: a region that several read is held
 // once, and one thread's release never leaves the others' pages unaccounted for long.
 // (One tracker per thread, each a share, made the threads release each other's
-// regions: the zones of a segment read the same label range, and at 256M the
-// TLB shootdowns of the releases took a third of the run.) A read is a relaxed load
-// and, once per epoch, a compare-and-swap; a new region takes a lock. The clock is an epoch
-// that each new region advances, so "least recently read" is by epochs. A read that
-// races with the release of its region maps pages that count again at the next read
-// of that region: a few regions at most, until the next release_all().
+// regions: the zones of a segment read the same label range, and at 256M the TLB
+// shootdowns of the releases were 18% of the samples.) A read is a relaxed load and,
+// once per epoch, a compare-and-swap; a new region takes a lock. The clock is an
+// epoch that each new region advances, so "least recently read" is by epochs. A read
+// that races with the release of its region maps pages that count again at the next
+// read of that region: a few regions at most, until then or until the whole mapping
+// is handed back (the job does so after each zone).
 class MappedRegions {
  public:
   static constexpr int kRegionShift = 21;
@@ -91,13 +92,17 @@ class MappedRegions {
       if (last_read_[r].compare_exchange_weak(last, now, std::memory_order_relaxed)) return;
     }
   }
-  // Hands every held region back (between jobs' phases: none is being read).
+  // Hands every held region back.
   void release_all();
   std::size_t held() const;
   std::uint64_t releases() const { return releases_.load(std::memory_order_relaxed); }
 
  private:
   void hold(std::size_t region);  // makes room first, unless another thread held it meanwhile
+  void release_region(std::size_t region);  // under the lock; the caller drops it from held_
+  // Whether a read of region r should go through the mapping: it is held, or this
+  // read makes kAdmitReads recent ones (then it is to be held).
+  bool worth_mapping(std::size_t r);
   const char* base_;
   std::size_t bytes_, max_regions_;
   std::string path_;
