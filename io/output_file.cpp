@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -18,10 +19,86 @@ namespace {
 }
 }  // namespace
 
-OutputFile::OutputFile(std::string path, std::size_t buffer_bytes) : path_(std::move(path)) {
+void check_output_path(const std::string& path) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) {
+    if (errno == ENOENT) return;
+    fail("cannot stat", path);
+  }
+  if (S_ISLNK(st.st_mode))
+    throw UsageError(path + " is a symbolic link: tetstream does not write through links (give the real path)");
+  if (S_ISDIR(st.st_mode)) throw UsageError(path + " is a directory: give the output file's name");
+  if (!S_ISREG(st.st_mode))
+    throw UsageError(path + " is not a regular file (a device, pipe or socket): tetstream writes regular files, "
+                     "or - for standard output where the command supports it");
+}
+
+void refuse_input_as_output(const std::string& input, const std::string& output) {
+  struct stat in {};
+  if (::stat(input.c_str(), &in) != 0 || !S_ISREG(in.st_mode)) return;
+  for (const std::string& p : {output, output + ".partial"}) {
+    struct stat st {};
+    if (::lstat(p.c_str(), &st) == 0 && st.st_dev == in.st_dev && st.st_ino == in.st_ino)
+      throw UsageError("the output " + p + " is the input " + input + ": refusing to write over the input");
+  }
+}
+
+OutputClaim::OutputClaim(std::string path) : path_(std::move(path)), partial_(path_ + ".partial") {
+  check_output_path(path_);
+  fd_ = ::open(partial_.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW);
+  if (fd_ < 0 && errno == ENOENT) {
+    fd_ = ::open(partial_.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_CREAT | O_EXCL, 0644);
+    created_ = fd_ >= 0;
+  }
+  if (fd_ < 0) {
+    if (errno == ELOOP) throw UsageError(partial_ + " is a symbolic link: tetstream does not follow it (remove it)");
+    fail("cannot create", partial_);
+  }
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0) fail("cannot stat", partial_);
+  if (!S_ISREG(st.st_mode) || st.st_nlink != 1) {
+    ::close(fd_);
+    fd_ = -1;
+    throw UsageError(partial_ + " is not a regular file of its own (a device, pipe, or a hard link to another file): "
+                     "remove it");
+  }
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(fd_);
+    fd_ = -1;
+    errno = err;
+    if (err == EWOULDBLOCK) throw UsageError(path_ + " is being written by another tetstream process");
+    fail("cannot lock", partial_);
+  }
+}
+
+OutputClaim::~OutputClaim() {
+  if (fd_ < 0) return;
+  struct stat st {};
+  // Still linked (not renamed into place, not removed by the writer) and empty: the
+  // job wrote nothing, and the file is the one this claim made.
+  if (created_ && ::fstat(fd_, &st) == 0 && st.st_nlink > 0 && st.st_size == 0) {
+    struct stat at {};
+    if (::lstat(partial_.c_str(), &at) == 0 && at.st_ino == st.st_ino && at.st_dev == st.st_dev)
+      ::unlink(partial_.c_str());
+  }
+  ::close(fd_);
+}
+
+namespace {
+// A descriptor of PATH.partial that shares the claim's lock (the same open file).
+int claimed_fd(const OutputClaim& claim) {
+  const int fd = ::fcntl(claim.fd(), F_DUPFD_CLOEXEC, 0);
+  if (fd < 0) fail("cannot duplicate the descriptor of", claim.path() + ".partial");
+  return fd;
+}
+}  // namespace
+
+OutputFile::OutputFile(std::string path, std::size_t buffer_bytes, const OutputClaim* claim) : path_(std::move(path)) {
   partial_ = path_ + ".partial";
-  fd_ = ::open(partial_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd_ < 0) fail("cannot create", partial_);
+  if (!claim) own_claim_ = std::make_unique<OutputClaim>(path_), claim = own_claim_.get();
+  fd_ = claimed_fd(*claim);
+  if (::ftruncate(fd_, 0) != 0 || ::lseek(fd_, 0, SEEK_SET) < 0) fail("cannot truncate", partial_);
   cap_ = std::max<std::size_t>(buffer_bytes, 4096);
   buf_.reset(new char[cap_]);
 }
@@ -33,10 +110,12 @@ OutputFile::OutputFile(std::string path, std::size_t buffer_bytes, int fd, std::
   buf_.reset(new char[cap_]);
 }
 
-std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t keep, std::size_t buffer_bytes) {
+std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t keep, std::size_t buffer_bytes,
+                                               const OutputClaim* claim) {
   const std::string partial = path + ".partial";
-  const int fd = ::open(partial.c_str(), O_RDWR | O_CLOEXEC);
-  if (fd < 0) fail("cannot reopen", partial);
+  std::unique_ptr<OutputClaim> own;
+  if (!claim) own = std::make_unique<OutputClaim>(path), claim = own.get();
+  const int fd = claimed_fd(*claim);
   struct stat st;
   if (::fstat(fd, &st) != 0) {
     ::close(fd);
@@ -51,7 +130,9 @@ std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t k
     ::close(fd);
     fail("cannot truncate", partial);
   }
-  return std::unique_ptr<OutputFile>(new OutputFile(std::move(path), buffer_bytes, fd, keep));
+  std::unique_ptr<OutputFile> f(new OutputFile(std::move(path), buffer_bytes, fd, keep));
+  f->own_claim_ = std::move(own);
+  return f;
 }
 
 OutputFile::~OutputFile() {

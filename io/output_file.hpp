@@ -17,18 +17,54 @@
 
 namespace tetstream::io {
 
+// Refuses (UsageError) an output path the tool must not write: a directory, a device,
+// pipe or socket, or a symbolic link (the final rename would replace the link, or
+// the device node as root). A missing path or a regular file is fine.
+void check_output_path(const std::string& path);
+// Refuses (UsageError) writing `output` when it, or OUTPUT.partial, is `input` (the
+// same file by device and inode, whatever the spelling or hard link).
+void refuse_input_as_output(const std::string& input, const std::string& output);
+
+// The claim of a job on PATH: PATH.partial opened (created when missing) without
+// following a link, checked to be a regular file with a single link, and locked
+// (flock, exclusive) for as long as the claim lives. A second process that claims the
+// same output is refused (UsageError) while the first runs; the kernel drops the
+// lock when a process dies. A job takes the claim before any work and hands it to
+// its writer (OutputFile shares the locked descriptor), so the output is its own from
+// start to rename. The destructor removes PATH.partial only when this claim created
+// it and nothing was written to it.
+class OutputClaim {
+ public:
+  explicit OutputClaim(std::string path);
+  ~OutputClaim();
+  OutputClaim(const OutputClaim&) = delete;
+  OutputClaim& operator=(const OutputClaim&) = delete;
+
+  const std::string& path() const { return path_; }
+  int fd() const { return fd_; }
+  bool created() const { return created_; }  // PATH.partial did not exist before
+
+ private:
+  std::string path_, partial_;
+  int fd_ = -1;
+  bool created_ = false;
+};
+
 // Reads exactly n bytes at `offset` of fd (retrying short reads and EINTR). False,
 // with errno set (EIO at the end of the file), when it cannot.
 bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset);
 
 class OutputFile {
  public:
-  // Creates (truncates) PATH.partial. Throws IoError.
-  explicit OutputFile(std::string path, std::size_t buffer_bytes = std::size_t(8) << 20);
+  // Creates (truncates) PATH.partial, under `claim` when given (its locked file),
+  // else claiming PATH itself (see OutputClaim). Throws IoError, UsageError.
+  explicit OutputFile(std::string path, std::size_t buffer_bytes = std::size_t(8) << 20,
+                      const OutputClaim* claim = nullptr);
   // Reopens an existing PATH.partial for a resumed job: keeps its first `keep` bytes
   // (it must have at least that many) and appends after them. Throws IoError.
   static std::unique_ptr<OutputFile> reopen(std::string path, std::uint64_t keep,
-                                            std::size_t buffer_bytes = std::size_t(8) << 20);
+                                            std::size_t buffer_bytes = std::size_t(8) << 20,
+                                            const OutputClaim* claim = nullptr);
   ~OutputFile();
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
@@ -61,6 +97,8 @@ class OutputFile {
 
   std::string path_, partial_;
   int fd_ = -1;
+  // Set when this file claimed PATH itself (no claim given): the lock lives as long.
+  std::unique_ptr<OutputClaim> own_claim_;
   bool committed_ = false;
   bool keep_on_failure_ = false;
   std::unique_ptr<char[]> buf_;

@@ -51,7 +51,7 @@ TetWriter::TetWriter(std::string path, TetFileHeader header, TetWriterOptions op
     : path_(std::move(path)), header_(std::move(header)), options_(options) {
   header_.resolve_and_validate();
   validate_options(options_);
-  out_ = std::make_unique<OutputFile>(path_, options_.buffer_bytes);
+  out_ = std::make_unique<OutputFile>(path_, options_.buffer_bytes, options_.claim);
   out_->keep_on_failure(options_.keep_partial);
   const std::vector<std::uint8_t> lead = leading_bytes(header_);
   out_->write(lead.data(), lead.size());
@@ -81,7 +81,7 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
   if (committed < w->points_end_) {
     throw InputError::at_byte(partial, committed, "cannot resume before the points are complete");
   }
-  w->out_ = OutputFile::reopen(w->path_, committed, options.buffer_bytes);
+  w->out_ = OutputFile::reopen(w->path_, committed, options.buffer_bytes, options.claim);
   // Before the checks below: a resume that fails them must not delete the job's file.
   w->out_->keep_on_failure(options.keep_partial);
   OutputFile& f = *w->out_;
@@ -90,6 +90,23 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
   f.read_at(0, have.data(), have.size());
   if (have != lead) throw InputError::at_byte(partial, 0, "header differs from the resumed job's");
   w->points_ = w->header_.point_count;
+  // The committed points are trusted only against their CRC: a flipped coordinate
+  // would otherwise end in a container whose CRC was computed over other bytes.
+  {
+    std::vector<std::uint8_t> chunk(std::size_t(1) << 20);
+    std::uint32_t crc = 0;
+    const std::uint64_t begin = pnts_at + kSectionHeaderSize;
+    for (std::uint64_t at = begin; at < begin + pnts_len;) {
+      const std::size_t n = std::size_t(std::min<std::uint64_t>(chunk.size(), begin + pnts_len - at));
+      f.read_at(at, chunk.data(), n);
+      crc = crc32c(chunk.data(), n, crc);
+      at += n;
+    }
+    std::uint8_t stored[4];
+    f.read_at(begin + pnts_len, stored, 4);
+    if (crc != get_u32(stored)) throw InputError::at_byte(partial, begin, "points: checksum mismatch");
+    w->points_crc_ = crc;
+  }
 
   // Rebuild the frame index from the frames after the points.
   std::uint64_t at = w->points_end_;

@@ -35,6 +35,7 @@
 namespace tetstream::io {
 
 class OutputFile;
+class OutputClaim;
 
 struct TetWriterOptions {
   int zstd_level = kDefaultZstdLevel;
@@ -47,6 +48,9 @@ struct TetWriterOptions {
   // resume() honours it too: a resume refused by its checks leaves the file in place
   // (already cut back to `committed` bytes).
   bool keep_partial = false;
+  // The job's claim on the output (io/output_file.hpp), taken before its work began;
+  // null: the writer claims the output itself.
+  const OutputClaim* claim = nullptr;
 };
 
 class TetWriter {

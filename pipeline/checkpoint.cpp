@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <spdlog/spdlog.h>
 #include <vector>
 #include <fcntl.h>
 #include <sys/file.h>
@@ -68,32 +69,12 @@ bool Checkpoint::exists() const {
   return std::filesystem::exists(path(kStateFile), ec);
 }
 
-Checkpoint::~Checkpoint() {
-  if (lock_fd_ >= 0) ::close(lock_fd_);
-}
-
 void Checkpoint::create_and_lock() {
-  std::error_code ec;
-  std::filesystem::create_directory(dir_, ec);  // not its parents: a mistyped --tmpdir is an error
-  if (ec) throw IoError(dir_ + ": cannot create the checkpoint directory: " + ec.message());
-  if (lock_fd_ >= 0) return;
-  const std::string lock = path("lock");
-  lock_fd_ = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (lock_fd_ < 0) throw IoError(lock + ": cannot open: " + errno_text());
-  if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
-    const int err = errno;
-    ::close(lock_fd_);
-    lock_fd_ = -1;
-    if (err == EWOULDBLOCK) throw UsageError(dir_ + " is in use: another tetstream process is running this job");
-    errno = err;
-    throw IoError(lock + ": cannot lock: " + errno_text());
-  }
+  if (!work_) work_.emplace(WorkDir::open_or_create(dir_));
 }
 
 void Checkpoint::clear() const {
-  std::error_code ec;
-  for (const auto& entry : std::filesystem::directory_iterator(dir_, ec))
-    if (entry.path().filename() != "lock") std::filesystem::remove_all(entry.path(), ec);
+  if (work_) work_->clear();
 }
 
 nlohmann::json Checkpoint::load() const {
@@ -128,9 +109,10 @@ void Checkpoint::save(nlohmann::json state) {
   write_file_atomically(dir_, kStateFile, text.data(), text.size());
 }
 
-void Checkpoint::remove() const {
-  std::error_code ec;
-  std::filesystem::remove_all(dir_, ec);
+void Checkpoint::remove() {
+  if (work_ && !work_->remove())
+    spdlog::warn("{} is left in place: it holds files that tetstream did not write", dir_);
+  work_.reset();
 }
 
 void write_file_atomically(const std::string& dir, const std::string& name, const void* data, std::size_t bytes) {
@@ -145,7 +127,7 @@ void write_file_atomically(const std::string& dir, const std::string& name, cons
   sync_directory(dir);
 }
 
-void read_file_exactly(const std::string& path, void* data, std::size_t bytes) {
+void read_file_exactly(const std::string& path, void* data, std::size_t bytes, std::uint32_t crc) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw DamagedCheckpoint(path + ": damaged checkpoint (the file is missing)");
   BinaryFile f(path, "rb");
@@ -153,6 +135,27 @@ void read_file_exactly(const std::string& path, void* data, std::size_t bytes) {
   char extra;
   if (n != bytes || f.read(&extra, 1, 1) != 0)
     throw DamagedCheckpoint(path + ": damaged checkpoint (expected " + std::to_string(bytes) + " bytes)");
+  if (io::crc32c(data, bytes) != crc) throw DamagedCheckpoint(path + ": damaged checkpoint (checksum mismatch)");
+}
+
+bool file_matches(const std::string& path, std::uint64_t bytes, std::uint32_t crc) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  std::vector<char> buf(std::size_t(1) << 20);
+  std::uint64_t total = 0;
+  std::uint32_t c = 0;
+  for (;;) {
+    const ssize_t n = ::read(fd, buf.data(), buf.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      ::close(fd);
+      return n == 0 && total == bytes && c == crc;
+    }
+    c = io::crc32c(buf.data(), std::size_t(n), c);
+    total += std::uint64_t(n);
+    // Hand the pages back: a resume checks files larger than memory.
+    if (total % (std::uint64_t(64) << 20) == 0) ::posix_fadvise(fd, 0, off_t(total), POSIX_FADV_DONTNEED);
+  }
 }
 
 }  // namespace tetstream::pipeline

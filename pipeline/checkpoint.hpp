@@ -18,10 +18,12 @@
 // CRC32C over samples spread through the file) and the options that change the
 // output. A resumed job with a different input or options is refused.
 #include "core/error.hpp"
+#include "pipeline/work_dir.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 namespace tetstream::pipeline {
@@ -39,10 +41,10 @@ nlohmann::json fingerprint_file(const std::string& path);
 
 class Checkpoint {
  public:
-  static constexpr int kVersion = 1;
+  // 2: every file the state names carries its CRC32C; the directory has a marker.
+  static constexpr int kVersion = 2;
 
   explicit Checkpoint(std::string dir) : dir_(std::move(dir)) {}
-  ~Checkpoint();  // releases the lock
   Checkpoint(const Checkpoint&) = delete;
   Checkpoint& operator=(const Checkpoint&) = delete;
 
@@ -50,30 +52,36 @@ class Checkpoint {
   std::string path(const std::string& name) const { return dir_ + "/" + name; }
   bool exists() const;  // the directory holds a state.json
 
-  // Makes the directory if needed (its parent must exist; IoError otherwise) and
-  // takes its lock (flock on DIR/lock, released by the kernel if the process dies):
-  // UsageError when another process holds it, i.e. runs the same job right now.
+  // Makes the directory if needed (its parent must exist; IoError otherwise), or
+  // reopens one that tetstream made (a WorkDir: never a link, another user's or a
+  // directory without the marker: UsageError), and takes its lock (released by the
+  // kernel if the process dies): UsageError when another process holds it, i.e. runs
+  // the same job right now.
   void create_and_lock();
   // The saved state (without its CRC). Throws InputError naming the file when it is
   // damaged: unreadable JSON, a CRC mismatch, another format or version.
   nlohmann::json load() const;
   // Replaces the state atomically (see above). Throws IoError.
   void save(nlohmann::json state);
-  // Removes everything in the directory but the lock: --force starting over.
+  // Removes the job's files but the lock and the marker: --force starting over.
   void clear() const;
-  // Removes the directory and everything in it (ignores errors: used on the way out).
-  void remove() const;
+  // Removes the job's files and, when nothing else is in it, the directory (ignores
+  // errors: used on the way out; a directory left with other files in it is logged).
+  void remove();
 
  private:
   std::string dir_;
-  int lock_fd_ = -1;
+  std::optional<WorkDir> work_;  // set by create_and_lock
 };
 
 // Writes `bytes` bytes to DIR/NAME through NAME.tmp, fsync and rename, so the file is
 // complete whenever it exists. Throws IoError.
 void write_file_atomically(const std::string& dir, const std::string& name, const void* data, std::size_t bytes);
-// Reads a whole file written by write_file_atomically (InputError when it is not
-// `bytes` long: a damaged checkpoint).
-void read_file_exactly(const std::string& path, void* data, std::size_t bytes);
+// Reads a whole file written by write_file_atomically: DamagedCheckpoint when it is
+// missing, not `bytes` long or its bytes do not have the CRC32C `crc`.
+void read_file_exactly(const std::string& path, void* data, std::size_t bytes, std::uint32_t crc);
+// Whether PATH holds exactly `bytes` bytes with the CRC32C `crc` (read in full): how a
+// resumed job decides to trust a file that its checkpoint names.
+bool file_matches(const std::string& path, std::uint64_t bytes, std::uint32_t crc);
 
 }  // namespace tetstream::pipeline

@@ -265,13 +265,14 @@ class ExternalSorter {
   // push_sorted_run() with the same options): it joins the runs as if just written.
   // Adopt runs before pushing anything, in their original order.
   void adopt_run(std::string path, std::uint64_t records) {
-    runs_.push_back({std::move(path), records});
+    runs_.push_back({std::move(path), records, 0});
     next_run_id_ = std::max<std::uint64_t>(next_run_id_, runs_.size());
     stats_.records_pushed += records;
   }
   // The run file written last (by push_sorted_run() or a spill): path and records.
   const std::string& last_run_path() const { return runs_.back().path; }
   std::uint64_t last_run_records() const { return runs_.back().records; }
+  std::uint32_t last_run_crc() const { return runs_.back().crc; }  // CRC32C of its bytes
 
   std::uint64_t records_pushed() const { return stats_.records_pushed; }
   bool spilled() const { return !runs_.empty(); }
@@ -307,7 +308,7 @@ class ExternalSorter {
           next.push_back(group[0]);
           continue;
         }
-        Run out{run_path(next_run_id_++), 0};
+        Run out{run_path(next_run_id_++), 0, 0};
         {
           BinaryFile f(out.path, "wb");
           merge_runs(group, [&](std::span<const T> batch) {
@@ -332,6 +333,7 @@ class ExternalSorter {
   struct Run {
     std::string path;
     std::uint64_t records = 0;
+    std::uint32_t crc = 0;  // of the file's bytes, when this sorter wrote it in one piece
   };
 
   // Sequential reader of one run, a block at a time.
@@ -387,10 +389,11 @@ class ExternalSorter {
   void write_run(const T* data, std::size_t n) {
     if (opt_.dir.empty() && opt_.make_dir) opt_.dir = opt_.make_dir();
     if (opt_.dir.empty()) throw IoError("external sort '" + opt_.name + "': out of memory budget and no temporary directory");
-    Run r{run_path(next_run_id_++), n};
+    Run r{run_path(next_run_id_++), n, 0};
     BinaryFile f(r.path, "wb");
     f.write(data, sizeof(T), n);
     f.close(/*sync=*/opt_.keep_files);
+    r.crc = f.crc();
     stats_.bytes_written += n * sizeof(T);
     ++stats_.runs_written;
     runs_.push_back(std::move(r));

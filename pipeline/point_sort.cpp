@@ -1,5 +1,7 @@
 #include "pipeline/point_sort.hpp"
 
+#include "io/tet_container.hpp"
+
 #include "core/error.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/external_sort.hpp"
@@ -110,7 +112,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   for (const SortRunFile& r : done.runs) {
     sorter.adopt_run(r.path, r.records);
     std::vector<std::uint64_t> hull(r.hull_count);
-    read_file_exactly(r.hull_path, hull.data(), hull.size() * sizeof(std::uint64_t));
+    read_file_exactly(r.hull_path, hull.data(), hull.size() * sizeof(std::uint64_t), r.hull_crc32c);
     hull_originals.insert(hull.begin(), hull.end());
     skip += r.records;
   }
@@ -158,6 +160,8 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
         r.records = sorter.last_run_records();
         r.hull_path = r.path + ".hull";
         r.hull_count = run_hull.size();
+        r.crc32c = sorter.last_run_crc();
+        r.hull_crc32c = io::crc32c(run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
         const std::string name = std::filesystem::path(r.hull_path).filename().string();
         write_file_atomically(dir, name, run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
         done.runs.push_back(r);
@@ -224,6 +228,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
     });
     out.write(block.data(), sizeof(SortedPoint), block.size());
     out.close(/*sync=*/resumable);
+    result.crc32c = out.crc();
     progress.finish();
     std::sort(hull_labels.begin(), hull_labels.end());
     hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());

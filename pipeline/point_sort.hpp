@@ -35,6 +35,7 @@ struct SortRunFile {
   std::uint64_t records = 0;
   std::string hull_path;  // hull_count uint64 original indices
   std::uint64_t hull_count = 0;
+  std::uint32_t crc32c = 0, hull_crc32c = 0;  // of the two files' bytes (a resume checks them)
 };
 
 // How far the sort of a resumable job got: the caller persists it (pipeline/checkpoint)
@@ -66,6 +67,7 @@ struct SortedPoints {
   int axis = 0;                   // the longest axis of the bounding box
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
   std::vector<std::uint64_t> hull_labels;  // labels of the global convex hull's vertices (sorted)
+  std::uint32_t crc32c = 0;                // of the sorted file's bytes
   std::size_t runs = 0;
   double seconds_scan = 0, seconds_runs = 0, seconds_merge = 0;
 };

@@ -1,7 +1,9 @@
 #include "pipeline/run.hpp"
 
 #include "core/error.hpp"
+#include "io/output_file.hpp"
 #include "io/point_format.hpp"
+#include "io/tet_container.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/async_tet_writer.hpp"
@@ -24,7 +26,9 @@
 #include <filesystem>
 #include <atomic>
 #include <exception>
+#include <optional>
 #include <malloc.h>
+#include <unistd.h>
 #include <omp.h>
 
 namespace tetstream::pipeline {
@@ -148,7 +152,8 @@ struct ZonePlan {
   double buffer_width = 0;
 };
 
-ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
+// The plan for o.memory_bytes, or none when the budget cannot hold a window.
+std::optional<ZonePlan> try_plan(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
   const double index_bytes =
       double(index.memory_bytes()) + double(view.hull_points.capacity() * sizeof(SortedPoint)) +
       (view.hull_index ? double(view.hull_index->memory_bytes()) : 0.0);
@@ -197,12 +202,30 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
     const double r = evaluate(k, s).first;
     if (r < best - 1e-9) best = r, plan.zones = k, plan.segment_points = std::uint64_t(s);
   }
-  if (plan.segment_points == 0)
-    throw UsageError("--memory " + std::to_string(o.memory_bytes >> 20) +
-                     "M is too small for this input: each window needs about " +
-                     std::to_string(std::uint64_t(axis_buffers * kWindowBytesPerPoint) >> 20) +
-                     "M for its buffers alone");
+  if (plan.segment_points == 0) return std::nullopt;
   return plan;
+}
+
+// The plan for the budget; when it cannot hold a window, a UsageError that names the
+// smallest budget that can (to a mebibyte, found by bisection: the plan is cheap).
+ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
+  if (std::optional<ZonePlan> plan = try_plan(view, index, o, threads)) return *plan;
+  RunOptions larger = o;
+  auto works = [&](std::uint64_t bytes) {
+    larger.memory_bytes = bytes;
+    return try_plan(view, index, larger, threads).has_value();
+  };
+  std::uint64_t lo = o.memory_bytes, hi = std::max<std::uint64_t>(2 * lo, std::uint64_t(64) << 20);
+  constexpr std::uint64_t kMost = std::uint64_t(1) << 50;
+  while (hi < kMost && !works(hi)) lo = hi, hi *= 2;
+  if (hi >= kMost) throw UsageError("no memory budget can hold a window of this input");
+  while (hi - lo > (std::uint64_t(1) << 20)) {
+    const std::uint64_t mid = lo + (hi - lo) / 2;
+    (works(mid) ? hi : lo) = mid;
+  }
+  const std::uint64_t need_mib = (hi + (std::uint64_t(1) << 20) - 1) >> 20;
+  throw UsageError("--memory " + human_bytes(double(o.memory_bytes)) + " is too small for this input (" +
+                   std::to_string(view.count) + " points): use --memory " + std::to_string(need_mib) + "M or more");
 }
 
 }  // namespace
@@ -250,11 +273,14 @@ std::string base_name(const std::string& path) { return std::filesystem::path(pa
 json to_json(const SortProgress& p) {
   json runs = json::array();
   for (const SortRunFile& r : p.runs)
-    runs.push_back({{"file", base_name(r.path)}, {"records", r.records}, {"hull_file", base_name(r.hull_path)},
-                    {"hull_count", r.hull_count}});
+    runs.push_back({{"file", base_name(r.path)}, {"records", r.records}, {"crc32c", r.crc32c},
+                    {"hull_file", base_name(r.hull_path)}, {"hull_count", r.hull_count}, {"hull_crc32c", r.hull_crc32c}});
   return {{"scanned", p.scanned}, {"input_count", p.input_count}, {"bbox_min", bbox_json(p.bbox_min)},
           {"bbox_max", bbox_json(p.bbox_max)}, {"axis", p.axis}, {"runs", runs}};
 }
+// The sort's progress as the checkpoint recorded it, less the runs from the first one
+// whose files are missing or fail their checksums: the sort redoes those from the
+// input (a damaged piece is recomputed, not trusted).
 SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
   SortProgress p;
   p.scanned = j.at("scanned").get<bool>();
@@ -262,9 +288,17 @@ SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
   bbox_from(j.at("bbox_min"), p.bbox_min);
   bbox_from(j.at("bbox_max"), p.bbox_max);
   p.axis = j.at("axis").get<int>();
-  for (const json& r : j.at("runs"))
-    p.runs.push_back({ckpt.path(r.at("file").get<std::string>()), r.at("records").get<std::uint64_t>(),
-                      ckpt.path(r.at("hull_file").get<std::string>()), r.at("hull_count").get<std::uint64_t>()});
+  for (const json& r : j.at("runs")) {
+    SortRunFile run{ckpt.path(r.at("file").get<std::string>()), r.at("records").get<std::uint64_t>(),
+                    ckpt.path(r.at("hull_file").get<std::string>()), r.at("hull_count").get<std::uint64_t>(),
+                    r.at("crc32c").get<std::uint32_t>(), r.at("hull_crc32c").get<std::uint32_t>()};
+    if (!file_matches(run.path, run.records * sizeof(SortedPoint), run.crc32c) ||
+        !file_matches(run.hull_path, run.hull_count * sizeof(std::uint64_t), run.hull_crc32c)) {
+      spdlog::warn("{}: damaged or missing (size or checksum): sorting again from run {}", run.path, p.runs.size());
+      break;
+    }
+    p.runs.push_back(run);
+  }
   return p;
 }
 
@@ -273,9 +307,13 @@ constexpr const char* kHullFile = "hull.labels";
 json to_json(const SortedPoints& s) {
   return {{"file", base_name(s.path)}, {"count", s.count},       {"input_count", s.input_count},
           {"duplicates", s.duplicates}, {"axis", s.axis},        {"bbox_min", bbox_json(s.bbox_min)},
-          {"bbox_max", bbox_json(s.bbox_max)}, {"runs", s.runs}, {"hull_count", s.hull_labels.size()}};
+          {"bbox_max", bbox_json(s.bbox_max)}, {"runs", s.runs}, {"hull_count", s.hull_labels.size()},
+          {"crc32c", s.crc32c}, {"hull_crc32c", io::crc32c(s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t))}};
 }
-SortedPoints sorted_from(const json& j, const Checkpoint& ckpt) {
+// The sorted file and the hull's labels as the checkpoint recorded them; nullopt when
+// either is missing or fails its checksum (the job sorts again, and must then come to
+// the same bytes: see Job::sort).
+std::optional<SortedPoints> sorted_from(const json& j, const Checkpoint& ckpt) {
   SortedPoints s;
   s.path = ckpt.path(j.at("file").get<std::string>());
   s.count = j.at("count").get<std::uint64_t>();
@@ -285,11 +323,19 @@ SortedPoints sorted_from(const json& j, const Checkpoint& ckpt) {
   bbox_from(j.at("bbox_min"), s.bbox_min);
   bbox_from(j.at("bbox_max"), s.bbox_max);
   s.runs = j.at("runs").get<std::size_t>();
+  s.crc32c = j.at("crc32c").get<std::uint32_t>();
   s.hull_labels.resize(j.at("hull_count").get<std::size_t>());
-  read_file_exactly(ckpt.path(kHullFile), s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t));
-  std::error_code ec;
-  if (std::filesystem::file_size(s.path, ec) != s.count * sizeof(SortedPoint))
-    throw DamagedCheckpoint(s.path + ": damaged checkpoint (the sorted file is not " + std::to_string(s.count) + " records)");
+  try {
+    read_file_exactly(ckpt.path(kHullFile), s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t),
+                      j.at("hull_crc32c").get<std::uint32_t>());
+  } catch (const DamagedCheckpoint& e) {
+    spdlog::warn("{}: sorting again", e.what());
+    return std::nullopt;
+  }
+  if (!file_matches(s.path, s.count * sizeof(SortedPoint), s.crc32c)) {
+    spdlog::warn("{}: damaged or missing (size or checksum): sorting again", s.path);
+    return std::nullopt;
+  }
   return s;
 }
 
@@ -357,15 +403,17 @@ std::string identity_difference(const json& saved, const json& now) {
     return "the input was " + saved.at("input").get<std::string>() + ", now " + now.at("input").get<std::string>();
   if (saved.at("input_fingerprint") != now.at("input_fingerprint"))
     return "the input " + now.at("input").get<std::string>() + " changed (size, time or contents) since the checkpoint";
-  for (const char* key : {"output", "memory", "buffer_spacings", "sort_run_points", "read"})
+  // Not "memory": a resumed job may take another budget (the frames do not depend on
+  // it, and the header keeps the budget it was written with; see Job::run).
+  for (const char* key : {"output", "buffer_spacings", "sort_run_points", "read"})
     if (saved.at(key) != now.at(key)) return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
   return "";
 }
 
 class Job {
  public:
-  Job(const RunOptions& options, std::string dir, Checkpoint* checkpoint, json state)
-      : options_(options), dir_(std::move(dir)), checkpoint_(checkpoint), state_(std::move(state)) {}
+  Job(const RunOptions& options, std::string dir, Checkpoint* checkpoint, json state, const io::OutputClaim* claim)
+      : options_(options), dir_(std::move(dir)), checkpoint_(checkpoint), state_(std::move(state)), claim_(claim) {}
   RunSummary run();
 
  private:
@@ -378,13 +426,22 @@ class Job {
   std::string dir_;
   Checkpoint* checkpoint_;  // null: not resumable
   json state_;              // what the checkpoint holds (maintained even without one)
+  const io::OutputClaim* claim_;  // the output, locked for this job since it began
   RunSummary summary_;
   Clock::time_point start_ = Clock::now();
 };
 
-// Stage 1, or what a checkpoint kept of it.
+// Stage 1, or what a checkpoint kept of it. A sorted file that fails its checksum is
+// made again; the new one must have the recorded checksum (the labels that the
+// output written so far uses), else the checkpoint is refused as damaged.
 SortedPoints Job::sort() {
-  if (state_.contains("sorted")) return sorted_from(state_["sorted"], *checkpoint_);
+  std::optional<std::uint32_t> expected_crc;
+  if (state_.contains("sorted")) {
+    if (std::optional<SortedPoints> kept = sorted_from(state_["sorted"], *checkpoint_)) return *kept;
+    // "sorted" stays in the state until the new file replaces it: a crash while
+    // sorting again still finds the checksum to come to.
+    expected_crc = state_["sorted"].at("crc32c").get<std::uint32_t>();
+  }
   PointSortOptions sort_options;
   sort_options.memory_bytes = std::size_t(options_.memory_bytes);
   sort_options.run_points = std::size_t(options_.sort_run_points);
@@ -399,6 +456,9 @@ SortedPoints Job::sort() {
     };
   }
   SortedPoints sorted = sort_points(options_.input, options_.read, sort_options, dir_);
+  if (expected_crc && sorted.crc32c != *expected_crc)
+    throw DamagedCheckpoint(sorted.path + ": sorted again after a checksum failure, the points differ from the "
+                            "checkpoint's (damaged checkpoint, or the input changed)");
   if (checkpoint_) {
     write_file_atomically(dir_, kHullFile, sorted.hull_labels.data(), sorted.hull_labels.size() * sizeof(std::uint64_t));
     state_["sorted"] = to_json(sorted);
@@ -493,6 +553,13 @@ RunSummary Job::run() {
   const double buffer_width = zone_plan.buffer_width;
 
   // ---- writer: header and points (or the checkpoint's partial output) ----
+  // The budget the output's header names: the one its first process wrote it with (a
+  // resumed job may run with another; the frames do not depend on it).
+  if (!state_.contains("header_memory")) state_["header_memory"] = options_.memory_bytes;
+  const std::uint64_t header_memory = state_["header_memory"].get<std::uint64_t>();
+  if (header_memory != options_.memory_bytes)
+    spdlog::info("resumed with --memory {}: the output keeps the budget it was started with, {}",
+                 human_bytes(double(options_.memory_bytes)), human_bytes(double(header_memory)));
   io::TetFileHeader header;
   header.point_count = view.count;
   header.input_count = sorted.input_count;
@@ -501,7 +568,7 @@ RunSummary Job::run() {
   header.tool = "tetstream 0.1.0";
   header.options = json{{"command", "run"},
                         {"input", options_.input},
-                        {"memory", options_.memory_bytes},
+                        {"memory", header_memory},
                         {"buffer_spacings", options_.buffer_spacings},
                         {"axis", std::string(1, "xyz"[view.axis])},
                         {"duplicates_merged", sorted.duplicates}}
@@ -511,6 +578,7 @@ RunSummary Job::run() {
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
   writer_options.frame_tets = 2 * kFrameTets;
   writer_options.keep_partial = checkpoint_ != nullptr;
+  writer_options.claim = claim_;
   std::unique_ptr<io::TetWriter> writer_holder;
   SegmentStats work;                  // of the segments written, this process's and earlier ones'
   std::uint64_t zone_points_done = 0;
@@ -534,7 +602,7 @@ RunSummary Job::run() {
     pending.resize(4 * out.at("pending_tets").get<std::size_t>());
     if (!pending.empty())
       read_file_exactly(checkpoint_->path(out.at("pending_file").get<std::string>()), pending.data(),
-                        pending.size() * sizeof(std::uint64_t));
+                        pending.size() * sizeof(std::uint64_t), out.at("pending_crc32c").get<std::uint32_t>());
     counters_from(out.at("counters"), work, zone_points_done);
     record_work(work, zone_points_done, summary);
     summary.segments_resumed = out.at("segments").get<std::uint64_t>();
@@ -585,8 +653,13 @@ RunSummary Job::run() {
     const auto& p = cutter.pending();
     if (!p.empty()) write_file_atomically(dir_, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
     const std::string old_pending = state_.contains("output") ? state_["output"].value("pending_file", "") : "";
-    state_["output"] = {{"committed", 0},         {"next_label", next_label}, {"pending_file", pending_file},
-                        {"pending_tets", p.size() / 4}, {"segments", segments_done}, {"counters", counters_json(work, zone_points_done)}};
+    state_["output"] = {{"committed", 0},
+                        {"next_label", next_label},
+                        {"pending_file", pending_file},
+                        {"pending_tets", p.size() / 4},
+                        {"pending_crc32c", io::crc32c(p.data(), p.size() * sizeof(std::uint64_t))},
+                        {"segments", segments_done},
+                        {"counters", counters_json(work, zone_points_done)}};
     const std::string old_path = old_pending.empty() || old_pending == pending_file ? "" : checkpoint_->path(old_pending);
     auto persist = [this, old_path](json state, std::uint64_t committed) {
       state["output"]["committed"] = committed;
@@ -747,16 +820,52 @@ std::string work_parent(const RunOptions& options) {
 }  // namespace
 
 std::string checkpoint_directory(const RunOptions& options) {
-  if (!options.checkpoint_dir.empty()) return options.checkpoint_dir;
-  return work_parent(options) + "/" + base_name(options.output) + ".ckpt";
+  // Always a directory of the job's own, inside the one the user named: the job may
+  // remove what it made, never the user's directory (docs/safety.md).
+  const std::string parent = options.checkpoint_dir.empty() ? work_parent(options) : options.checkpoint_dir;
+  return parent + "/" + base_name(options.output) + ".ckpt";
 }
 
-RunSummary run_job(const RunOptions& options) {
-  options.validate();
+namespace {
+
+// The machine's physical memory: a larger --memory is capped there (a budget is a
+// ceiling, and buffers sized from 1T fail to allocate).
+std::uint64_t physical_memory_bytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  return pages > 0 && page > 0 ? std::uint64_t(pages) * std::uint64_t(page) : ~std::uint64_t(0);
+}
+
+// Temporary directories that killed jobs left in `parent` (their lock is free).
+void remove_stale_temporary_dirs(const std::string& parent) {
+  try {
+    for (const StaleWorkDir& stale : find_stale_work_dirs(parent))
+      if (!stale.checkpoint && remove_stale_work_dir(stale))
+        spdlog::info("removed {}, left by a tetstream job that no longer runs", stale.path);
+  } catch (const IoError& e) {
+    spdlog::debug("not looking for stale work directories: {}", e.what());
+  }
+}
+
+}  // namespace
+
+RunSummary run_job(const RunOptions& requested) {
+  requested.validate();
+  RunOptions options = requested;
+  if (const std::uint64_t ram = physical_memory_bytes(); options.memory_bytes > ram) {
+    spdlog::warn("--memory {} is more than this machine's {} of memory: capped there", human_bytes(double(options.memory_bytes)),
+                 human_bytes(double(ram)));
+    options.memory_bytes = ram;
+  }
+  // The user's files before anything else (docs/safety.md): never the input as the
+  // output, never through a link or into a device, and one job per output at a time
+  // (the claim's lock is held until the job ends).
+  if (!io::is_std_stream(options.input)) io::refuse_input_as_output(options.input, options.output);
+  io::OutputClaim claim(options.output);
   if (!options.checkpoint || io::is_std_stream(options.input)) {
     if (options.checkpoint) spdlog::info("the input is stdin: this job keeps no checkpoint (it cannot be resumed)");
+    remove_stale_temporary_dirs(work_parent(options));
     TempDir tmp(work_parent(options), "tetstream-run");
-    return Job(options, tmp.dir(), nullptr, json::object()).run();
+    return Job(options, tmp.dir(), nullptr, json::object(), &claim).run();
   }
 
   Checkpoint checkpoint(checkpoint_directory(options));
@@ -778,8 +887,7 @@ RunSummary run_job(const RunOptions& options) {
   if (checkpoint.exists()) {
     if (options.force) {
       spdlog::info("--force: discarding the checkpoint in {}", checkpoint.dir());
-      checkpoint.clear();
-      remove_file(options.output + ".partial");
+      checkpoint.clear();  // the job's files only; the partial output is truncated by the writer
     } else if (!options.resume) {
       throw UsageError(checkpoint.dir() + " holds the checkpoint of an unfinished job: rerun with --resume to continue "
                        "it, or with --force to discard it and start over");
@@ -796,8 +904,8 @@ RunSummary run_job(const RunOptions& options) {
   } else if (options.resume) {
     spdlog::warn("no checkpoint in {}: starting from the beginning", checkpoint.dir());
   }
-  if (state.contains("output") && state["output"].value("finishing", false) &&
-      !std::filesystem::exists(options.output + ".partial") && std::filesystem::exists(options.output)) {
+  if (state.contains("output") && state["output"].value("finishing", false) && claim.created() &&
+      std::filesystem::exists(options.output)) {
     // The job had finished; only the removal of its checkpoint was cut short.
     const io::TetReader finished(options.output);  // throws unless complete
     spdlog::info("the checkpointed job had finished: {} is complete", options.output);
@@ -822,20 +930,25 @@ RunSummary run_job(const RunOptions& options) {
   }
   try {
     RunSummary summary;
-    trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state).run(); });
+    trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state, &claim).run(); });
     checkpoint.remove();
     return summary;
   } catch (const DamagedCheckpoint&) {
     throw;  // left for the user to inspect or --force away
   } catch (const InputError&) {
-    // Bad input or a damaged checkpoint: nothing to resume.
+    // Bad input: nothing to resume.
     checkpoint.remove();
     remove_file(options.output + ".partial");
     throw;
-  } catch (const UsageError&) {
-    checkpoint.remove();
-    remove_file(options.output + ".partial");
-    throw;
+  } catch (const UsageError& e) {
+    // A budget too small for the sorted input: the sort's work is kept, and a resume
+    // may take another --memory (the message names the one that works).
+    throw UsageError(std::string(e.what()) + "; the work so far is kept in " + checkpoint.dir() +
+                     ": add --resume with the new --memory");
+  } catch (const std::bad_alloc&) {
+    throw IoError("out of memory at --memory " + human_bytes(double(options.memory_bytes)) +
+                  "; the work so far is kept in " + checkpoint.dir() +
+                  ": free memory, or rerun with a smaller --memory and --resume");
   } catch (...) {
     spdlog::warn("the job's progress is kept in {}: run the same command with --resume to continue", checkpoint.dir());
     throw;

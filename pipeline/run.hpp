@@ -36,7 +36,8 @@ struct RunOptions {
   int zones = 0;
   bool progress = true;
   // Checkpoints (pipeline/checkpoint.hpp): the job keeps its working files and its
-  // progress in `checkpoint_dir` (default: OUTPUT's file name + ".ckpt" in tmpdir) and
+  // progress in OUTPUT's file name + ".ckpt", a directory it makes in `checkpoint_dir`
+  // (default: tmpdir, else the output's directory), and
   // can be resumed after a crash, kill -9, Ctrl-C or a full disk. An existing
   // checkpoint is continued with `resume`, discarded with `force`, and otherwise
   // refused. Off (or stdin input): a private temporary directory, removed at the end.

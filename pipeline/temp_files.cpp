@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 #include "io/output_file.hpp"
+#include "io/tet_container.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -19,20 +20,6 @@ namespace tetstream::pipeline {
 namespace {
 std::string errno_text() { return std::strerror(errno); }
 }  // namespace
-
-TempDir::TempDir(const std::string& parent, const std::string& prefix) {
-  std::string templ = (parent.empty() ? std::string(".") : parent) + "/" + prefix + "-XXXXXX";
-  std::vector<char> buf(templ.begin(), templ.end());
-  buf.push_back('\0');
-  if (!mkdtemp(buf.data()))
-    throw IoError("cannot create a temporary directory in " + parent + ": " + errno_text());
-  dir_ = buf.data();
-}
-
-TempDir::~TempDir() {
-  std::error_code ec;
-  std::filesystem::remove_all(dir_, ec);
-}
 
 void remove_file(const std::string& path) {
   std::error_code ec;
@@ -158,6 +145,7 @@ BinaryFile::~BinaryFile() {
 void BinaryFile::write(const void* data, std::size_t size, std::size_t count) {
   if (count == 0) return;
   if (std::fwrite(data, size, count, f_) != count) throw IoError(path_ + ": write failed: " + errno_text());
+  crc_ = io::crc32c(data, size * count, crc_);
 }
 
 std::size_t BinaryFile::read(void* data, std::size_t size, std::size_t count) {

@@ -10,21 +10,26 @@
 #include <string>
 #include <vector>
 
+#include "pipeline/work_dir.hpp"
+
 namespace tetstream::pipeline {
 
+// A WorkDir (pipeline/work_dir.hpp) made for one process and removed when it ends:
+// the job's own files are unlinked, nothing else. A process killed with -9 leaves it
+// behind unlocked, and the next run in the same parent (or `tetstream clean`) removes it.
 class TempDir {
  public:
   // Creates PARENT/PREFIX-XXXXXX. Throws IoError when it cannot.
-  TempDir(const std::string& parent, const std::string& prefix);
-  ~TempDir();  // removes the directory and its contents
+  TempDir(const std::string& parent, const std::string& prefix) : dir_(WorkDir::create_unique(parent, prefix)) {}
+  ~TempDir() { dir_.remove(); }
   TempDir(const TempDir&) = delete;
   TempDir& operator=(const TempDir&) = delete;
 
-  const std::string& dir() const { return dir_; }
-  std::string path(const std::string& name) const { return dir_ + "/" + name; }
+  const std::string& dir() const { return dir_.dir(); }
+  std::string path(const std::string& name) const { return dir_.path(name); }
 
  private:
-  std::string dir_;
+  WorkDir dir_;
 };
 
 void remove_file(const std::string& path);  // ignores a missing file
@@ -131,10 +136,14 @@ class BinaryFile {
   // Flushes (and with `sync`, fsyncs: the data survives a crash of the machine);
   // throws IoError when the data did not reach the file.
   void close(bool sync = false);
+  // CRC32C (io::crc32c) of every byte written so far: a checkpoint records it, and a
+  // resumed job checks the file against it before trusting it.
+  std::uint32_t crc() const { return crc_; }
 
  private:
   std::string path_;
   std::FILE* f_ = nullptr;
+  std::uint32_t crc_ = 0;
 };
 
 }  // namespace tetstream::pipeline

@@ -94,8 +94,8 @@ void setup_run(CLI::App& app, Context& ctx) {
                   "Points per sorted run (default: from --memory; tests force many runs)")
       ->group("");  // hidden: a testing knob
   cmd->add_option("--checkpoint", args->options.checkpoint_dir,
-                  "Checkpoint directory (default: OUTPUT.ckpt in --tmpdir): the job's working files and progress, "
-                  "removed when it succeeds");
+                  "Directory in which the job makes its checkpoint, OUTPUT.ckpt (default: --tmpdir, else the "
+                  "output's directory): the job's working files and progress, removed when it succeeds");
   cmd->add_flag_callback(
       "--no-checkpoint", [args] { args->options.checkpoint = false; },
       "Keep no checkpoint (temporary files in a private directory; the job cannot be resumed)");

@@ -1,0 +1,175 @@
+#!/usr/bin/env bash
+# The user's files are sacred (docs/safety.md; issue: nothing lost, nothing wrong).
+# Each block is one defect found by an audit, run as a user would, in a scratch tree
+# where the user's own files sit next door:
+#   1. a checkpoint directory the job did not make is never removed (--checkpoint DIR
+#      makes DIR/OUT.ckpt; --force, bad input, --resume without state, --checkpoint .);
+#   3. damaged checkpoint files are recomputed or refused, never trusted;
+#   4. the output is never the input; 5. one job per output; 6. no links followed,
+#      no devices or directories written;
+#   7. a budget failure keeps the checkpoint and names a budget that works, which a
+#      --resume may then take;
+#  10. a killed job's temporary directory is removed by the next run and by `clean`.
+# Usage: bash safety_cli.sh /path/to/tetstream
+set -euo pipefail
+T=$(realpath "${1:?usage: safety_cli.sh /path/to/tetstream}")
+dir=$(mktemp -d)
+trap 'chmod -R u+w "$dir"; rm -rf "$dir"' EXIT
+cd "$dir"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+# The same tets (the header names the input's path, which may differ).
+same_tets() { cmp -s <("$T" -q cat "$1" --format u32) <("$T" -q cat "$2" --format u32); }
+# expect CODE PATTERN CMD...: exit code CODE and one stderr line matching PATTERN.
+expect() {
+  local code=$1 pattern=$2
+  shift 2
+  local rc=0
+  "$@" 2>err.txt >/dev/null || rc=$?
+  [ "$rc" -eq "$code" ] || fail "exit $rc, not $code: $* ($(cat err.txt))"
+  grep -q -- "$pattern" err.txt || fail "no '$pattern' in the error of $*: $(cat err.txt)"
+}
+
+"$T" -q gen --dist uniform --n 20000 --seed 5 -o pts.f64
+cp pts.f64 pristine.f64
+base=(-q run --memory 128M --zone-points 2000)
+"$T" "${base[@]}" pts.f64 -o reference.tets --no-checkpoint
+
+# ---- 1. the checkpoint directory ----
+mkdir v
+echo "four years of work" >v/thesis.txt
+cp pts.f64 v/
+"$T" "${base[@]}" v/pts.f64 -o out.tets --checkpoint v || fail "run with --checkpoint v failed"
+[ -f v/thesis.txt ] && cmp -s v/pts.f64 pristine.f64 || fail "--checkpoint v removed the user's files"
+[ ! -e v/out.tets.ckpt ] || fail "the job's own checkpoint directory was left behind"
+same_tets out.tets reference.tets || fail "--checkpoint changed the tets"
+"$T" "${base[@]}" v/pts.f64 -o out.tets --checkpoint v --force
+"$T" "${base[@]}" v/pts.f64 -o out.tets --checkpoint v --resume 2>/dev/null
+[ -f v/thesis.txt ] && [ -f v/pts.f64 ] || fail "--force or --resume removed the user's files"
+printf 'nan 0 0\n1 2 3\n' >v/bad.txt
+expect 1 "bad.txt" "$T" "${base[@]}" v/bad.txt -o bad.tets --checkpoint v
+[ -f v/thesis.txt ] && [ -f v/pts.f64 ] && [ -f v/bad.txt ] || fail "bad input removed the user's files"
+# The current directory as the checkpoint's place: the input and outputs stay.
+mkdir here && cp pts.f64 here/ && (cd here && "$T" "${base[@]}" pts.f64 -o o.tets --checkpoint .)
+[ -f here/pts.f64 ] && [ -f here/o.tets ] || fail "--checkpoint . removed the input or the output"
+# A directory by the checkpoint's name that tetstream did not make is refused, untouched.
+mkdir out2.tets.ckpt && echo keep >out2.tets.ckpt/notes.txt
+expect 2 "not made by tetstream" "$T" "${base[@]}" pts.f64 -o out2.tets
+expect 2 "not made by tetstream" "$T" "${base[@]}" pts.f64 -o out2.tets --force
+[ -f out2.tets.ckpt/notes.txt ] || fail "a foreign directory by the checkpoint's name was emptied"
+# A file the user left inside a real checkpoint survives its removal.
+TETSTREAM_FAULT=sort-run:1 "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out3.tets 2>/dev/null && fail "fault not injected"
+echo mine >out3.tets.ckpt/mine.txt
+"$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out3.tets --resume
+[ -f out3.tets.ckpt/mine.txt ] || fail "a file the job did not write was removed with its checkpoint"
+cmp -s out3.tets reference.tets || fail "resumed output differs"
+
+# ---- 3. damaged checkpoint files: recomputed where possible, else refused ----
+ck=out4.tets.ckpt
+fresh_checkpoint() {  # stops the job with an injected fault at $1
+  rm -rf "$ck" out4.tets out4.tets.partial
+  TETSTREAM_FAULT=$1 "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets 2>/dev/null && fail "no fault at $1"
+  [ -e "$ck/state.json" ] || fail "no checkpoint after the fault at $1"
+}
+flip() { printf '\x5a' | dd of="$1" bs=1 seek="$2" conv=notrunc status=none; }
+resumes_to_reference() {
+  "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume 2>err.txt || fail "$1: resume failed: $(cat err.txt)"
+  cmp -s out4.tets reference.tets || fail "$1: a damaged checkpoint gave other bytes"
+}
+fresh_checkpoint sort-run:3
+truncate -s -24 "$ck/points-1.run"
+resumes_to_reference "a run cut by 24 bytes"
+fresh_checkpoint sort-run:3
+flip "$ck/points-0.run" 1000
+resumes_to_reference "a flipped byte in a run"
+fresh_checkpoint sort-run:3
+rm "$ck/points-2.run"
+resumes_to_reference "a missing run"
+fresh_checkpoint sort-run:3
+flip "$ck/points-1.run.hull" 3
+resumes_to_reference "a flipped byte in a run's hull candidates"
+fresh_checkpoint write:4
+flip "$ck/sorted.points" 4242
+resumes_to_reference "a flipped byte in the sorted points"
+fresh_checkpoint write:4
+pending=$(ls "$ck"/pending-*.tets | head -1)
+flip "$pending" 100
+expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
+[ -e "$ck/state.json" ] || fail "a damaged checkpoint was removed"
+fresh_checkpoint write:4
+flip out4.tets.partial 5000  # inside the committed points
+expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
+"$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --force
+cmp -s out4.tets reference.tets || fail "--force after damage"
+
+# ---- 4. the output is never the input ----
+for o in pts.f64 ./pts.f64 "$dir/pts.f64"; do
+  expect 2 "is the input" "$T" "${base[@]}" pts.f64 -o "$o"
+done
+ln pts.f64 hardlink.f64
+expect 2 "is the input" "$T" "${base[@]}" pts.f64 -o hardlink.f64
+cmp -s pts.f64 pristine.f64 || fail "the input was written over"
+
+# ---- 5. one job per output at a time ----
+"$T" -q gen --dist uniform --n 300000 --seed 6 -o big.f64
+"$T" --threads 1 -q run big.f64 -o shared.tets --memory 256M --zone-points 20000 &
+first=$!
+for _ in $(seq 1 500); do [ -e shared.tets.partial ] && break; sleep 0.01; done
+[ -e shared.tets.partial ] || fail "the first job made no partial output"
+expect 2 "being written by another" "$T" "${base[@]}" pts.f64 -o shared.tets --no-checkpoint
+expect 2 "being written by another" "$T" "${base[@]}" pts.f64 -o shared.tets --checkpoint v
+wait $first || fail "the first job failed when a second one tried its output"
+"$T" -q verify shared.tets >/dev/null || fail "the first job's output is not valid"
+
+# ---- 6. links, devices and directories ----
+echo precious >victim
+ln -s victim o6.tets.partial
+expect 2 "symbolic link" "$T" "${base[@]}" pts.f64 -o o6.tets --no-checkpoint
+[ "$(cat victim)" = precious ] || fail "a planted link to the partial output was followed"
+rm o6.tets.partial
+mkdir elsewhere
+ln -s elsewhere o7.tets.ckpt
+expect 2 "symbolic link" "$T" "${base[@]}" pts.f64 -o o7.tets
+[ -z "$(ls -A elsewhere)" ] || fail "a planted link to the checkpoint was followed"
+ln -s victim link.tets
+expect 2 "symbolic link" "$T" "${base[@]}" pts.f64 -o link.tets --no-checkpoint
+[ -L link.tets ] && [ "$(cat victim)" = precious ] || fail "an output that is a link was replaced or followed"
+mkdir isdir.tets
+expect 2 "is a directory" "$T" "${base[@]}" pts.f64 -o isdir.tets
+mkfifo fifo.tets
+expect 2 "not a regular file" "$T" "${base[@]}" pts.f64 -o fifo.tets --no-checkpoint
+[ -p fifo.tets ] || fail "a fifo output was replaced"
+if [ "$(id -u)" -eq 0 ] && [ -c /dev/null ]; then
+  expect 2 "not a regular file" "$T" "${base[@]}" pts.f64 -o /dev/null --no-checkpoint
+  [ -c /dev/null ] || fail "/dev/null was replaced"
+fi
+
+# ---- 7. budgets: a failure keeps the checkpoint and names a budget that works ----
+"$T" -q gen --dist uniform --n 200000 --seed 7 -o b.f64
+expect 2 "use --memory [0-9]*M or more" "$T" -q run b.f64 -o b.tets --memory 64M
+grep -o "use --memory [0-9]*M" err.txt | head -1 >need.txt
+need=$(sed 's/use --memory //' need.txt)
+[ -e b.tets.ckpt/state.json ] || fail "a budget failure removed the checkpoint"
+grep -q -- "--resume" err.txt || fail "the budget failure does not say how to continue"
+"$T" -q run b.f64 -o b.tets --memory "$need" --resume || fail "--resume with the named budget $need failed"
+"$T" -q run b.f64 -o b2.tets --memory "$need" --no-checkpoint
+cmp -s b.tets b2.tets || fail "a resume with a new budget differs from a run with that budget"
+"$T" -q run pts.f64 -o huge.tets --memory 1T --zone-points 2000 2>err.txt || fail "--memory 1T failed: $(cat err.txt)"
+grep -q "capped" err.txt || fail "--memory 1T was not capped with a warning"
+
+# ---- 10. a killed job's temporary directory ----
+mkdir spool && cd spool
+{ cat ../big.f64; sleep 30; } | "$T" -q run - --type f64 -o s.tets --memory 256M &
+job=$!
+for _ in $(seq 1 500); do ls -d tetstream-run-* >/dev/null 2>&1 && [ -s tetstream-run-*/stdin.f64 ] && break; sleep 0.01; done
+kill -9 $job 2>/dev/null || true
+wait $job 2>/dev/null || true
+pkill -f "sleep 30" 2>/dev/null || true
+ls -d tetstream-run-* >/dev/null 2>&1 || fail "the killed stdin job left no spool (test did not reach it)"
+echo "user data" >tetstream-run-lookalike  # a file, not a work directory: never touched
+"$T" -q clean --dry-run . >/dev/null
+ls -d tetstream-run-*/ >/dev/null 2>&1 || fail "clean --dry-run removed something"
+"$T" -q run ../pts.f64 -o again.tets --memory 128M --no-checkpoint
+ls -d tetstream-run-*/ >/dev/null 2>&1 && fail "the next run left the dead job's spool"
+[ -f tetstream-run-lookalike ] || fail "a user file with a work directory's name was removed"
+cd ..
+echo "safety_cli: all checks passed"
