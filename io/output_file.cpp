@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <stdexcept>
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
@@ -135,9 +136,19 @@ std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t k
   return f;
 }
 
+std::unique_ptr<OutputFile> OutputFile::to_stdout(std::size_t buffer_bytes) {
+  if (::isatty(STDOUT_FILENO)) throw UsageError("-o -: standard output is a terminal; pipe it into a command or a file");
+  const int fd = ::fcntl(STDOUT_FILENO, F_DUPFD_CLOEXEC, 0);
+  if (fd < 0) fail("cannot duplicate", "standard output");
+  std::unique_ptr<OutputFile> f(new OutputFile("-", buffer_bytes, fd, 0));
+  f->stream_ = true;
+  f->partial_ = "standard output";
+  return f;
+}
+
 OutputFile::~OutputFile() {
   if (fd_ >= 0) ::close(fd_);
-  if (!committed_ && !keep_on_failure_) ::unlink(partial_.c_str());
+  if (!committed_ && !keep_on_failure_ && !stream_) ::unlink(partial_.c_str());
 }
 
 void OutputFile::flush() {
@@ -187,7 +198,7 @@ char* OutputFile::reserve(std::size_t n) {
 
 void OutputFile::sync() {
   flush();
-  if (::fsync(fd_) != 0) fail("fsync failed", partial_);
+  if (!stream_ && ::fsync(fd_) != 0) fail("fsync failed", partial_);
 }
 
 bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset) {
@@ -205,11 +216,18 @@ bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset) {
 }
 
 void OutputFile::read_at(std::uint64_t offset, void* data, std::size_t n) const {
+  if (stream_) throw std::logic_error("OutputFile: standard output cannot be read back");
   if (!pread_exactly(fd_, data, n, offset)) fail("read back failed", partial_);
 }
 
 void OutputFile::commit(bool do_sync) {
   flush();
+  if (stream_) {
+    ::close(fd_);
+    fd_ = -1;
+    committed_ = true;
+    return;
+  }
   if (do_sync && ::fsync(fd_) != 0) fail("fsync failed", partial_);
   if (::close(fd_) != 0) {
     fd_ = -1;

@@ -65,6 +65,10 @@ class OutputFile {
   static std::unique_ptr<OutputFile> reopen(std::string path, std::uint64_t keep,
                                             std::size_t buffer_bytes = std::size_t(8) << 20,
                                             const OutputClaim* claim = nullptr);
+  // Standard output, for a container streamed to a pipe ("-o -"): bytes are only
+  // appended, commit() flushes (no fsync, no rename), and nothing is ever removed or
+  // read back. Throws UsageError when stdout is a terminal.
+  static std::unique_ptr<OutputFile> to_stdout(std::size_t buffer_bytes = std::size_t(8) << 20);
   ~OutputFile();
   OutputFile(const OutputFile&) = delete;
   OutputFile& operator=(const OutputFile&) = delete;
@@ -97,6 +101,7 @@ class OutputFile {
 
   std::string path_, partial_;
   int fd_ = -1;
+  bool stream_ = false;  // standard output: no partial file, no rename, no read-back
   // Set when this file claimed PATH itself (no claim given): the lock lives as long.
   std::unique_ptr<OutputClaim> own_claim_;
   bool committed_ = false;

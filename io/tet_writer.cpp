@@ -51,7 +51,8 @@ TetWriter::TetWriter(std::string path, TetFileHeader header, TetWriterOptions op
     : path_(std::move(path)), header_(std::move(header)), options_(options) {
   header_.resolve_and_validate();
   validate_options(options_);
-  out_ = std::make_unique<OutputFile>(path_, options_.buffer_bytes, options_.claim);
+  out_ = path_ == "-" ? OutputFile::to_stdout(options_.buffer_bytes)
+                      : std::make_unique<OutputFile>(path_, options_.buffer_bytes, options_.claim);
   out_->keep_on_failure(options_.keep_partial);
   const std::vector<std::uint8_t> lead = leading_bytes(header_);
   out_->write(lead.data(), lead.size());
@@ -140,6 +141,12 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
 TetWriter::~TetWriter() = default;  // out_'s destructor removes the partial file unless finished or kept
 
 std::uint64_t TetWriter::bytes_written() const { return out_ ? out_->offset() : 0; }
+
+std::uint64_t TetWriter::tet_bytes() const {
+  std::uint64_t bytes = 0;
+  for (const FrameEntry& f : frames_) bytes += kSectionHeaderSize + f.length + kSectionTrailerSize;
+  return bytes;
+}
 
 void TetWriter::write_section_start(std::uint32_t tag, std::uint64_t length) {
   const auto h = section_header(tag, kSectionCritical, length);

@@ -58,6 +58,7 @@ class TetWriter {
   // Creates PATH.partial and writes the preamble and HEAD. The header's widths are
   // resolved (label width 32 when point_count <= 2^32) and it is validated:
   // std::invalid_argument for a header no container can hold, IoError for I/O.
+  // PATH "-" streams the container to standard output (io::OutputFile::to_stdout).
   TetWriter(std::string path, TetFileHeader header, TetWriterOptions options = {});
   // Continues PATH.partial, left by a writer with the same header and options, after
   // its first `committed` bytes (a value its checkpoint() returned): checks the header
@@ -99,6 +100,8 @@ class TetWriter {
   std::uint64_t tets_written() const { return tets_; }
   std::uint64_t frames_written() const { return frames_.size(); }
   std::uint64_t bytes_written() const;
+  // Bytes of the tet frames written so far (section headers and trailers included).
+  std::uint64_t tet_bytes() const;
 
  private:
   struct Resume {};

@@ -32,6 +32,9 @@ void install_interrupt_handlers() {
   // reports it like any write failure (and keeps its checkpoint), instead of being
   // killed by SIGXFSZ half-way through a write.
   std::signal(SIGXFSZ, SIG_IGN);
+  // A reader that closes the pipe (`run -o - | head`): write() fails with EPIPE and the
+  // job ends through its cleanup, instead of being killed with its work files left.
+  std::signal(SIGPIPE, SIG_IGN);
 }
 
 void check_interrupted() {

@@ -803,7 +803,7 @@ RunSummary Job::run() {
   summary.seconds_writer_busy = writer.busy_seconds();
   summary.seconds_writer_wait = writer.producer_wait_seconds();
   summary.output_bytes = writer_holder->bytes_written();
-  summary.tet_bytes = io::TetReader(options_.output).tet_bytes();
+  summary.tet_bytes = writer_holder->tet_bytes();
   summary.seconds_total = since(start_);
   return summary;
 }
@@ -814,7 +814,7 @@ namespace {
 // Where a job's working files go: --tmpdir, else the output's directory.
 std::string work_parent(const RunOptions& options) {
   std::string dir = options.tmpdir;
-  if (dir.empty()) dir = std::filesystem::path(options.output).parent_path().string();
+  if (dir.empty() && !io::is_std_stream(options.output)) dir = std::filesystem::path(options.output).parent_path().string();
   return dir.empty() ? "." : dir;
 }
 }  // namespace
@@ -859,13 +859,21 @@ RunSummary run_job(const RunOptions& requested) {
   // The user's files before anything else (docs/safety.md): never the input as the
   // output, never through a link or into a device, and one job per output at a time
   // (the claim's lock is held until the job ends).
+  // A container streamed to standard output ("-o -") cannot be resumed (what went
+  // down the pipe is gone), and neither can stdin input (it cannot be read again).
+  const bool to_stdout = io::is_std_stream(options.output);
+  if (to_stdout && options.resume)
+    throw UsageError("--resume needs an output file: a job streamed to standard output (-o -) cannot be resumed");
   if (!io::is_std_stream(options.input)) io::refuse_input_as_output(options.input, options.output);
-  io::OutputClaim claim(options.output);
-  if (!options.checkpoint || io::is_std_stream(options.input)) {
-    if (options.checkpoint) spdlog::info("the input is stdin: this job keeps no checkpoint (it cannot be resumed)");
+  std::optional<io::OutputClaim> claim;
+  if (!to_stdout) claim.emplace(options.output);
+  if (!options.checkpoint || io::is_std_stream(options.input) || to_stdout) {
+    if (options.checkpoint)
+      spdlog::info("the {} is a stream: this job keeps no checkpoint (it cannot be resumed)",
+                   to_stdout ? "output" : "input");
     remove_stale_temporary_dirs(work_parent(options));
     TempDir tmp(work_parent(options), "tetstream-run");
-    return Job(options, tmp.dir(), nullptr, json::object(), &claim).run();
+    return Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr).run();
   }
 
   Checkpoint checkpoint(checkpoint_directory(options));
@@ -904,7 +912,7 @@ RunSummary run_job(const RunOptions& requested) {
   } else if (options.resume) {
     spdlog::warn("no checkpoint in {}: starting from the beginning", checkpoint.dir());
   }
-  if (state.contains("output") && state["output"].value("finishing", false) && claim.created() &&
+  if (state.contains("output") && state["output"].value("finishing", false) && claim->created() &&
       std::filesystem::exists(options.output)) {
     // The job had finished; only the removal of its checkpoint was cut short.
     const io::TetReader finished(options.output);  // throws unless complete
@@ -930,7 +938,7 @@ RunSummary run_job(const RunOptions& requested) {
   }
   try {
     RunSummary summary;
-    trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state, &claim).run(); });
+    trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state, &*claim).run(); });
     checkpoint.remove();
     return summary;
   } catch (const DamagedCheckpoint&) {

@@ -1,5 +1,6 @@
 // `tetstream run`: triangulate a point file out of core into a .tets container.
 #include "core/error.hpp"
+#include "io/point_format.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/run.hpp"
 #include "tools/command.hpp"
@@ -20,6 +21,7 @@ void run_run(RunArgs& args, Context& ctx) {
   o.memory_bytes = pipeline::parse_memory_size(args.memory);
   o.threads = ctx.global.threads;
   o.progress = !ctx.global.quiet;
+  ctx.stdout_is_data = io::is_std_stream(o.output);
   const pipeline::RunSummary s = pipeline::run_job(o);
   const double tets_per_s = s.seconds_total > 0 ? double(s.tets) / s.seconds_total : 0;
   spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments ({} zones); {} written, tets {:.2f} B/tet", s.points,
@@ -76,7 +78,9 @@ void setup_run(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<RunArgs>();
   auto* cmd = app.add_subcommand("run", "Triangulate a point file out of core into a .tets container");
   cmd->add_option("input", args->options.input, "Point file (raw, PLY, .npy, text) or - for stdin")->required();
-  cmd->add_option("-o,--output", args->options.output, "Output container (.tets)")->required();
+  cmd->add_option("-o,--output", args->options.output,
+                  "Output container (.tets), or - to stream it to standard output (a pipe; not resumable)")
+      ->required();
   cmd->add_option("--memory", args->memory, "Memory budget, e.g. 512M, 4G (peak resident memory stays below it)")
       ->capture_default_str();
   cmd->add_option("--tmpdir", args->options.tmpdir, "Directory for temporary files (default: the output's)");

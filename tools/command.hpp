@@ -26,6 +26,9 @@ struct GlobalOptions {
 struct Context {
   GlobalOptions global;
   nlohmann::json summary = nlohmann::json::object();
+  // Standard output carries the command's data (a container streamed with -o -): the
+  // --json summary goes to stderr instead.
+  bool stdout_is_data = false;
 };
 
 using CommandSetup = std::function<void(CLI::App& app, Context& ctx)>;

@@ -90,6 +90,6 @@ int main(int argc, char** argv) {
     std::cerr << "tetstream: error: " << e.what() << '\n';
     return static_cast<int>(ExitCode::kIoFailure);
   }
-  if (ctx.global.json) std::cout << ctx.summary.dump(2) << std::endl;
+  if (ctx.global.json) (ctx.stdout_is_data ? std::cerr : std::cout) << ctx.summary.dump(2) << std::endl;
   return 0;
 }
