@@ -581,6 +581,56 @@ TEST(Verify, SampleFindsAnUndoneFlipWhenItsFacetIsSampled) {
   EXPECT_EQ(count(r, Violation::kOrientation), 1u) << r.summary();
 }
 
+// The fuzz tier's rewritten-but-checksummed containers (docs/safety.md): a container
+// whose tets were edited and then written with valid CRCs passes every reader check,
+// so `verify` alone must catch it. Seeded edits of the kinds a bug or a hand could
+// make: a vertex replaced, two vertices swapped (orientation), a tet dropped or
+// doubled, a tet moved onto a neighbour's vertex set; on grid (degenerate) and
+// uniform points. Every one must be rejected. TETSTREAM_TEST_SEED replays one seed.
+TEST(Verify, RewrittenButChecksummedTetsAreCaught) {
+  const char* env = std::getenv("TETSTREAM_TEST_SEED");
+  const std::uint64_t first = env ? std::strtoull(env, nullptr, 10) : 1, last = env ? first : 60;
+  static const Output grid = triangulate(test::grid(7));
+  for (std::uint64_t seed = first; seed <= last; ++seed) {
+    SCOPED_TRACE("TETSTREAM_TEST_SEED=" + std::to_string(seed));
+    std::mt19937_64 g(seed);
+    Output o = seed % 3 == 0 ? grid : uniform_output();
+    const std::size_t tets = o.tets.size() / 4, t = g() % tets, k = g() % 4;
+    std::string edit;
+    switch (g() % 5) {
+      case 0: {  // a vertex replaced by another point
+        std::uint64_t v;
+        do v = g() % o.count(); while (v == o.tets[4 * t + k]);
+        o.tets[4 * t + k] = v;
+        edit = "replaced a vertex";
+        break;
+      }
+      case 1:
+        std::swap(o.tets[4 * t + k], o.tets[4 * t + (k + 1) % 4]);
+        edit = "swapped two vertices";
+        break;
+      case 2:
+        erase_tet(o.tets, t);
+        edit = "dropped a tet";
+        break;
+      case 3:
+        o.tets.insert(o.tets.end(), o.tets.begin() + std::ptrdiff_t(4 * t), o.tets.begin() + std::ptrdiff_t(4 * t + 4));
+        sort_by_min(o.tets);
+        edit = "doubled a tet";
+        break;
+      default: {  // the vertex opposite a facet moved to the other side's apex
+        const std::size_t u = (t + 1 + g() % (tets - 1)) % tets;
+        o.tets[4 * t + k] = o.tets[4 * u + g() % 4];
+        edit = "copied a vertex of another tet";
+        break;
+      }
+    }
+    SCOPED_TRACE(edit);
+    const VerifyReport r = verify_output(o, "rewritten-" + std::to_string(seed) + ".tets");
+    EXPECT_FALSE(r.ok()) << r.summary();
+  }
+}
+
 TEST(Verify, BadOptions) {
   VerifyOptions v;
   v.sample = 0;
