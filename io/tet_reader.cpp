@@ -4,7 +4,9 @@
 #include "io/tet_codec.hpp"
 
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
+#include <vector>
 #include <fcntl.h>
 #include <stdexcept>
 #include <sys/mman.h>
@@ -21,8 +23,38 @@ void TetReader::fail(std::uint64_t offset, const std::string& problem) const {
   throw InputError::at_byte(path_, offset, problem);
 }
 
+namespace {
+// Standard input copied into an unnamed file in $TMPDIR (O_TMPFILE: nothing to clean
+// up, whatever happens): the random-access reader needs a file to map. `cat -` reads
+// the stream as it comes instead (io/tet_stream_reader.hpp).
+int spool_stdin() {
+  const char* env = std::getenv("TMPDIR");
+  const std::string dir = env && *env ? env : "/tmp";
+  const int fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+  if (fd < 0) throw IoError(dir + ": cannot make a temporary file for standard input: " + std::strerror(errno));
+  std::vector<char> buf(std::size_t(1) << 20);
+  for (;;) {
+    const ssize_t n = ::read(STDIN_FILENO, buf.data(), buf.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw IoError(std::string("standard input: read failed: ") + std::strerror(errno));
+    if (n == 0) break;
+    for (ssize_t done = 0; done < n;) {
+      const ssize_t w = ::write(fd, buf.data() + done, std::size_t(n - done));
+      if (w < 0 && errno == EINTR) continue;
+      if (w < 0) {
+        const int e = errno;
+        ::close(fd);
+        throw IoError(dir + ": cannot spool standard input: " + std::strerror(e));
+      }
+      done += w;
+    }
+  }
+  return fd;
+}
+}  // namespace
+
 TetReader::TetReader(std::string path) : path_(std::move(path)) {
-  fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
+  fd_ = path_ == "-" ? spool_stdin() : ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw IoError(path_ + ": cannot open: " + std::strerror(errno));
   struct stat st;
   if (::fstat(fd_, &st) != 0) {

@@ -30,6 +30,7 @@ namespace tetstream::io {
 
 class TetReader {
  public:
+  // PATH "-": standard input, copied first into an unnamed temporary file.
   explicit TetReader(std::string path);
   ~TetReader();
   TetReader(const TetReader&) = delete;

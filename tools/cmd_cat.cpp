@@ -8,9 +8,12 @@
 //   --points        the points instead: "x y z original_id\n" per label, in label order
 //
 // Streams frame by frame in bounded memory. Tets come in stored order (docs/format.md
-// §4.1), each positively oriented.
+// §4.1), each positively oriented. FILE "-" reads the container from standard input as
+// it is written (`run ... -o - | cat -`): each frame is checked before it is printed,
+// and the exit status says whether the stream was complete (index and footer agree).
 #include "core/error.hpp"
 #include "io/tet_reader.hpp"
+#include "io/tet_stream_reader.hpp"
 #include "pipeline/progress.hpp"
 #include "tools/command.hpp"
 
@@ -20,6 +23,7 @@
 #include <cstring>
 #include <memory>
 #include <vector>
+#include <unistd.h>
 
 namespace tetstream::cli {
 namespace {
@@ -88,7 +92,48 @@ class Stdout {
   std::size_t used_ = 0;
 };
 
+// One frame's tets (4 values each) in the chosen format.
+void write_tets(const std::vector<std::uint64_t>& labels, const std::string& format, Stdout& out,
+                std::vector<std::uint32_t>& narrow) {
+  if (format == "text") {
+    for (std::size_t i = 0; i < labels.size(); i += 4) {
+      char* s = out.reserve(96);
+      char* e = s;
+      for (int c = 0; c < 4; ++c) {
+        e = std::to_chars(e, s + 96, labels[i + c]).ptr;
+        *e++ = c == 3 ? '\n' : ' ';
+      }
+      out.advance(std::size_t(e - s));
+    }
+  } else if (format == "u32") {
+    narrow.assign(labels.begin(), labels.end());
+    out.write(narrow.data(), 4 * narrow.size());
+  } else {
+    out.write(labels.data(), 8 * labels.size());
+  }
+}
+
+// `cat -`: the container read front to back from a pipe as its writer writes it.
+void run_cat_stream(const CatArgs& args, Context& ctx) {
+  if (args.points || !args.frames.empty()) throw UsageError("cat -: --points and --frames need a container file");
+  io::TetStreamReader r(STDIN_FILENO, "standard input", args.original_ids);
+  const std::uint64_t top = args.original_ids ? std::max(r.header().input_count, r.point_count()) : r.point_count();
+  if (args.format == "u32" && top > (std::uint64_t(1) << 32)) throw UsageError("values do not fit 32 bits: use --format u64");
+  Stdout out;
+  std::vector<std::uint64_t> labels;
+  std::vector<std::uint32_t> narrow;
+  while (r.next_frame(labels)) {
+    if (args.original_ids) r.map_to_original(labels);
+    write_tets(labels, args.format, out, narrow);
+  }
+  out.flush();
+  if (std::fflush(stdout) != 0) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
+  ctx.summary = {{"command", "cat"}, {"file", "-"}, {"format", args.format}, {"tets", r.tets_read()},
+                 {"frames", r.frames_read()}, {"original_ids", args.original_ids}};
+}
+
 void run_cat(const CatArgs& args, Context& ctx) {
+  if (args.path == "-") return run_cat_stream(args, ctx);
   const io::TetReader r(args.path);
   const auto [first, last] = parse_frames(args.frames.empty() ? ":" : args.frames, r.frame_count());
   Stdout out;
@@ -144,22 +189,7 @@ void run_cat(const CatArgs& args, Context& ctx) {
   for (std::uint64_t k = first; k < last; ++k) {
     r.read_frame(k, labels);
     if (args.original_ids) r.map_to_original(labels);
-    if (args.format == "text") {
-      for (std::size_t i = 0; i < labels.size(); i += 4) {
-        char* s = out.reserve(96);
-        char* e = s;
-        for (int c = 0; c < 4; ++c) {
-          e = std::to_chars(e, s + 96, labels[i + c]).ptr;
-          *e++ = c == 3 ? '\n' : ' ';
-        }
-        out.advance(std::size_t(e - s));
-      }
-    } else if (args.format == "u32") {
-      narrow.assign(labels.begin(), labels.end());
-      out.write(narrow.data(), 4 * narrow.size());
-    } else {
-      out.write(labels.data(), 8 * labels.size());
-    }
+    write_tets(labels, args.format, out, narrow);
     written += labels.size() / 4;
     progress.add(labels.size() / 4);
   }
@@ -173,7 +203,8 @@ void run_cat(const CatArgs& args, Context& ctx) {
 void setup_cat(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<CatArgs>();
   CLI::App* cmd = app.add_subcommand("cat", "Write a .tets container's tets (or points) to stdout, for pipes");
-  cmd->add_option("file", args->path, ".tets container")->required();
+  cmd->add_option("file", args->path, ".tets container, or - to read one from standard input as it is written")
+      ->required();
   cmd->add_option("--format", args->format, "text (\"a b c d\" per line), u32 or u64 (4 little-endian labels per tet)")
       ->check(CLI::IsMember({"text", "u32", "u64"}))
       ->capture_default_str();
