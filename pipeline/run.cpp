@@ -3,11 +3,13 @@
 #include "core/error.hpp"
 #include "io/output_file.hpp"
 #include "io/point_format.hpp"
+#include "io/point_reader.hpp"
 #include "io/tet_container.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/async_tet_writer.hpp"
 #include "pipeline/checkpoint.hpp"
+#include "pipeline/disk_plan.hpp"
 #include "pipeline/fault.hpp"
 #include "pipeline/hull.hpp"
 #include "pipeline/interrupt.hpp"
@@ -835,6 +837,26 @@ std::uint64_t physical_memory_bytes() {
   return pages > 0 && page > 0 ? std::uint64_t(pages) * std::uint64_t(page) : ~std::uint64_t(0);
 }
 
+// The disk the job needs, from the input's point count (a header or the file's size;
+// unknown for text and stdin, then not planned), checked before any work: IoError
+// with the figures when a filesystem cannot hold its share.
+std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_parent, bool checkpointed) {
+  if (io::is_std_stream(o.input)) return 0;
+  const std::optional<std::uint64_t> points = io::open_points(o.input, o.read)->count();
+  if (!points) return 0;
+  std::string out_dir = io::is_std_stream(o.output) ? "" : std::filesystem::path(o.output).parent_path().string();
+  if (out_dir.empty()) out_dir = ".";
+  const std::vector<DiskNeed> plan = plan_disk(*points, work_parent, out_dir, io::is_std_stream(o.output), checkpointed);
+  std::uint64_t need = 0;
+  for (const DiskNeed& d : plan) {
+    need += d.need;
+    spdlog::info("disk: the job will need about {} in {} ({} free)", human_bytes(double(d.need)), d.dir,
+                 human_bytes(double(d.available)));
+  }
+  check_disk(plan);
+  return need;
+}
+
 // Temporary directories that killed jobs left in `parent` (their lock is free).
 void remove_stale_temporary_dirs(const std::string& parent) {
   try {
@@ -872,8 +894,11 @@ RunSummary run_job(const RunOptions& requested) {
       spdlog::info("the {} is a stream: this job keeps no checkpoint (it cannot be resumed)",
                    to_stdout ? "output" : "input");
     remove_stale_temporary_dirs(work_parent(options));
+    const std::uint64_t disk = plan_and_check_disk(options, work_parent(options), false);
     TempDir tmp(work_parent(options), "tetstream-run");
-    return Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr).run();
+    RunSummary summary = Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr).run();
+    summary.disk_planned_bytes = disk;
+    return summary;
   }
 
   Checkpoint checkpoint(checkpoint_directory(options));
@@ -932,7 +957,15 @@ RunSummary run_job(const RunOptions& requested) {
     checkpoint.remove();
     return summary;
   }
+  std::uint64_t disk = 0;
   if (!state.contains("job")) {
+    const std::string parent = std::filesystem::path(checkpoint.dir()).parent_path().string();
+    try {
+      disk = plan_and_check_disk(options, parent.empty() ? "." : parent, true);
+    } catch (...) {
+      checkpoint.remove();  // made just now, and empty: nothing to resume
+      throw;
+    }
     state = {{"job", identity}};
     checkpoint.save(state);
   }
@@ -940,6 +973,7 @@ RunSummary run_job(const RunOptions& requested) {
     RunSummary summary;
     trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state, &*claim).run(); });
     checkpoint.remove();
+    summary.disk_planned_bytes = disk;
     return summary;
   } catch (const DamagedCheckpoint&) {
     throw;  // left for the user to inspect or --force away

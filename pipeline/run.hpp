@@ -62,6 +62,7 @@ struct RunSummary {
   std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_window_points = 0;
   double seconds_build = 0, seconds_check = 0;  // kernel builds and exactness checks, summed over segments
   std::uint64_t tets = 0, output_bytes = 0;
+  std::uint64_t disk_planned_bytes = 0;  // pipeline/disk_plan.hpp; 0: not planned (unknown count, resumed)
   std::uint64_t tet_bytes = 0;  // of the tet frames alone (the file also holds the points)
   int axis = 0;
   bool resumed = false;                // continued an earlier process's checkpoint

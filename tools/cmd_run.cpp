@@ -58,6 +58,7 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"zone_buffer_share", s.zone_buffer_share()},
                  {"tets", s.tets},
                  {"output_bytes", s.output_bytes},
+                 {"disk_planned_bytes", s.disk_planned_bytes},
                  {"tet_bytes", s.tet_bytes},
                  {"bytes_per_tet", s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0},
                  {"seconds", {{"sort", s.seconds_sort},

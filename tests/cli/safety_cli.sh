@@ -174,6 +174,14 @@ grep -q -- "--resume" err.txt || fail "the budget failure does not say how to co
 cmp -s b.tets b2.tets || fail "a resume with a new budget differs from a run with that budget"
 "$T" -q run pts.f64 -o huge.tets --memory 1T --zone-points 2000 2>err.txt || fail "--memory 1T failed: $(cat err.txt)"
 grep -q "capped" err.txt || fail "--memory 1T was not capped with a warning"
+# The disk is planned from the input's size before any work: a (sparse) 1 TB input needs
+# more than this disk has, and is refused at once with the figures, leaving nothing.
+truncate -s 1099511627760 huge.f64  # 45,812,984,490 records of 24 bytes
+expect 3 "not enough disk for this job: needs .* free" "$T" -q run huge.f64 -o huge.tets --memory 128M
+[ ! -e huge.tets.ckpt ] && [ ! -e huge.tets.partial ] || fail "a refused disk plan left files"
+expect 3 "not enough disk" "$T" -q run huge.f64 -o huge.tets --memory 128M --no-checkpoint
+ls -d tetstream-run-* 2>/dev/null && fail "a refused disk plan left a temporary directory"
+rm huge.f64
 
 fi
 

@@ -1,0 +1,59 @@
+#include "pipeline/disk_plan.hpp"
+
+#include "core/error.hpp"
+#include "pipeline/progress.hpp"
+
+#include <cerrno>
+#include <algorithm>
+#include <cstring>
+#include <sys/stat.h>
+#include <sys/statvfs.h>
+
+namespace tetstream::pipeline {
+
+namespace {
+
+constexpr std::uint64_t kRunBytes = 32, kSortedBytes = 32;
+constexpr std::uint64_t kTetBytesPerPoint = 4 * 7;
+
+struct Filesystem {
+  dev_t device;
+  std::uint64_t available;
+};
+
+Filesystem examine(const std::string& dir) {
+  struct stat st {};
+  struct statvfs vfs {};
+  if (::stat(dir.c_str(), &st) != 0 || ::statvfs(dir.c_str(), &vfs) != 0)
+    throw IoError(dir + ": cannot examine the filesystem: " + std::strerror(errno));
+  return {st.st_dev, std::uint64_t(vfs.f_bavail) * std::uint64_t(vfs.f_frsize)};
+}
+
+}  // namespace
+
+std::vector<DiskNeed> plan_disk(std::uint64_t points, const std::string& work_parent, const std::string& output_dir,
+                                bool output_to_stdout, bool checkpointed) {
+  const std::uint64_t record = 24 + (points <= (std::uint64_t(1) << 32) ? 4 : 8);
+  const std::uint64_t output = points * (record + kTetBytesPerPoint);
+  const std::uint64_t pending =
+      checkpointed ? 2 * 32 * std::min<std::uint64_t>(7 * points, (std::uint64_t(1) << 18) + 4096) + (1 << 20) : 0;
+  const std::uint64_t merge_peak = points * (kRunBytes + kSortedBytes), sorted = points * kSortedBytes + pending;
+  const Filesystem work = examine(work_parent);
+  if (output_to_stdout) return {{work_parent, merge_peak, work.available}};
+  const Filesystem out = examine(output_dir);
+  if (out.device == work.device) return {{work_parent, std::max(merge_peak, sorted + output), work.available}};
+  return {{work_parent, merge_peak, work.available}, {output_dir, output, out.available}};
+}
+
+void check_disk(const std::vector<DiskNeed>& plan) {
+  std::string problems;
+  for (const DiskNeed& d : plan)
+    if (d.need > d.available)
+      problems += (problems.empty() ? "" : "; ") + std::string("needs ") + human_bytes(double(d.need)) + " in " +
+                  d.dir + ", " + human_bytes(double(d.available)) + " free";
+  if (!problems.empty())
+    throw IoError("not enough disk for this job: " + problems +
+                  " (free space, or put the work files elsewhere with --tmpdir)");
+}
+
+}  // namespace tetstream::pipeline
