@@ -28,6 +28,9 @@ void install_interrupt_handlers() {
   sigemptyset(&sa.sa_mask);
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
+  // A closed terminal (ssh dropped) ends the job like Ctrl-C: checkpoint kept, nothing
+  // under the final name. (`nohup` or a terminal multiplexer keeps a job running.)
+  sigaction(SIGHUP, &sa, nullptr);
   // Past a file-size limit (ulimit -f), write() then fails with EFBIG and the job
   // reports it like any write failure (and keeps its checkpoint), instead of being
   // killed by SIGXFSZ half-way through a write.

@@ -782,7 +782,17 @@ RunSummary Job::run() {
       malloc_trim(0);  // hand any freed heap back, so resident memory tracks the windows
     }
   }
-  if (failure) std::rethrow_exception(failure);
+  if (failure) {
+    try {
+      std::rethrow_exception(failure);
+    } catch (const DamagedCheckpoint&) {
+      throw;
+    } catch (const InputError& e) {
+      // The kernel's word on the points (too few affinely independent ones) names no
+      // file: the input is the job's.
+      throw InputError(options_.input + ": " + e.what());
+    }
+  }
   {
     const auto t0 = Clock::now();
     cutter.flush();

@@ -135,6 +135,9 @@ void run_cat_stream(const CatArgs& args, Context& ctx) {
 void run_cat(const CatArgs& args, Context& ctx) {
   if (args.path == "-") return run_cat_stream(args, ctx);
   const io::TetReader r(args.path);
+  // Points and original ids are trusted only after the points' CRC (frames are
+  // checked one by one as they are read).
+  if (args.points || args.original_ids) r.verify_points();
   const auto [first, last] = parse_frames(args.frames.empty() ? ":" : args.frames, r.frame_count());
   Stdout out;
   std::uint64_t written = 0;

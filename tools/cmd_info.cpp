@@ -22,6 +22,7 @@ namespace {
 struct InfoArgs {
   std::string path;
   io::PointReadOptions read;
+  bool check = false;  // containers: read and check every point and frame
 };
 
 bool ends_with(const std::string& s, const std::string& suffix) {
@@ -114,9 +115,10 @@ void setup_info(CLI::App& app, Context& ctx) {
               "coordinate), or a .tets container's summary");
   cmd->add_option("file", args->path, "Point file ('-' for stdin) or .tets container")->required();
   add_point_input_options(cmd, args->read);
+  cmd->add_flag("--check", args->check, "For a .tets container: also read every point and frame and check their CRCs");
   cmd->callback([args, &ctx] {
     if (ends_with(args->path, ".tets")) {
-      info_tets(args->path, ctx);
+      info_tets(args->path, ctx, args->check);
     } else {
       info_points(*args, ctx);
     }

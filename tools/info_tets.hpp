@@ -6,5 +6,7 @@
 #include <string>
 
 namespace tetstream::cli {
-void info_tets(const std::string& path, Context& ctx);
+// check: also read every point and frame and check their CRCs (and the frames'
+// decoding): InputError naming the first damaged byte.
+void info_tets(const std::string& path, Context& ctx, bool check = false);
 }

@@ -10,6 +10,8 @@
 #include <cstdio>
 #include <iostream>
 #include <new>
+#include <string>
+#include <vector>
 #include <omp.h>
 
 namespace tetstream::cli {
@@ -21,6 +23,8 @@ std::vector<CommandRegistration>& command_registry() {
 
 namespace {
 
+constexpr int kMaxThreads = 1024;
+
 constexpr const char* kExitCodes =
     "Exit codes:\n"
     "  0  success\n"
@@ -28,6 +32,43 @@ constexpr const char* kExitCodes =
     "  2  usage error (unknown option, bad value; a checkpoint exists, or belongs to other input or options)\n"
     "  3  I/O or resource failure (unreadable file, disk full, out of memory): run keeps its checkpoint\n"
     "  130  interrupted (Ctrl-C, SIGTERM): no output under its final name; run keeps its checkpoint\n";
+
+// Edit distance, for "unknown subcommand runn; did you mean run?".
+std::size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
+}
+
+// The first word that is neither an option, an option's value nor a subcommand: what
+// the user meant as the subcommand, when CLI11 says only that one is required.
+std::string unknown_subcommand(const CLI::App& app, int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--threads" || a == "--log-level") {
+      ++i;
+      continue;
+    }
+    if (a.empty() || a[0] == '-') continue;
+    for (const CLI::App* sub : app.get_subcommands({}))
+      if (sub->get_name() == a) return "";
+    std::string best;
+    std::size_t best_distance = 3;  // suggest only close names
+    for (const CLI::App* sub : app.get_subcommands({}))
+      if (const std::size_t d = edit_distance(a, sub->get_name()); d < best_distance) best_distance = d, best = sub->get_name();
+    return "unknown subcommand '" + a + "'" + (best.empty() ? "" : "; did you mean '" + best + "'?");
+  }
+  return "";
+}
 
 void configure_logging(const GlobalOptions& g) {
   // Logs go to stderr so stdout stays clean for data (`cat`) and the --json summary.
@@ -48,12 +89,15 @@ int main(int argc, char** argv) {
 
   Context ctx;
   CLI::App app{"tetstream: exact 3D Delaunay triangulation of point sets larger than memory,\n"
-               "streamed to a compressed container of tetrahedra."};
+               "streamed to a compressed container of tetrahedra.",
+               "tetstream"};
   app.footer(kExitCodes);
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("tetstream 0.1.0"));
-  app.add_option("--threads", ctx.global.threads, "Worker threads (0: all cores)")
-      ->check(CLI::NonNegativeNumber);
+  // Capped: each thread holds a kernel and buffers, and OpenMP runtimes fail (or crash)
+  // long before 65536 threads; more threads than cores never help.
+  app.add_option("--threads", ctx.global.threads, "Worker threads (0: all cores; at most " + std::to_string(kMaxThreads) + ")")
+      ->check(CLI::Range(0, kMaxThreads));
   app.add_option("--log-level", ctx.global.log_level, "trace, debug, info, warn, error, critical, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
   app.add_flag("--json", ctx.global.json, "Print a machine-readable summary on stdout at the end");
@@ -77,7 +121,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::Success& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    app.exit(e);
+    // One line, like every other error (CLI11 would add a second, "Run with --help").
+    const std::string unknown = unknown_subcommand(app, argc, argv);
+    std::cerr << "tetstream: error: " << (unknown.empty() ? std::string(e.what()) : unknown) << " (see tetstream --help)\n";
     return static_cast<int>(ExitCode::kUsage);
   } catch (const Error& e) {
     std::fflush(stdout);

@@ -9,12 +9,15 @@
 #      no devices or directories written;
 #   7. a budget failure keeps the checkpoint and names a budget that works, which a
 #      --resume may then take;
+#   9. numeric options that would crash (--threads 65536) are refused; parser errors
+#      are one line; SIGHUP stops a job like Ctrl-C; degenerate input names its file;
+#      damaged points are refused by cat and found by info --check;
 #  10. a killed job's temporary directory is removed by the next run and by `clean`.
-# Usage: bash safety_cli.sh /path/to/tetstream [BLOCK...]   (blocks: 1 3 4 5 6 7 10; default all)
+# Usage: bash safety_cli.sh /path/to/tetstream [BLOCK...]   (blocks: 1 3 4 5 6 7 9 10; default all)
 set -euo pipefail
 T=$(realpath "${1:?usage: safety_cli.sh /path/to/tetstream [BLOCK...]}")
 shift
-blocks=" ${*:-1 3 4 5 6 7 10} "
+blocks=" ${*:-1 3 4 5 6 7 9 10} "
 want() { [[ $blocks == *" $1 "* ]]; }
 dir=$(mktemp -d)
 trap 'chmod -R u+w "$dir"; rm -rf "$dir"' EXIT
@@ -22,6 +25,7 @@ cd "$dir"
 fail() { echo "FAIL: $*" >&2; exit 1; }
 # The same tets (the header names the input's path, which may differ).
 same_tets() { cmp -s <("$T" -q cat "$1" --format u32) <("$T" -q cat "$2" --format u32); }
+flip() { printf '\x5a' | dd of="$1" bs=1 seek="$2" conv=notrunc status=none; }
 # expect CODE PATTERN CMD...: exit code CODE and one stderr line matching PATTERN.
 expect() {
   local code=$1 pattern=$2
@@ -34,6 +38,7 @@ expect() {
 
 "$T" -q gen --dist uniform --n 20000 --seed 5 -o pts.f64
 cp pts.f64 pristine.f64
+"$T" -q gen --dist uniform --n 300000 --seed 6 -o big.f64  # a job that runs a few seconds
 base=(-q run --memory 128M --zone-points 2000)
 "$T" "${base[@]}" pts.f64 -o reference.tets --no-checkpoint
 
@@ -77,7 +82,6 @@ fresh_checkpoint() {  # stops the job with an injected fault at $1
   TETSTREAM_FAULT=$1 "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets 2>/dev/null && fail "no fault at $1"
   [ -e "$ck/state.json" ] || fail "no checkpoint after the fault at $1"
 }
-flip() { printf '\x5a' | dd of="$1" bs=1 seek="$2" conv=notrunc status=none; }
 resumes_to_reference() {
   "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume 2>err.txt || fail "$1: resume failed: $(cat err.txt)"
   cmp -s out4.tets reference.tets || fail "$1: a damaged checkpoint gave other bytes"
@@ -123,7 +127,6 @@ fi
 
 # ---- 5. one job per output at a time ----
 if want 5; then
-"$T" -q gen --dist uniform --n 300000 --seed 6 -o big.f64
 "$T" --threads 1 -q run big.f64 -o shared.tets --memory 256M --zone-points 20000 &
 first=$!
 for _ in $(seq 1 500); do [ -e shared.tets.partial ] && break; sleep 0.01; done
@@ -183,6 +186,35 @@ expect 3 "not enough disk" "$T" -q run huge.f64 -o huge.tets --memory 128M --no-
 ls -d tetstream-run-* 2>/dev/null && fail "a refused disk plan left a temporary directory"
 rm huge.f64
 
+fi
+
+# ---- 9. numbers and signals: no crash, one line ----
+if want 9; then
+expect 2 "not in range" "$T" --threads 65536 run pts.f64 -o t.tets
+expect 2 "not in range" "$T" --threads 65536 verify reference.tets
+[ "$(wc -l <err.txt)" = 1 ] || fail "a parser error took more than one line: $(cat err.txt)"
+expect 2 "did you mean 'run'" "$T" runn pts.f64
+[ "$(wc -l <err.txt)" = 1 ] || fail "an unknown subcommand took more than one line"
+expect 2 "^tetstream: error: " "$T" run
+# A closed terminal ends a job like Ctrl-C: exit 130, the checkpoint kept, no output.
+"$T" --threads 1 -q run big.f64 -o hup.tets --memory 256M --zone-points 20000 &
+job=$!
+for _ in $(seq 1 500); do [ -e hup.tets.ckpt/state.json ] && break; sleep 0.01; done
+kill -HUP $job
+rc=0; wait $job || rc=$?
+[ $rc = 130 ] || fail "SIGHUP: exit $rc, not 130"
+[ -e hup.tets.ckpt/state.json ] && [ ! -e hup.tets ] || fail "SIGHUP: checkpoint not kept, or an output left"
+# Degenerate input: the message names the file.
+printf '0 0 0\n1 0 0\n0 1 0\n1 1 0\n2 3 0\n' >flat.txt
+expect 1 "flat.txt: .*affinely independent" "$T" -q run flat.txt -o flat.tets
+# Damaged points: cat --points and --original-ids refuse; info --check finds it.
+cp reference.tets dmg.tets
+flip dmg.tets 3000
+expect 1 "points: checksum mismatch" "$T" -q cat dmg.tets --points
+expect 1 "points: checksum mismatch" "$T" -q cat dmg.tets --original-ids
+"$T" -q info dmg.tets >/dev/null || fail "info without --check reads only the header: it should pass"
+expect 1 "checksum mismatch" "$T" -q info dmg.tets --check
+"$T" -q info reference.tets --check >/dev/null || fail "info --check rejected a valid container"
 fi
 
 # ---- 10. a killed job's temporary directory ----
