@@ -1,0 +1,55 @@
+#pragma once
+// Pass 1 of `tetstream field`: streams the container's frames once, batch by batch
+// (pipeline/field_window.hpp), sums each tet's contributions (field_geometry.hpp) into
+// per-label accumulators that live in a ring over the window, and hands every point to
+// the caller once it is final, in label order.
+//
+// Determinism: frames are decoded and the per-tet geometry computed on all OpenMP
+// threads, but the sums are made by one thread in a fixed order (frame, then tet in
+// stored order, then vertex), so every point's sums are the same bits whatever the
+// thread count and whatever the batching (the memory budget).
+//
+// Neighbours: each batch's edges are packed, sorted and made unique on all threads,
+// then merged into the window's sorted list of (label, neighbour's original index),
+// whose prefix of final labels is handed out at each retirement.
+#include "io/tet_reader.hpp"
+#include "pipeline/field_window.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <span>
+
+namespace tetstream::pipeline {
+
+class Progress;
+
+// A final point, in label order.
+struct FinalPoint {
+  std::uint64_t label = 0, original = 0;
+  double xyz[3];
+  double volume = 0.0;   // sum of the incident tets' volumes
+  double voronoi = 0.0;  // sum of the Voronoi pieces (the cell's volume when interior)
+  bool hull = false;     // on the convex hull (solid angles sum below 3 pi)
+};
+
+struct AccumulateSinks {
+  std::function<void(const FinalPoint&)> point;
+  // Set to collect neighbours: the point's Delaunay neighbours as original indices,
+  // increasing.
+  std::function<void(const FinalPoint&, std::span<const std::uint64_t>)> neighbours;
+};
+
+struct AccumulateStats {
+  std::uint64_t tets = 0, batches = 0;
+  std::uint64_t neighbour_entries = 0;  // sum of the neighbour counts
+  std::uint64_t peak_pairs = 0;         // largest held list of (label, neighbour)
+  std::uint64_t peak_far = 0;           // most far labels held (field_points.hpp)
+};
+
+AccumulateStats accumulate_fields(const io::TetReader& reader, const BatchPlan& plan, const AccumulateSinks& sinks,
+                                  Progress* progress);
+
+// The solid-angle sum below which a point is on the hull (see field_geometry.hpp).
+inline constexpr double kHullAngleThreshold = 3.0 * 3.14159265358979323846;
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,138 @@
+#include "pipeline/field_geometry.hpp"
+
+#include "core/predicates.hpp"
+
+#include <cmath>
+
+namespace tetstream::pipeline {
+namespace {
+
+struct V3 {
+  double x, y, z;
+};
+inline V3 sub(const V3& a, const V3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline V3 add(const V3& a, const V3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+inline V3 scale(const V3& a, double s) { return {a.x * s, a.y * s, a.z * s}; }
+inline double dot(const V3& a, const V3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline V3 cross(const V3& a, const V3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double det3(const V3& a, const V3& b, const V3& c) { return dot(a, cross(b, c)); }
+inline double norm(const V3& a) { return std::sqrt(dot(a, a)); }
+
+// Circumcentre of the triangle (0, u, v), relative to its first vertex.
+V3 face_circumcentre(const V3& u, const V3& v) {
+  const V3 n = cross(u, v);
+  const V3 w = sub(scale(v, dot(u, u)), scale(u, dot(v, v)));
+  return scale(cross(w, n), 0.5 / dot(n, n));
+}
+
+// Solid angle at the origin of the tet (0, a, b, c) (Van Oosterom & Strackee 1983):
+// tan(Omega / 2) = |det| / (|a||b||c| + (a.b)|c| + (a.c)|b| + (b.c)|a|), in [0, 2 pi).
+double solid_angle(const V3& a, const V3& b, const V3& c) {
+  const double la = norm(a), lb = norm(b), lc = norm(c);
+  const double num = std::fabs(det3(a, b, c));
+  const double den = la * lb * lc + dot(a, b) * lc + dot(a, c) * lb + dot(b, c) * la;
+  return 2.0 * std::atan2(num, den);
+}
+
+// The faces through each edge: for vertex i and its edge to j, the two other vertices.
+// Even permutations of (0,1,2,3) keep the positive orientation: sigma of (i, j, k, l)
+// is its parity, +1 for even.
+int parity(int i, int j, int k, int l) {
+  const int p[4] = {i, j, k, l};
+  int inv = 0;
+  for (int x = 0; x < 4; ++x)
+    for (int y = x + 1; y < 4; ++y) inv += p[x] > p[y];
+  return inv % 2 == 0 ? 1 : -1;
+}
+
+// Face index by the vertex it omits: face f holds the three vertices other than f.
+int face_without(int i, int j, int k) { return 6 - i - j - k; }
+
+}  // namespace
+
+TetContribution tet_contribution(const double* const p[4]) {
+  // Everything relative to vertex 0, so the arithmetic sees the tet's own scale.
+  V3 v[4];
+  for (int i = 0; i < 4; ++i) v[i] = {p[i][0] - p[0][0], p[i][1] - p[0][1], p[i][2] - p[0][2]};
+  TetContribution out;
+  const double d6 = det3(v[1], v[2], v[3]);
+  out.volume = d6 / 6.0;
+  // Tet circumcentre: (|u|^2 (v x w) + |v|^2 (w x u) + |w|^2 (u x v)) / (2 det).
+  const V3 cc = scale(add(add(scale(cross(v[2], v[3]), dot(v[1], v[1])), scale(cross(v[3], v[1]), dot(v[2], v[2]))),
+                          scale(cross(v[1], v[2]), dot(v[3], v[3]))),
+                      0.5 / d6);
+  // Face circumcentres, face f opposite vertex f.
+  V3 fc[4];
+  for (int f = 0; f < 4; ++f) {
+    const int a = f == 0 ? 1 : 0, b = f <= 1 ? 2 : 1, c = f <= 2 ? 3 : 2;
+    fc[f] = add(v[a], face_circumcentre(sub(v[b], v[a]), sub(v[c], v[a])));
+  }
+  for (int i = 0; i < 4; ++i) {
+    double vor = 0.0;
+    const V3 c_rel = sub(cc, v[i]);
+    for (int j = 0; j < 4; ++j) {
+      if (j == i) continue;
+      const V3 m_rel = scale(sub(v[j], v[i]), 0.5);
+      for (int k = 0; k < 4; ++k) {
+        if (k == i || k == j) continue;
+        const int l = 6 - i - j - k;
+        const V3 f_rel = sub(fc[face_without(i, j, k)], v[i]);
+        vor += parity(i, j, k, l) * det3(m_rel, f_rel, c_rel);
+      }
+    }
+    out.voronoi[i] = vor / 6.0;
+    int o[3], n = 0;
+    for (int j = 0; j < 4; ++j)
+      if (j != i) o[n++] = j;
+    out.angle[i] = solid_angle(sub(v[o[0]], v[i]), sub(v[o[1]], v[i]), sub(v[o[2]], v[i]));
+  }
+  return out;
+}
+
+namespace {
+
+// The sign of n_x, n_y or n_z for the normal n = (b-a) x (c-a), exactly: a 2D
+// orientation in the plane of the other two axes, written as orient3d of the points
+// projected there (coordinates copied exactly) against an apex above the plane.
+int normal_sign(const double* a, const double* b, const double* c, int axis) {
+  const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+  const double pa[3] = {a[u], a[w], 0.0}, pb[3] = {b[u], b[w], 0.0}, pc[3] = {c[u], c[w], 0.0};
+  const double apex[3] = {0.0, 0.0, 1.0};
+  return core::orient3d(pa, pb, pc, apex);
+}
+
+// Sign of orient3d(a, b, c, g + e x + e^2 y + e^3 z) as e -> 0+: the exact sign when
+// nonzero, else the first nonzero component of the normal in the order x, y, z.
+int perturbed_orient(const double* a, const double* b, const double* c, const double* g) {
+  const int s = core::orient3d(a, b, c, g);
+  if (s != 0) return s;
+  for (int axis = 0; axis < 3; ++axis)
+    if (const int n = normal_sign(a, b, c, axis); n != 0) return n;
+  return 0;  // a flat face: not in a valid container
+}
+
+}  // namespace
+
+bool tet_contains(const double* a, const double* b, const double* c, const double* d, const double* g) {
+  // g replaces each vertex in turn; each determinant is rewritten with g last by an
+  // odd permutation (hence the "< 0") except the first.
+  return perturbed_orient(a, b, c, g) > 0 && perturbed_orient(a, b, d, g) < 0 && perturbed_orient(a, d, c, g) < 0 &&
+         perturbed_orient(d, b, c, g) < 0;
+}
+
+double tet_interpolate(const double* const p[4], const double* f, const double* g) {
+  V3 v[4];
+  for (int i = 0; i < 4; ++i) v[i] = {p[i][0] - g[0], p[i][1] - g[1], p[i][2] - g[2]};
+  // lambda_i = det with g in place of vertex i / det of the tet; with everything
+  // relative to g, g is the origin.
+  const double l0 = det3(sub(v[1], v[0]) , sub(v[2], v[0]), sub(v[3], v[0]));
+  const double w0 = det3(v[1], v[2], v[3]);
+  const double w1 = -det3(v[0], v[2], v[3]);
+  const double w2 = det3(v[0], v[1], v[3]);
+  const double w3 = -det3(v[0], v[1], v[2]);
+  return (w0 * f[0] + w1 * f[1] + w2 * f[2] + w3 * f[3]) / l0;
+}
+
+}  // namespace tetstream::pipeline
