@@ -136,6 +136,9 @@ FieldSummary compute_fields(const FieldOptions& options) {
                n, summary.tets, summary.frames, summary.batches, plan.window_labels, plan.ring_labels,
                human_bytes(double(summary.memory_planned)));
 
+  // The mass file is checked (length, format) before any work; its values when read.
+  std::unique_ptr<io::ScalarFileReader> masses;
+  if (!options.mass.empty()) masses = std::make_unique<io::ScalarFileReader>(options.mass, h.input_count ? h.input_count : n);
   TempDir tmp(default_tmpdir(options), "tetstream-field");
   const bool grid = options.grid_wanted();
   const bool need_points = options.density || options.voronoi || (grid && !options.mass.empty());
@@ -180,8 +183,6 @@ FieldSummary compute_fields(const FieldOptions& options) {
   summary.far_labels_peak = acc.peak_far;
 
   if (points) {
-    std::unique_ptr<io::ScalarFileReader> masses;
-    if (!options.mass.empty()) masses = std::make_unique<io::ScalarFileReader>(options.mass, h.input_count ? h.input_count : n);
     // With masses, the grid's densities come back to label order through another sort.
     std::unique_ptr<ExternalSorter<GridDensity, ByLabel>> by_label;
     std::function<void(std::uint64_t, double)> sink;
