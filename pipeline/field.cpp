@@ -60,14 +60,13 @@ double parse_double(const std::string& s, const std::string& what) {
 
 // Memory plan (bytes per item, measured on the structures the passes hold):
 //   per window label: coordinates 24, original index 8, sums 24 (+ density 8 in the
-//     grid pass), and with neighbours the held (label, neighbour) pairs, ~16 of 16
-//     bytes per label, twice while a batch merges in;
+//     grid pass);
 //   per batch tet: labels 32, contributions 72, with neighbours 6 packed edges of 8
-//     and their pairs;
+//     and the radix sort's other buffer;
 // and the external sorts of the outputs their share. The ring is a power of two.
 constexpr std::uint64_t kReserve = std::uint64_t(40) << 20;  // code, decoders, I/O buffers
-std::uint64_t label_bytes(const FieldOptions& o) { return 64 + (o.neighbours ? 512 : 0); }
-std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 112 : 0); }
+std::uint64_t label_bytes(const FieldOptions&) { return 64; }
+std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 96 : 0); }
 
 std::string default_tmpdir(const FieldOptions& o) {
   if (!o.tmpdir.empty()) return o.tmpdir;
@@ -112,13 +111,13 @@ FieldSummary compute_fields(const FieldOptions& options) {
   summary.tets = reader.tet_count();
   summary.frames = reader.frame_count();
 
-  // Budget shares: window 40%, batch 25%, the output sorts 35% (split between them).
+  // Budget caps: window 40%, batch 25%; the output sorts get the rest (split between them).
   const std::uint64_t usable = options.memory_bytes - kReserve;
-  const std::uint64_t window_bytes = usable / 100 * 40, batch_bytes = usable / 100 * 25, sort_bytes = usable / 100 * 35;
+  const std::uint64_t window_bytes = usable / 100 * 40, batch_bytes = usable / 100 * 25;
   std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
                                                            std::uint64_t(1) << 32);
   std::uint64_t max_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
-  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << 21);
+  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << 19);  // scratch reused, not re-faulted
   if (options.batch_tets) max_tets = options.batch_tets;
   if (options.ring_labels) {
     if (!std::has_single_bit(options.ring_labels)) throw UsageError("field: ring_labels must be a power of two");
@@ -130,8 +129,11 @@ FieldSummary compute_fields(const FieldOptions& options) {
   summary.batches = plan.batches.size();
   summary.window_labels = plan.window_labels;
   summary.ring_labels = plan.ring_labels;
-  summary.memory_planned = kReserve + plan.ring_labels * label_bytes(options) +
-                           plan.largest_batch_tets * tet_bytes(options) + sort_bytes;
+  // The output sorts take what the window and the batches leave (at least 20%): the
+  // window is usually far below its cap, and a sort that fits in memory never spills.
+  const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options);
+  const std::uint64_t sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
+  summary.memory_planned = kReserve + held + sort_bytes;
   spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}",
                n, summary.tets, summary.frames, summary.batches, plan.window_labels, plan.ring_labels,
                human_bytes(double(summary.memory_planned)));
@@ -153,7 +155,23 @@ FieldSummary compute_fields(const FieldOptions& options) {
   std::unique_ptr<ExternalSorter<PointRecord, ByOriginal>> points;
   std::unique_ptr<ExternalSorter<NeighbourRecord, ByPair>> neighbours;
   if (need_points) points = std::make_unique<ExternalSorter<PointRecord, ByOriginal>>(sort_options("points"));
-  if (options.neighbours) neighbours = std::make_unique<ExternalSorter<NeighbourRecord, ByPair>>(sort_options("neighbours"));
+  if (options.neighbours) {
+    ExternalSortOptions so = sort_options("neighbours");
+    so.memory_bytes /= 2;  // the radix sort's second buffer takes the other half
+    neighbours = std::make_unique<ExternalSorter<NeighbourRecord, ByPair>>(so);
+    // Original indices are below 2^id_bits and the row marker is all ones: an LSD radix
+    // sort on id_bits + 1 bits of each word (marker folded to the top value) orders
+    // them as ByPair does, several times faster than a comparison sort of 16-byte records.
+    const int bits = std::bit_width(std::max(h.input_count, n)) + 1;
+    auto radix_tmp = std::make_shared<std::vector<NeighbourRecord>>();
+    neighbours->set_run_sort([bits, radix_tmp](NeighbourRecord* d, std::size_t k) {
+      const std::uint64_t top = (std::uint64_t(1) << bits) - 1;
+      radix_sort(d, k, *radix_tmp, bits, [top](const NeighbourRecord& r) { return std::min(r.other, top); });
+      radix_sort(d, k, *radix_tmp, bits, [](const NeighbourRecord& r) { return r.original; });
+      radix_tmp->clear();
+      radix_tmp->shrink_to_fit();
+    });
+  }
   const std::string rho_path = tmp.path("rho-by-label.f64");
   std::unique_ptr<BinaryFile> rho_file;
   if (grid && options.mass.empty()) rho_file = std::make_unique<BinaryFile>(rho_path, "wb");
@@ -161,6 +179,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
   Progress progress("field", "tets", summary.tets * (grid ? 2 : 1), options.progress);
   double volume4 = 0.0;
   AccumulateSinks sinks;
+  sinks.voronoi = options.voronoi;
   sinks.point = [&](const FinalPoint& p) {
     volume4 += p.volume;
     summary.hull_points += p.hull;
@@ -172,14 +191,20 @@ FieldSummary compute_fields(const FieldOptions& options) {
       rho_file->write(&rho, sizeof rho, 1);
     }
   };
-  if (neighbours)
-    sinks.neighbours = [&](const FinalPoint& p, std::span<const std::uint64_t> nb) {
-      for (const std::uint64_t q : nb) neighbours->push({p.original, q});
+  if (neighbours) {
+    sinks.edge = [&](std::uint64_t a, std::uint64_t b) {
+      neighbours->push({a, b});
+      neighbours->push({b, a});
+    };
+    // Every point gets a row, even one in no edge (not in a valid container).
+    const auto point = sinks.point;
+    sinks.point = [&, point](const FinalPoint& p) {
+      point(p);
       neighbours->push({p.original, kRowMarker});
     };
+  }
   const AccumulateStats acc = accumulate_fields(reader, plan, sinks, &progress);
   summary.tet_volume = volume4 / 4.0;
-  summary.neighbour_entries = acc.neighbour_entries;
   summary.far_labels_peak = acc.peak_far;
 
   if (points) {
@@ -202,7 +227,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
     summary.total_mass = double(n);
   }
   if (neighbours) {
-    write_neighbours(*neighbours, options, n, acc.neighbour_entries, summary);
+    write_neighbours(*neighbours, options, n, tmp, summary);
     neighbours.reset();
   }
   if (grid) {

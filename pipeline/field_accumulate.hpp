@@ -9,9 +9,8 @@
 // stored order, then vertex), so every point's sums are the same bits whatever the
 // thread count and whatever the batching (the memory budget).
 //
-// Neighbours: each batch's edges are packed, sorted and made unique on all threads,
-// then merged into the window's sorted list of (label, neighbour's original index),
-// whose prefix of final labels is handed out at each retirement.
+// Neighbours: each batch's edges are packed, radix-sorted and made unique, and handed
+// out at once; the caller's external sort by original index makes them unique overall.
 #include "io/tet_reader.hpp"
 #include "pipeline/field_window.hpp"
 
@@ -33,16 +32,16 @@ struct FinalPoint {
 };
 
 struct AccumulateSinks {
+  bool voronoi = true;  // compute the Voronoi sums (FinalPoint::voronoi is 0 otherwise)
   std::function<void(const FinalPoint&)> point;
-  // Set to collect neighbours: the point's Delaunay neighbours as original indices,
-  // increasing.
-  std::function<void(const FinalPoint&, std::span<const std::uint64_t>)> neighbours;
+  // Set to collect neighbours: each Delaunay edge as the original indices of its
+  // endpoints, at least once (once per batch whose tets hold it).
+  std::function<void(std::uint64_t, std::uint64_t)> edge;
 };
 
 struct AccumulateStats {
   std::uint64_t tets = 0, batches = 0;
-  std::uint64_t neighbour_entries = 0;  // sum of the neighbour counts
-  std::uint64_t peak_pairs = 0;         // largest held list of (label, neighbour)
+  std::uint64_t batch_edges = 0;        // edges handed out (copies across batches included)
   std::uint64_t peak_far = 0;           // most far labels held (field_points.hpp)
 };
 

@@ -27,14 +27,24 @@ V3 face_circumcentre(const V3& u, const V3& v) {
   return scale(cross(w, n), 0.5 / dot(n, n));
 }
 
-// Solid angle at the origin of the tet (0, a, b, c) (Van Oosterom & Strackee 1983):
-// tan(Omega / 2) = |det| / (|a||b||c| + (a.b)|c| + (a.c)|b| + (b.c)|a|), in [0, 2 pi).
-double solid_angle(const V3& a, const V3& b, const V3& c) {
-  const double la = norm(a), lb = norm(b), lc = norm(c);
-  const double num = std::fabs(det3(a, b, c));
-  const double den = la * lb * lc + dot(a, b) * lc + dot(a, c) * lb + dot(b, c) * la;
-  return 2.0 * std::atan2(num, den);
+}  // namespace
+
+// atan(y / x) for y >= 0 in [0, pi], by range reduction to [0, 1] and a polynomial of
+// degree 11 (absolute error below 2e-6 rad, checked against std::atan2 in
+// tests/unit/field_test.cpp; a solid angle is twice it: 4e-6). The hull test has a
+// margin of pi on a sum of these, so a star would need over 7 * 10^5 tets before the
+// approximation could matter; libm's atan2 was a quarter of a density job's time.
+double fast_atan2(double y, double x) {
+  const double ax = std::fabs(x);
+  const bool steep = y > ax;
+  const double a = steep ? ax / y : (ax > 0 ? y / ax : 0.0);
+  const double s = a * a;
+  double r = a * (0.99997726 + s * (-0.33262347 + s * (0.19354346 + s * (-0.11643287 + s * (0.05265332 + s * -0.01172120)))));
+  if (steep) r = 1.5707963267948966 - r;
+  return x < 0 ? 3.141592653589793 - r : r;
 }
+
+namespace {
 
 // The faces through each edge: for vertex i and its edge to j, the two other vertices.
 // Even permutations of (0,1,2,3) keep the positive orientation: sigma of (i, j, k, l)
@@ -52,13 +62,35 @@ int face_without(int i, int j, int k) { return 6 - i - j - k; }
 
 }  // namespace
 
-TetContribution tet_contribution(const double* const p[4]) {
+TetContribution tet_contribution(const double* const p[4], bool voronoi) {
   // Everything relative to vertex 0, so the arithmetic sees the tet's own scale.
   V3 v[4];
   for (int i = 0; i < 4; ++i) v[i] = {p[i][0] - p[0][0], p[i][1] - p[0][1], p[i][2] - p[0][2]};
   TetContribution out;
   const double d6 = det3(v[1], v[2], v[3]);
   out.volume = d6 / 6.0;
+  // Solid angles (Van Oosterom & Strackee 1983): at vertex i with edges a, b, c to the
+  // others, tan(Omega / 2) = |det[a, b, c]| / (|a||b||c| + (a.b)|c| + (a.c)|b| + (b.c)|a|);
+  // |det| is 6 V at every vertex, and the six edge lengths are shared.
+  V3 e[4][4];
+  double len[4][4];
+  for (int i = 0; i < 4; ++i)
+    for (int j = i + 1; j < 4; ++j) {
+      e[i][j] = sub(v[j], v[i]);
+      e[j][i] = scale(e[i][j], -1.0);
+      len[i][j] = len[j][i] = norm(e[i][j]);
+    }
+  const double num = std::fabs(d6);
+  for (int i = 0; i < 4; ++i) {
+    const int a = i == 0 ? 1 : 0, b = i <= 1 ? 2 : 1, c = i <= 2 ? 3 : 2;
+    const double den = len[i][a] * len[i][b] * len[i][c] + dot(e[i][a], e[i][b]) * len[i][c] +
+                       dot(e[i][a], e[i][c]) * len[i][b] + dot(e[i][b], e[i][c]) * len[i][a];
+    out.angle[i] = 2.0 * fast_atan2(num, den);
+  }
+  if (!voronoi) {
+    out.voronoi[0] = out.voronoi[1] = out.voronoi[2] = out.voronoi[3] = 0.0;
+    return out;
+  }
   // Tet circumcentre: (|u|^2 (v x w) + |v|^2 (w x u) + |w|^2 (u x v)) / (2 det).
   const V3 cc = scale(add(add(scale(cross(v[2], v[3]), dot(v[1], v[1])), scale(cross(v[3], v[1]), dot(v[2], v[2]))),
                           scale(cross(v[1], v[2]), dot(v[3], v[3]))),
@@ -67,14 +99,14 @@ TetContribution tet_contribution(const double* const p[4]) {
   V3 fc[4];
   for (int f = 0; f < 4; ++f) {
     const int a = f == 0 ? 1 : 0, b = f <= 1 ? 2 : 1, c = f <= 2 ? 3 : 2;
-    fc[f] = add(v[a], face_circumcentre(sub(v[b], v[a]), sub(v[c], v[a])));
+    fc[f] = add(v[a], face_circumcentre(e[a][b], e[a][c]));
   }
   for (int i = 0; i < 4; ++i) {
     double vor = 0.0;
     const V3 c_rel = sub(cc, v[i]);
     for (int j = 0; j < 4; ++j) {
       if (j == i) continue;
-      const V3 m_rel = scale(sub(v[j], v[i]), 0.5);
+      const V3 m_rel = scale(e[i][j], 0.5);
       for (int k = 0; k < 4; ++k) {
         if (k == i || k == j) continue;
         const int l = 6 - i - j - k;
@@ -83,10 +115,6 @@ TetContribution tet_contribution(const double* const p[4]) {
       }
     }
     out.voronoi[i] = vor / 6.0;
-    int o[3], n = 0;
-    for (int j = 0; j < 4; ++j)
-      if (j != i) o[n++] = j;
-    out.angle[i] = solid_angle(sub(v[o[0]], v[i]), sub(v[o[1]], v[i]), sub(v[o[2]], v[i]));
   }
   return out;
 }

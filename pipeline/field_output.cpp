@@ -1,5 +1,7 @@
 #include "pipeline/field_output.hpp"
 
+#include "pipeline/temp_files.hpp"
+
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -92,27 +94,45 @@ void write_point_fields(ExternalSorter<PointRecord, ByOriginal>& records, const 
 }
 
 void write_neighbours(ExternalSorter<NeighbourRecord, ByPair>& records, const FieldOptions& options,
-                      std::uint64_t point_count, std::uint64_t entries, FieldSummary& summary) {
+                      std::uint64_t point_count, const TempDir& tmp, FieldSummary& summary) {
+  // The entries' count is known at the end only, and .npy states it up front: the
+  // indices go to a scratch file first and are copied behind the header after.
   IntColumn offsets(field_path(options, "neighbours.offsets"), point_count + 1);
-  IntColumn indices(field_path(options, "neighbours.indices"), entries);
+  const std::string scratch = tmp.path("neighbour-indices.i64");
   std::uint64_t at = 0, rows = 0;
-  offsets.add(0);
-  records.merge([&](std::span<const NeighbourRecord> batch) {
-    for (const NeighbourRecord& r : batch) {
-      if (r.other == kRowMarker) {  // sorts after the row's entries: the row is complete
-        offsets.add(at);
-        ++rows;
-      } else {
-        indices.add(r.other);
-        ++at;
+  {
+    BinaryFile out(scratch, "wb");
+    std::vector<std::int64_t> buf;
+    NeighbourRecord last{kRowMarker, kRowMarker};
+    offsets.add(0);
+    records.merge([&](std::span<const NeighbourRecord> batch) {
+      for (const NeighbourRecord& r : batch) {
+        if (r.other == kRowMarker) {  // sorts after the row's entries: the row is complete
+          offsets.add(at);
+          ++rows;
+        } else if (r.original != last.original || r.other != last.other) {  // copies of an edge are adjacent
+          buf.push_back(std::int64_t(r.other));
+          ++at;
+          if (buf.size() == (1 << 16)) out.write(buf.data(), sizeof(std::int64_t), buf.size()), buf.clear();
+        }
+        last = r;
       }
-    }
-  });
-  if (rows != point_count || at != entries)
-    throw std::logic_error("field: neighbour rows " + std::to_string(rows) + " / entries " + std::to_string(at) +
-                           " do not match " + std::to_string(point_count) + " / " + std::to_string(entries));
+    });
+    out.write(buf.data(), sizeof(std::int64_t), buf.size());
+    out.close();
+  }
+  if (rows != point_count)
+    throw std::logic_error("field: " + std::to_string(rows) + " neighbour rows, expected " + std::to_string(point_count));
+  io::NpyArrayWriter indices(field_path(options, "neighbours.indices"), "<i8", {at});
+  {
+    BinaryFile in(scratch, "rb");
+    std::vector<char> buf(std::size_t(8) << 20);
+    while (const std::size_t got = in.read(buf.data(), 1, buf.size())) indices.write(buf.data(), got);
+  }
+  remove_file(scratch);
   offsets.commit();
   indices.commit();
+  summary.neighbour_entries = at;
   summary.files.push_back({"neighbours.offsets", field_path(options, "neighbours.offsets")});
   summary.files.push_back({"neighbours.indices", field_path(options, "neighbours.indices")});
 }

@@ -5,7 +5,8 @@
 // (pipeline/external_sort.hpp: in memory when it fits its share of --memory, sorted runs
 // on disk otherwise), and the merged stream is written to the .npy files front to back.
 // Neighbours go the same way as (original, neighbour's original) pairs, with one marker
-// per point so a point without neighbours still gets its (empty) row.
+// per point so a point without neighbours still gets its (empty) row; an edge handed
+// out by several batches sorts into adjacent copies, written once.
 #include "io/npy.hpp"
 #include "pipeline/external_sort.hpp"
 #include "pipeline/field.hpp"
@@ -55,8 +56,9 @@ void write_point_fields(ExternalSorter<PointRecord, ByOriginal>& records, const 
 // Writes OUTPUT.neighbours.offsets.npy (int64, N + 1) and OUTPUT.neighbours.indices.npy
 // (int64, entries): row i of the CSR lists the neighbours of the i-th point in input order,
 // as original indices, increasing.
+// Copies of an edge (from several batches) are dropped here. Scratch goes to tmp.
 void write_neighbours(ExternalSorter<NeighbourRecord, ByPair>& records, const FieldOptions& options,
-                      std::uint64_t point_count, std::uint64_t entries, FieldSummary& summary);
+                      std::uint64_t point_count, const TempDir& tmp, FieldSummary& summary);
 
 std::string field_path(const FieldOptions& options, const std::string& what);  // OUTPUT.what.npy
 

@@ -425,6 +425,24 @@ TEST_F(FieldTest, PerturbedLocationIsExclusive) {
   EXPECT_LE(int(pipeline::tet_contains(a, b, c, up, vertex)) + int(pipeline::tet_contains(a, c, b, dn, vertex)), 1);
 }
 
+TEST(FieldGeometry, FastAtan2) {
+  double worst = 0;
+  for (int i = 0; i <= 200000; ++i) {
+    const double t = 3.141592653589793 * i / 200000;  // directions over the upper half plane
+    const double y = std::sin(t), x = std::cos(t);
+    worst = std::max(worst, std::fabs(pipeline::fast_atan2(std::fabs(y), x) - std::atan2(std::fabs(y), x)));
+  }
+  EXPECT_LT(worst, 2e-6);
+  EXPECT_EQ(pipeline::fast_atan2(0.0, 0.0), 0.0);
+  // The solid angles of a tet's vertices against the formula's own reference values.
+  const double a[3] = {0, 0, 0}, b[3] = {1, 0, 0}, c[3] = {0, 1, 0}, d[3] = {0, 0, 1};
+  const double* p[4] = {a, b, c, d};
+  const auto t = pipeline::tet_contribution(p);
+  EXPECT_NEAR(t.angle[0], 3.141592653589793 / 2, 4e-6);  // an octant
+  EXPECT_NEAR(t.volume, 1.0 / 6, 1e-15);
+  EXPECT_NEAR(t.voronoi[0] + t.voronoi[1] + t.voronoi[2] + t.voronoi[3], 1.0 / 6, 1e-15);
+}
+
 TEST_F(FieldTest, BadOptionsAndInput) {
   pipeline::FieldOptions o;
   o.input = path("missing.tets");
