@@ -2,6 +2,7 @@
 
 #include "core/predicates.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 namespace tetstream::pipeline {
@@ -148,6 +149,35 @@ bool tet_contains(const double* a, const double* b, const double* c, const doubl
   // odd permutation (hence the "< 0") except the first.
   return perturbed_orient(a, b, c, g) > 0 && perturbed_orient(a, b, d, g) < 0 && perturbed_orient(a, d, c, g) < 0 &&
          perturbed_orient(d, b, c, g) < 0;
+}
+
+TetLocator::TetLocator(const double* a, const double* b, const double* c, const double* d) : p_{a, b, c, d} {
+  // The four tests of tet_contains, as (face p, q, r; required sign).
+  const double* faces[4][3] = {{a, b, c}, {a, b, d}, {a, d, c}, {d, b, c}};
+  const double sign[4] = {1, -1, -1, -1};
+  for (int f = 0; f < 4; ++f) {
+    const double* p = faces[f][0];
+    double u[3], v[3];
+    for (int k = 0; k < 3; ++k) u[k] = faces[f][1][k] - p[k], v[k] = faces[f][2][k] - p[k], base_[f][k] = p[k];
+    normal_[f][0] = sign[f] * (u[1] * v[2] - u[2] * v[1]);
+    normal_[f][1] = sign[f] * (u[2] * v[0] - u[0] * v[2]);
+    normal_[f][2] = sign[f] * (u[0] * v[1] - u[1] * v[0]);
+    const double mu = std::max({std::fabs(u[0]), std::fabs(u[1]), std::fabs(u[2])});
+    const double mv = std::max({std::fabs(v[0]), std::fabs(v[1]), std::fabs(v[2])});
+    scale_[f] = mu * mv;
+  }
+}
+
+bool TetLocator::contains(const double* g) const {
+  bool sure = true;
+  for (int f = 0; f < 4; ++f) {
+    const double w[3] = {g[0] - base_[f][0], g[1] - base_[f][1], g[2] - base_[f][2]};
+    const double value = normal_[f][0] * w[0] + normal_[f][1] * w[1] + normal_[f][2] * w[2];
+    const double margin = 1e-13 * scale_[f] * std::max({std::fabs(w[0]), std::fabs(w[1]), std::fabs(w[2])});
+    if (value < -margin) return false;  // clearly on the outer side of a face
+    if (value <= margin) sure = false;
+  }
+  return sure || tet_contains(p_[0], p_[1], p_[2], p_[3], g);
 }
 
 double tet_interpolate(const double* const p[4], const double* f, const double* g) {

@@ -49,6 +49,23 @@ double fast_atan2(double y, double x);
 // core/predicates.hpp, antisymmetric in the face's vertices).
 bool tet_contains(const double* a, const double* b, const double* c, const double* d, const double* g);
 
+// tet_contains for many points of one tet: the four face planes in floating point
+// decide the points clearly inside or outside (the rounding of a plane's value is below
+// 48 u |u|max |v|max |w|max, the orient3d filter's bound; the margin is 20 times that),
+// and only points too close to a face to call go to tet_contains's exact test. The
+// answers are tet_contains's.
+class TetLocator {
+ public:
+  TetLocator(const double* a, const double* b, const double* c, const double* d);
+  bool contains(const double* g) const;
+
+ private:
+  const double* p_[4];
+  double base_[4][3];   // a point of each face
+  double normal_[4][3]; // oriented so that inside is positive
+  double scale_[4];     // |u|max |v|max of each face, for the margin
+};
+
 // The linear interpolant at g of the values f[0..3] at the vertices: barycentric
 // coordinates from the sub-volumes, in floating point.
 double tet_interpolate(const double* const p[4], const double* f, const double* g);

@@ -113,14 +113,18 @@ class GridSampler {
     }
   }
 
-  // Index range [first, last] of the grid centres along `axis` within [a, b], widened
-  // by one each way against rounding (the exact test decides), clamped to the planes held
-  // for the sampling axis. Empty when first > last.
+  // Index range [first, last] of the grid centres along `axis` within [a, b]: the
+  // exact condition is (a - lo) s - 1/2 <= i <= (b - lo) s - 1/2; the bounds are widened
+  // by far more than the rounding of them and of the centres' coordinates (a few ulps
+  // of the coordinates, in cells), so no centre inside is missed (the exact test
+  // decides the rest). The sampling axis starts at the first plane held. Empty when
+  // first > last.
   void range(int axis, double a, double b, std::int64_t& first, std::int64_t& last) const {
     const std::size_t k = std::size_t(axis);
     const double scale = double(g_.n[k]) / (g_.hi[k] - g_.lo[k]);
-    first = std::int64_t(std::floor((a - g_.lo[k]) * scale - 0.5));
-    last = std::int64_t(std::ceil((b - g_.lo[k]) * scale - 0.5));
+    const double slack = 1e-9 + 1e-14 * (std::fabs(a) + std::fabs(b) + std::fabs(g_.lo[k]) + std::fabs(g_.hi[k])) * scale;
+    first = std::int64_t(std::ceil(std::max(-1.0, (a - g_.lo[k]) * scale - 0.5 - slack)));
+    last = std::int64_t(std::floor(std::min(double(g_.n[k]), (b - g_.lo[k]) * scale - 0.5 + slack)));
     std::int64_t lo = 0, hi = std::int64_t(g_.n[k]) - 1;
     if (axis == axis_) lo = std::int64_t(first_plane_);  // planes before it are final: no tet reaches them
     first = std::max(first, lo);
@@ -135,6 +139,7 @@ class GridSampler {
       const std::uint64_t* q = batch_.tet(std::size_t(t));
       const double* p[4] = {points_.xyz(q[0]), points_.xyz(q[1]), points_.xyz(q[2]), points_.xyz(q[3])};
       const double f[4] = {rho(q[0]), rho(q[1]), rho(q[2]), rho(q[3])};
+      const TetLocator locate(p[0], p[1], p[2], p[3]);
       std::int64_t r0[3], r1[3];
       for (int k = 0; k < 3; ++k) {
         double a = p[0][k], b = p[0][k];
@@ -148,7 +153,7 @@ class GridSampler {
             g[axis_] = g_.centre(axis_, std::uint64_t(i));
             g[u_] = g_.centre(u_, std::uint64_t(j));
             g[w_] = g_.centre(w_, std::uint64_t(k));
-            if (!tet_contains(p[0], p[1], p[2], p[3], g)) continue;
+            if (!locate.contains(g)) continue;
             const double v = tet_interpolate(p, f, g);
             const std::size_t at = std::size_t(j) * g_.n[std::size_t(w_)] + std::size_t(k);
             if (std::uint64_t(i) < first_plane_ + planes_.size()) {

@@ -421,6 +421,15 @@ TEST_F(FieldTest, PerturbedLocationIsExclusive) {
   // (a, b, c, up) is positive; (a, c, b, dn) too.
   const bool in_up = pipeline::tet_contains(a, b, c, up, g), in_dn = pipeline::tet_contains(a, c, b, dn, g);
   EXPECT_NE(in_up, in_dn);
+  // The floating-point prefilter agrees with the exact test, near faces included.
+  const pipeline::TetLocator up_tet(a, b, c, up), dn_tet(a, c, b, dn);
+  for (int i = 0; i <= 40; ++i)
+    for (int j = 0; j <= 40; ++j)
+      for (const double z : {-1e-300, 0.0, 1e-300, 1e-17, -1e-17, 0.3}) {
+        const double q[3] = {i / 40.0, j / 40.0, z};
+        EXPECT_EQ(up_tet.contains(q), pipeline::tet_contains(a, b, c, up, q)) << q[0] << " " << q[1] << " " << z;
+        EXPECT_EQ(dn_tet.contains(q), pipeline::tet_contains(a, c, b, dn, q)) << q[0] << " " << q[1] << " " << z;
+      }
   const double vertex[3] = {0, 0, 0};
   EXPECT_LE(int(pipeline::tet_contains(a, b, c, up, vertex)) + int(pipeline::tet_contains(a, c, b, dn, vertex)), 1);
 }
