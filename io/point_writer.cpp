@@ -1,5 +1,7 @@
 #include "io/point_writer.hpp"
 
+#include "io/npy.hpp"
+
 #include "core/error.hpp"
 
 #include <algorithm>
@@ -249,18 +251,7 @@ class NpyWriter : public RawWriter {
 
  protected:
   std::string header(const std::string& count, std::size_t total) const {
-    std::string dict = "{'descr': '" + descr_ + "', 'fortran_order': False, 'shape': (" + count + ", 3), }";
-    std::size_t len = 10 + dict.size() + 1;
-    const std::size_t want = total ? total : (len + 63) / 64 * 64;
-    dict.append(want - len, ' ');
-    dict.push_back('\n');
-    std::string h = "\x93NUMPY";
-    h.push_back('\x01');
-    h.push_back('\x00');
-    const std::size_t hl = dict.size();
-    h.push_back(static_cast<char>(hl & 0xff));
-    h.push_back(static_cast<char>(hl >> 8));
-    return h + dict;
+    return npy_header(descr_, count + ", 3", total);
   }
   void finish() override {
     if (count_ != kUnknownCount) return;

@@ -260,6 +260,27 @@ void TetReader::map_to_original(std::span<std::uint64_t> labels) const {
   }
 }
 
+namespace {
+// Whole pages inside [p, p + bytes) only: a partial page at either end may hold bytes
+// a caller still reads.
+void release_range(const std::uint8_t* p, std::uint64_t bytes) {
+  const std::uintptr_t page = std::uintptr_t(::sysconf(_SC_PAGESIZE));
+  const std::uintptr_t b = std::uintptr_t(p), e = b + bytes;
+  const std::uintptr_t lo = (b + page - 1) / page * page, hi = e / page * page;
+  if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
+}
+}  // namespace
+
+void TetReader::release_frame_pages(std::uint64_t k) const {
+  const FrameEntry& f = frames_.at(std::size_t(k));
+  release_range(data_ + f.offset, kSectionHeaderSize + std::uint64_t(f.length) + kSectionTrailerSize);
+}
+
+void TetReader::release_point_pages(std::uint64_t first, std::uint64_t n) const {
+  const std::uint64_t size = header_.point_record_bytes();
+  release_range(data_ + points_offset_ + first * size, n * size);
+}
+
 void TetReader::verify_points() const {
   const auto p = point_records();
   if (crc32c(p.data(), p.size()) != get_u32(p.data() + p.size())) {

@@ -63,6 +63,11 @@ class TetReader {
   void verify_points() const;
   // The raw PNTS records (format.md §3.4), for bulk copies.
   std::span<const std::uint8_t> point_records() const;
+  // Hands the mapped pages of frame k, or of the points [first, first + n), back to the
+  // page cache (MADV_DONTNEED on the read-only mapping): a pass over a container larger
+  // than memory then keeps a bounded resident set. Later reads fault them back in.
+  void release_frame_pages(std::uint64_t k) const;
+  void release_point_pages(std::uint64_t first, std::uint64_t n) const;
 
  private:
   [[noreturn]] void fail(std::uint64_t offset, const std::string& problem) const;

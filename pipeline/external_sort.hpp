@@ -234,6 +234,10 @@ class ExternalSorter {
   ExternalSorter& operator=(const ExternalSorter&) = delete;
 
   void set_reducer(Reducer r) { reducer_ = std::move(r); }
+  // Replaces the comparison sort of the runs (e.g. by a radix sort for integer keys);
+  // it must order the records as `Less` does.
+  using RunSort = std::function<void(T* first, std::size_t n)>;
+  void set_run_sort(RunSort s) { run_sort_ = std::move(s); }
 
   void push(const T& r) {
     if (buf_.size() == buf_.capacity()) make_room();
@@ -361,7 +365,8 @@ class ExternalSorter {
   }
 
   void sort_and_reduce(T* data, std::size_t& n) {
-    if (opt_.parallel) parallel_sort(data, data + n, less_);
+    if (run_sort_) run_sort_(data, n);
+    else if (opt_.parallel) parallel_sort(data, data + n, less_);
     else std::sort(data, data + n, less_);
     if (reducer_) n = reducer_(data, n);
   }
@@ -447,6 +452,7 @@ class ExternalSorter {
   ExternalSortOptions opt_;
   Less less_;
   Reducer reducer_;
+  RunSort run_sort_;
   std::size_t max_records_ = 0;
   std::vector<T> buf_;
   std::vector<Run> runs_;

@@ -8,6 +8,8 @@ packages=(
   libboost-iostreams-dev libzstd-dev libspdlog-dev libgtest-dev libcli11-dev nlohmann-json3-dev
   # tests and benchmarks only: reference triangulations and independent mesh readers
   libcgal-dev libgmp-dev libmpfr-dev python3 python3-numpy python3-meshio gmsh libgmsh-dev time
+  # field: the SciPy (Qhull) comparison test, the docs' density picture
+  python3-scipy python3-matplotlib
 )
 
 missing=()

@@ -1,0 +1,256 @@
+#include "pipeline/field.hpp"
+
+#include "core/error.hpp"
+#include "io/npy.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/external_sort.hpp"
+#include "pipeline/field_accumulate.hpp"
+#include "pipeline/field_grid.hpp"
+#include "pipeline/field_output.hpp"
+#include "pipeline/field_window.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+
+namespace tetstream::pipeline {
+
+void FieldOptions::validate() const {
+  if (input.empty()) throw UsageError("field: no input container given");
+  if (output.empty()) throw UsageError("field: no output given (-o PREFIX)");
+  if (!density && !voronoi && !neighbours && !grid_wanted())
+    throw UsageError("field: nothing to compute: give --density dtfe, --voronoi-volume, --neighbours or --grid N");
+  if (grid_wanted() && (grid[0] == 0 || grid[1] == 0 || grid[2] == 0)) throw UsageError("field: --grid sizes must be >= 1");
+  if (grid_wanted() && grid[0] * grid[1] > (std::uint64_t(1) << 40) / std::max<std::uint64_t>(grid[2], 1))
+    throw UsageError("field: --grid has too many points");
+  if (has_box)
+    for (int k = 0; k < 3; ++k)
+      if (!(box[std::size_t(k)] < box[std::size_t(k + 3)]) || !std::isfinite(box[std::size_t(k)]) ||
+          !std::isfinite(box[std::size_t(k + 3)]))
+        throw UsageError("field: --box needs finite xmin < xmax, ymin < ymax, zmin < zmax");
+  if (memory_bytes < (std::uint64_t(64) << 20)) throw UsageError("field: --memory must be at least 64M");
+}
+
+namespace {
+
+std::vector<std::string> split(const std::string& text) {
+  std::vector<std::string> parts;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ',')) parts.push_back(item);
+  return parts;
+}
+
+double parse_double(const std::string& s, const std::string& what) {
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(v))
+    throw UsageError("field: " + what + ": '" + s + "' is not a finite number");
+  return v;
+}
+
+// Memory plan (bytes per item, measured on the structures the passes hold):
+//   per window label: coordinates 24, original index 8, sums 24 (+ density 8 in the
+//     grid pass);
+//   per batch tet: labels 32, contributions 72, with neighbours 6 packed edges of 8
+//     and the radix sort's other buffer;
+// and the external sorts of the outputs their share. The ring is a power of two.
+constexpr std::uint64_t kReserve = std::uint64_t(40) << 20;  // code, decoders, I/O buffers
+std::uint64_t label_bytes(const FieldOptions&) { return 64; }
+std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 96 : 0); }
+
+std::string default_tmpdir(const FieldOptions& o) {
+  if (!o.tmpdir.empty()) return o.tmpdir;
+  if (const char* t = std::getenv("TMPDIR"); t && *t) return t;
+  const std::filesystem::path p = std::filesystem::path(o.output).parent_path();
+  return p.empty() ? "." : p.string();
+}
+
+}  // namespace
+
+std::array<std::uint64_t, 3> parse_grid(const std::string& text) {
+  const std::vector<std::string> parts = split(text);
+  if (parts.size() != 1 && parts.size() != 3) throw UsageError("field: --grid wants N or NX,NY,NZ, not '" + text + "'");
+  std::array<std::uint64_t, 3> g{};
+  for (std::size_t k = 0; k < 3; ++k) {
+    const std::string& s = parts[parts.size() == 1 ? 0 : k];
+    char* end = nullptr;
+    const unsigned long long v = std::strtoull(s.c_str(), &end, 10);
+    if (s.empty() || end != s.c_str() + s.size() || v == 0 || v > (1u << 20) || s[0] == '-')
+      throw UsageError("field: --grid: '" + s + "' is not a size in 1..1048576");
+    g[k] = v;
+  }
+  return g;
+}
+
+std::array<double, 6> parse_box(const std::string& text) {
+  const std::vector<std::string> parts = split(text);
+  if (parts.size() != 6) throw UsageError("field: --box wants xmin,ymin,zmin,xmax,ymax,zmax, not '" + text + "'");
+  std::array<double, 6> b{};
+  for (std::size_t k = 0; k < 6; ++k) b[k] = parse_double(parts[k], "--box");
+  return b;
+}
+
+FieldSummary compute_fields(const FieldOptions& options) {
+  options.validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  const io::TetReader reader(options.input);
+  const io::TetFileHeader& h = reader.header();
+  const std::uint64_t n = reader.point_count();
+  FieldSummary summary;
+  summary.points = n;
+  summary.tets = reader.tet_count();
+  summary.frames = reader.frame_count();
+
+  // Budget caps: window 40%, batch 25%; the output sorts get the rest (split between them).
+  const std::uint64_t usable = options.memory_bytes - kReserve;
+  const std::uint64_t window_bytes = usable / 100 * 40, batch_bytes = usable / 100 * 25;
+  std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
+                                                           std::uint64_t(1) << 32);
+  std::uint64_t max_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
+  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << 19);  // scratch reused, not re-faulted
+  if (options.batch_tets) max_tets = options.batch_tets;
+  if (options.ring_labels) {
+    if (!std::has_single_bit(options.ring_labels)) throw UsageError("field: ring_labels must be a power of two");
+    max_labels = options.ring_labels;
+  }
+  if (options.neighbours && n > (std::uint64_t(1) << 32))
+    throw UsageError("field: --neighbours handles up to 2^32 points");  // edges packed in 64 bits
+  const BatchPlan plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
+  summary.batches = plan.batches.size();
+  summary.window_labels = plan.window_labels;
+  summary.ring_labels = plan.ring_labels;
+  // The output sorts take what the window and the batches leave (at least 20%): the
+  // window is usually far below its cap, and a sort that fits in memory never spills.
+  const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options);
+  const std::uint64_t sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
+  summary.memory_planned = kReserve + held + sort_bytes;
+  spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}",
+               n, summary.tets, summary.frames, summary.batches, plan.window_labels, plan.ring_labels,
+               human_bytes(double(summary.memory_planned)));
+
+  // The mass file is checked (length, format) before any work; its values when read.
+  std::unique_ptr<io::ScalarFileReader> masses;
+  if (!options.mass.empty()) masses = std::make_unique<io::ScalarFileReader>(options.mass, h.input_count ? h.input_count : n);
+  TempDir tmp(default_tmpdir(options), "tetstream-field");
+  const bool grid = options.grid_wanted();
+  const bool need_points = options.density || options.voronoi || (grid && !options.mass.empty());
+  const std::uint64_t sorts = std::uint64_t(need_points) + std::uint64_t(options.neighbours);
+  auto sort_options = [&](const char* name) {
+    ExternalSortOptions so;
+    so.memory_bytes = std::max<std::uint64_t>(sort_bytes / std::max<std::uint64_t>(sorts, 1), 8 << 20);
+    so.dir = tmp.dir();
+    so.name = name;
+    return so;
+  };
+  std::unique_ptr<ExternalSorter<PointRecord, ByOriginal>> points;
+  std::unique_ptr<ExternalSorter<NeighbourRecord, ByPair>> neighbours;
+  if (need_points) points = std::make_unique<ExternalSorter<PointRecord, ByOriginal>>(sort_options("points"));
+  if (options.neighbours) {
+    ExternalSortOptions so = sort_options("neighbours");
+    so.memory_bytes /= 2;  // the radix sort's second buffer takes the other half
+    neighbours = std::make_unique<ExternalSorter<NeighbourRecord, ByPair>>(so);
+    // Original indices are below 2^id_bits and the row marker is all ones: an LSD radix
+    // sort on id_bits + 1 bits of each word (marker folded to the top value) orders
+    // them as ByPair does, several times faster than a comparison sort of 16-byte records.
+    const int bits = std::bit_width(std::max(h.input_count, n)) + 1;
+    auto radix_tmp = std::make_shared<std::vector<NeighbourRecord>>();
+    neighbours->set_run_sort([bits, radix_tmp](NeighbourRecord* d, std::size_t k) {
+      const std::uint64_t top = (std::uint64_t(1) << bits) - 1;
+      radix_sort(d, k, *radix_tmp, bits, [top](const NeighbourRecord& r) { return std::min(r.other, top); });
+      radix_sort(d, k, *radix_tmp, bits, [](const NeighbourRecord& r) { return r.original; });
+      radix_tmp->clear();
+      radix_tmp->shrink_to_fit();
+    });
+  }
+  const std::string rho_path = tmp.path("rho-by-label.f64");
+  std::unique_ptr<BinaryFile> rho_file;
+  if (grid && options.mass.empty()) rho_file = std::make_unique<BinaryFile>(rho_path, "wb");
+
+  Progress progress("field", "tets", summary.tets * (grid ? 2 : 1), options.progress);
+  double volume4 = 0.0;
+  AccumulateSinks sinks;
+  sinks.voronoi = options.voronoi;
+  sinks.point = [&](const FinalPoint& p) {
+    volume4 += p.volume;
+    summary.hull_points += p.hull;
+    if (!p.hull) summary.interior_voronoi += p.voronoi;
+    summary.voronoi_total += p.voronoi;
+    if (points) points->push({p.original, p.label, p.volume, p.voronoi, p.hull ? 1u : 0u});
+    if (rho_file) {
+      const double rho = dtfe_density(1.0, p.volume, p.hull, options.hull);
+      rho_file->write(&rho, sizeof rho, 1);
+    }
+  };
+  if (neighbours) {
+    sinks.edge = [&](std::uint64_t a, std::uint64_t b) {
+      neighbours->push({a, b});
+      neighbours->push({b, a});
+    };
+    // Every point gets a row, even one in no edge (not in a valid container).
+    const auto point = sinks.point;
+    sinks.point = [&, point](const FinalPoint& p) {
+      point(p);
+      neighbours->push({p.original, kRowMarker});
+    };
+  }
+  const AccumulateStats acc = accumulate_fields(reader, plan, sinks, &progress);
+  summary.tet_volume = volume4 / 4.0;
+  summary.far_labels_peak = acc.peak_far;
+
+  if (points) {
+    // With masses, the grid's densities come back to label order through another sort.
+    std::unique_ptr<ExternalSorter<GridDensity, ByLabel>> by_label;
+    std::function<void(std::uint64_t, double)> sink;
+    if (grid && masses) {
+      by_label = std::make_unique<ExternalSorter<GridDensity, ByLabel>>(sort_options("rho"));
+      sink = [&](std::uint64_t label, double rho) { by_label->push({label, rho}); };
+    }
+    write_point_fields(*points, options, n, masses.get(), sink, summary);
+    points.reset();
+    if (by_label) {
+      rho_file = std::make_unique<BinaryFile>(rho_path, "wb");
+      by_label->merge([&](std::span<const GridDensity> batch) {
+        for (const GridDensity& d : batch) rho_file->write(&d.rho, sizeof d.rho, 1);
+      });
+    }
+  } else {
+    summary.total_mass = double(n);
+  }
+  if (neighbours) {
+    write_neighbours(*neighbours, options, n, tmp, summary);
+    neighbours.reset();
+  }
+  if (grid) {
+    rho_file->close();
+    rho_file.reset();
+    GridSpec g;
+    g.n = options.grid;
+    for (std::size_t k = 0; k < 3; ++k) {
+      g.lo[k] = options.has_box ? options.box[k] : h.bbox_min[k];
+      g.hi[k] = options.has_box ? options.box[k + 3] : h.bbox_max[k];
+      if (!(g.hi[k] > g.lo[k])) throw UsageError("field: the points are flat along axis " + std::to_string(k) + ": give --box");
+    }
+    const double ext[3] = {h.bbox_max[0] - h.bbox_min[0], h.bbox_max[1] - h.bbox_min[1], h.bbox_max[2] - h.bbox_min[2]};
+    const int axis = int(std::max_element(ext, ext + 3) - ext);  // the sort axis of `run` (point_sort.cpp)
+    const GridStats gs = sample_grid(reader, plan, g, axis, rho_path, options, window_bytes + batch_bytes / 2,
+                                     tmp.dir(), &progress);
+    summary.grid_points = g.n[0] * g.n[1] * g.n[2];
+    summary.grid_inside = gs.inside;
+    summary.files.push_back({"grid", options.output + ".grid.npy"});
+  }
+  progress.finish();
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return summary;
+}
+
+}  // namespace tetstream::pipeline
