@@ -8,6 +8,8 @@ packages=(
   libboost-iostreams-dev libzstd-dev libspdlog-dev libgtest-dev libcli11-dev nlohmann-json3-dev
   # tests and benchmarks only: reference triangulations and independent mesh readers
   libcgal-dev libgmp-dev libmpfr-dev python3 python3-numpy python3-meshio gmsh libgmsh-dev time
+  # HDF5 input (optional at build time) and the h5py files its tests read
+  libhdf5-dev python3-h5py
 )
 
 missing=()
