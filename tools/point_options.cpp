@@ -19,15 +19,6 @@ std::vector<std::string> split_commas(const std::string& v) {
   }
 }
 
-// Calls io::PointReadOptions::validate()'s checks at parse time, as a CLI error.
-void check(const io::PointReadOptions& options) {
-  try {
-    options.validate();
-  } catch (const Error& e) {
-    throw CLI::ValidationError(std::string(e.what()));
-  }
-}
-
 }  // namespace
 
 void add_point_input_options(CLI::App* app, io::PointReadOptions& options) {
@@ -69,10 +60,10 @@ void add_point_input_options(CLI::App* app, io::PointReadOptions& options) {
              std::uint64_t c = 0;
              const auto r = std::from_chars(f.data(), f.data() + f.size(), c);
              if (f.empty() || r.ec != std::errc() || r.ptr != f.data() + f.size())
-               throw CLI::ValidationError("--columns", "'" + f + "' is not a column number (1, 2, ...)");
+               throw UsageError("--columns: '" + f + "' is not a column number (1, 2, ...)");
              options.columns.push_back(c);
            }
-           check(options);
+           options.validate();  // a UsageError: one line, exit 2
          },
          "Text and npy input: the columns of x,y,z, counted from 1 (e.g. 2,3,4 skips an id column);\n"
          "default: the input has exactly three")
@@ -81,7 +72,7 @@ void add_point_input_options(CLI::App* app, io::PointReadOptions& options) {
          "--properties",
          [&options](const std::string& v) {
            options.properties = split_commas(v);
-           check(options);
+           options.validate();  // a UsageError: one line, exit 2
          },
          "PLY input: the vertex properties of x,y,z (default x,y,z, else X,Y,Z)")
       ->group(group);
