@@ -130,6 +130,14 @@ class BinaryPointReader final : public PointReader {
     if (n == 0 && points_read_ == 0) {
       throw InputError::at_byte(source_name_, src_->offset(), "no points");
     }
+    if (count_ && points_read_ == *count_ && !tail_checked_) {
+      tail_checked_ = true;
+      if (layout_.tail == BinaryLayout::Tail::kNothing) {
+        expect_end(*src_, std::to_string(*count_) + " " + layout_.records + " the header declares");
+      } else if (layout_.tail == BinaryLayout::Tail::kChecked) {
+        layout_.after(*src_);
+      }
+    }
     return n;
   }
 
@@ -200,14 +208,29 @@ class BinaryPointReader final : public PointReader {
   BinaryLayout layout_;
   bool promised_ = false;
   bool swap_ = false, same_type_ = false, direct_ = false;
+  bool tail_checked_ = false;
   DecodeFn decode_ = nullptr;
 };
 
 }  // namespace
 
+void expect_end(ByteSource& src, const std::string& what_ended) {
+  if (src.at_end()) return;
+  const std::uint64_t at = src.offset();
+  std::string amount = "trailing data";
+  if (src.size()) amount = std::to_string(*src.size() - at) + " bytes of trailing data";
+  throw InputError::at_byte(src.name(), at, amount + " after the " + what_ended + " (a wrong count in the header?)");
+}
+
 std::unique_ptr<PointReader> make_binary_reader(std::unique_ptr<ByteSource> src, BinaryLayout layout,
                                                 std::optional<std::uint64_t> count, bool promised,
                                                 std::string format_name) {
+  if (layout.stride == 0 || layout.stride > PointReadOptions::kMaxRecordBytes) {
+    throw InputError::at_byte(src->name(), layout.data_start,
+                              "a " + layout.record + " of " + std::to_string(layout.stride) +
+                                  " bytes: more than the largest record we read (" +
+                                  std::to_string(PointReadOptions::kMaxRecordBytes) + " bytes)");
+  }
   if (!promised) return std::make_unique<BinaryPointReader>(std::move(src), std::move(layout), count, false, std::move(format_name));
   // A regular file must hold every record the header promises: check before any work.
   if (count && src->size()) {
@@ -221,8 +244,24 @@ std::unique_ptr<PointReader> make_binary_reader(std::unique_ptr<ByteSource> src,
               std::to_string(have / layout.stride) + " " + layout.records + ")");
     }
   }
+  std::uint64_t bytes = 0;  // (on stdin the count is not checked against a size above)
+  if (count && (!checked_mul(*count, layout.stride, bytes) || !checked_add(bytes, layout.data_start, bytes))) {
+    throw InputError::at_byte(src->name(), layout.data_start,
+                              "the header declares " + std::to_string(*count) + " " + layout.records + " of " +
+                                  std::to_string(layout.stride) + " bytes: more than any file can hold");
+  }
   if (count && *count == 0) {
     throw InputError::at_byte(src->name(), layout.data_start, "the header declares 0 " + layout.records + ": no points");
+  }
+  // Nothing may follow the records: on a regular file, refuse before any work.
+  if (count && src->size() && layout.tail == BinaryLayout::Tail::kNothing) {
+    const std::uint64_t end = layout.data_start + *count * layout.stride;  // <= size: checked above
+    if (*src->size() > end) {
+      throw InputError::at_byte(src->name(), end,
+                                std::to_string(*src->size() - end) + " bytes of trailing data after the " +
+                                    std::to_string(*count) + " " + layout.records +
+                                    " the header declares (a wrong count in the header?)");
+    }
   }
   return std::make_unique<BinaryPointReader>(std::move(src), std::move(layout), count, true, std::move(format_name));
 }
@@ -233,7 +272,8 @@ std::unique_ptr<PointReader> open_raw(std::unique_ptr<ByteSource> src, ScalarTyp
   BinaryLayout layout;
   layout.data_start = 0;
   layout.stride = options.stride ? options.stride : 3 * w;
-  if (options.offset + 3 * w > layout.stride) {
+  std::uint64_t end = 0;
+  if (!checked_add(options.offset, 3 * w, end) || end > layout.stride) {
     throw UsageError("--offset " + std::to_string(options.offset) + " + 3 coordinates of " +
                      std::to_string(w) + " bytes do not fit in a record of --stride " +
                      std::to_string(layout.stride) + " bytes");

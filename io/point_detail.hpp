@@ -7,11 +7,18 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <memory>
 #include <string>
 #include <string_view>
 
 namespace tetstream::io::detail {
+
+// Overflow-checked arithmetic for every size that comes from a header or an option:
+// one rule in one place. Each returns false (and leaves r unspecified) when the exact
+// result does not fit in 64 bits.
+inline bool checked_add(std::uint64_t a, std::uint64_t b, std::uint64_t& r) { return !__builtin_add_overflow(a, b, &r); }
+inline bool checked_mul(std::uint64_t a, std::uint64_t b, std::uint64_t& r) { return !__builtin_mul_overflow(a, b, &r); }
 
 // Scalar types a binary record may hold (PLY property types; raw and npy use the floats).
 enum class Scalar : std::uint8_t { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64 };
@@ -29,7 +36,17 @@ struct BinaryLayout {
   bool big_endian = false;
   std::string record = "record";    // what error messages call one record ("vertex", "row")
   std::string records = "records";  // and several
+  // What may follow the last record. kNothing: the input must end there (checked before
+  // reading on regular files, after the last record on streams). kChecked: `after` runs
+  // once the last record has been consumed and judges the rest (PLY elements after
+  // vertex, LAS extended records). kAnything: not looked at (raw: no count).
+  enum class Tail { kAnything, kNothing, kChecked } tail = Tail::kAnything;
+  std::function<void(ByteSource&)> after;
 };
+
+// Throws "FILE: byte OFFSET: N bytes of trailing data after the K RECORDS the header
+// declares" unless `src` is at its end.
+void expect_end(ByteSource& src, const std::string& what_ended);
 
 // Reads fixed-size records (raw, PLY binary, npy). `count` is the number of records the
 // header promises (nullopt: until the end of the input, whole records only); when
@@ -40,9 +57,16 @@ std::unique_ptr<PointReader> make_binary_reader(std::unique_ptr<ByteSource> src,
 
 std::unique_ptr<PointReader> open_raw(std::unique_ptr<ByteSource> src, ScalarType type,
                                       const PointReadOptions& options);
-std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src);
-std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src);
-std::unique_ptr<PointReader> open_text(std::unique_ptr<ByteSource> src);
+std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src, const PointReadOptions& options);
+std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src, const PointReadOptions& options);
+std::unique_ptr<PointReader> open_text(std::unique_ptr<ByteSource> src, const PointReadOptions& options);
+std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src);
+// HDF5 reads by path (the library does its own I/O). `one_of_many`: the file is one of
+// several of a snapshot, so a dataset whose group it lacks holds 0 points here.
+std::unique_ptr<PointReader> open_hdf5(const std::string& path, const PointReadOptions& options, bool one_of_many);
+// Several files as one input; each opened by `open_one` when its turn comes.
+using OpenOne = std::function<std::unique_ptr<PointReader>(const std::string& path)>;
+std::unique_ptr<PointReader> open_concat(std::vector<std::string> paths, OpenOne open_one);
 
 // Complete lines of a ByteSource, without the '\n' (and a '\r' before it). A line is
 // valid until the next call. Lines longer than kMaxLine are an InputError.
@@ -58,9 +82,26 @@ class LineSource {
   std::uint64_t line_ = 0;
 };
 
-// Splits a text line into numbers separated by blanks, or by a comma or semicolon with
-// optional blanks around it; '#' starts a comment. Stores up to `cap` values and returns
-// how many fields the line has, or -1 when a field is not a number (`bad` is set to it).
+// The fields of a text line: separated by blanks, or by a comma or semicolon with
+// optional blanks around it; '#' starts a comment; a trailing separator is allowed.
+class FieldSplitter {
+ public:
+  explicit FieldSplitter(std::string_view line) : p_(line.data()), end_(line.data() + line.size()) {}
+  bool next(std::string_view& field);  // false after the last field
+
+ private:
+  const char* p_;
+  const char* end_;
+  bool first_ = true;
+};
+
+// Parses a whole field as a double (std::from_chars; a leading '+' allowed; overflow
+// gives +-inf, underflow 0). False when the field is not exactly one number.
+bool parse_double(std::string_view field, double& v);
+
+// Splits a text line into numbers (FieldSplitter's rules). Stores up to `cap` values and
+// returns how many fields the line has, or -1 when a field is not a number (`bad` is set
+// to it).
 int parse_numbers(std::string_view line, double* out, int cap, std::string_view& bad);
 
 // Throws "FILE: byte OFFSET: non-finite coordinate" (or line) if any of xyz[0..3n) is NaN

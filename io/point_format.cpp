@@ -15,6 +15,8 @@ const char* to_string(PointFormat f) {
     case PointFormat::kPly: return "ply";
     case PointFormat::kNpy: return "npy";
     case PointFormat::kText: return "text";
+    case PointFormat::kLas: return "las";
+    case PointFormat::kHdf5: return "hdf5";
   }
   return "?";
 }
@@ -40,9 +42,11 @@ void parse_format_name(std::string_view name, PointFormat& format, ScalarType& t
     format = PointFormat::kText;
     return;
   }
+  if (name == "las") { format = PointFormat::kLas; return; }
+  if (name == "hdf5" || name == "h5") { format = PointFormat::kHdf5; return; }
   if (name == "auto") { format = PointFormat::kAuto; return; }
   throw UsageError("unknown point format '" + std::string(name) +
-                   "' (expected raw, f32, f64, ply, npy or text)");
+                   "' (expected raw, f32, f64, ply, npy, text, las or hdf5)");
 }
 
 ByteOrder parse_byte_order(std::string_view name) {
@@ -63,6 +67,8 @@ FormatGuess format_from_extension(std::string_view path) {
   if (ext == "npy") return {PointFormat::kNpy, ScalarType::kAuto};
   if (ext == "txt" || ext == "csv" || ext == "xyz" || ext == "pts" || ext == "asc")
     return {PointFormat::kText, ScalarType::kAuto};
+  if (ext == "las" || ext == "laz") return {PointFormat::kLas, ScalarType::kAuto};
+  if (ext == "hdf5" || ext == "h5" || ext == "hdf") return {PointFormat::kHdf5, ScalarType::kAuto};
   return {};
 }
 
@@ -70,6 +76,8 @@ PointFormat sniff_format(const char* data, std::size_t size) {
   if (size >= 4 && std::memcmp(data, "ply", 3) == 0 && (data[3] == '\n' || data[3] == '\r'))
     return PointFormat::kPly;
   if (size >= 6 && std::memcmp(data, "\x93NUMPY", 6) == 0) return PointFormat::kNpy;
+  if (size >= 4 && std::memcmp(data, "LASF", 4) == 0) return PointFormat::kLas;
+  if (size >= 8 && std::memcmp(data, "\x89HDF\r\n\x1a\n", 8) == 0) return PointFormat::kHdf5;
   if (size == 0) return PointFormat::kAuto;
   // Text: printable ASCII and whitespace only in the prefix we have.
   const std::size_t n = std::min<std::size_t>(size, 4096);

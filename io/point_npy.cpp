@@ -1,5 +1,6 @@
 // NumPy .npy, format versions 1, 2 and 3: a float32 or float64 array of shape (N, 3)
-// in C order, either byte order.
+// in C order, either byte order; or (N, C), C >= 3, with three columns chosen by
+// --columns (1-based). Nothing may follow the array.
 //   "\x93NUMPY" major minor  header_len (uint16 LE for v1, uint32 LE for v2/v3)
 //   header: a Python dict literal {'descr': '<f8', 'fortran_order': False, 'shape': (N, 3), }
 //   padded with spaces and a '\n' so the data starts on a 64-byte boundary.
@@ -43,7 +44,7 @@ bool dict_value(std::string_view header, std::string_view key, std::string_view&
 
 }  // namespace
 
-std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src) {
+std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src, const PointReadOptions& options) {
   const std::string& file = src->name();
   if (src->ensure(10) == 0) throw InputError::at_byte(file, 0, "empty file: no points");
   if (src->available() < 10 || std::memcmp(src->data(), "\x93NUMPY", 6) != 0) {
@@ -117,20 +118,35 @@ std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src) {
       while (i < s.size() && s[i] == 'L') ++i;  // Python 2 longs
     }
   }
-  if (dims.size() != 2 || dims[1] != 3) throw bad("shape " + std::string(shape) + " is not (N, 3)");
+  const std::vector<std::uint64_t>& columns = options.columns;
+  if (dims.size() != 2 || (columns.empty() && dims[1] != 3)) {
+    throw bad("shape " + std::string(shape) + " is not (N, 3)" +
+              (dims.size() == 2 && dims[1] > 3 ? " (choose three columns with --columns)" : ""));
+  }
+  for (std::uint64_t c : columns) {
+    if (c > dims[1]) {
+      throw UsageError("--columns " + std::to_string(c) + ": " + file + " has " + std::to_string(dims[1]) +
+                       " columns (shape " + std::string(shape) + ")");
+    }
+  }
 
   BinaryLayout layout;
   const std::uint64_t w = scalar_size(type);
   layout.data_start = total;
-  layout.stride = 3 * w;
+  if (!checked_mul(dims[1], w, layout.stride)) throw bad("row size of shape " + std::string(shape) + " overflows");
   for (int c = 0; c < 3; ++c) {
-    layout.offset[c] = c * w;
+    layout.offset[c] = (columns.empty() ? std::uint64_t(c) : columns[c] - 1) * w;
     layout.type[c] = type;
   }
+  layout.tail = BinaryLayout::Tail::kNothing;  // the format has nothing after the array
   layout.big_endian = big;
   layout.record = "row";
   layout.records = "rows";
-  return make_binary_reader(std::move(src), layout, dims[0], /*promised=*/true, "npy " + std::string(dt));
+  std::string name = "npy " + std::string(dt);
+  if (!columns.empty()) {
+    name += " columns " + std::to_string(columns[0]) + "," + std::to_string(columns[1]) + "," + std::to_string(columns[2]);
+  }
+  return make_binary_reader(std::move(src), layout, dims[0], /*promised=*/true, std::move(name));
 }
 
 }  // namespace tetstream::io::detail

@@ -1,6 +1,7 @@
-// PLY: the `vertex` element's x, y, z, any numeric property type, binary (either byte
-// order) or ASCII. Other properties of vertex are skipped, and so are other elements
-// before it (list properties included) and everything after it.
+// PLY: the `vertex` element's x, y, z (or X, Y, Z, or the --properties named), any
+// numeric property type, binary (either byte order) or ASCII. Other properties of vertex
+// are skipped, and so are other elements before and after it (list properties
+// included); after the last element the file must end.
 #include "io/point_detail.hpp"
 
 #include <algorithm>
@@ -98,10 +99,16 @@ void skip_exactly(ByteSource& src, std::uint64_t n, const std::string& what) {
   }
 }
 
-// Skips a binary element that precedes vertex.
+// Skips a binary element (one before vertex, or after it when checking the tail).
 void skip_binary_element(ByteSource& src, const PlyElement& e, bool big_endian) {
   if (!e.has_list()) {
-    skip_exactly(src, e.count * e.record_bytes(), "element '" + e.name + "'");
+    std::uint64_t bytes = 0;
+    if (!checked_mul(e.count, e.record_bytes(), bytes)) {
+      throw InputError::at_byte(src.name(), src.offset(),
+                                "element '" + e.name + "': " + std::to_string(e.count) + " records of " +
+                                    std::to_string(e.record_bytes()) + " bytes: more than any file can hold");
+    }
+    skip_exactly(src, bytes, "element '" + e.name + "'");
     return;
   }
   for (std::uint64_t r = 0; r < e.count; ++r) {
@@ -116,11 +123,43 @@ void skip_binary_element(ByteSource& src, const PlyElement& e, bool big_endian) 
   }
 }
 
+// The vertex properties that hold x, y, z: the names given (--properties), else x, y, z,
+// else X, Y, Z (LAS-derived clouds). Throws naming what the element does have.
+void find_coordinates(const std::string& file, const PlyElement& vertex, const std::vector<std::string>& wanted,
+                      int index[3]) {
+  for (const auto& p : vertex.props) {
+    if (p.is_list) {
+      throw InputError::at_line(file, vertex.header_line,
+                                "vertex element has a list property '" + p.name + "': not supported");
+    }
+  }
+  auto find = [&](const std::string& name) {
+    for (std::size_t k = 0; k < vertex.props.size(); ++k)
+      if (vertex.props[k].name == name) return int(k);
+    return -1;
+  };
+  std::vector<std::string> names = wanted;
+  if (names.empty()) {
+    names = {"x", "y", "z"};
+    if (find("x") < 0 && find("y") < 0 && find("z") < 0 && find("X") >= 0) names = {"X", "Y", "Z"};
+  }
+  for (int c = 0; c < 3; ++c) {
+    index[c] = find(names[c]);
+    if (index[c] >= 0) continue;
+    std::string have;
+    for (const auto& p : vertex.props) have += (have.empty() ? "" : ", ") + p.name;
+    throw InputError::at_line(file, vertex.header_line,
+                              "vertex element has no '" + names[c] + "' property (it has: " + have +
+                                  "; choose with --properties)");
+  }
+}
+
 class PlyAsciiReader final : public PointReader {
  public:
+  // `after_lines`: the records (one non-blank line each) of the elements after vertex.
   PlyAsciiReader(std::unique_ptr<ByteSource> src, std::unique_ptr<LineSource> lines, std::uint64_t count,
-                 std::size_t nprops, const int index[3])
-      : src_(std::move(src)), lines_(std::move(lines)), nprops_(nprops) {
+                 std::size_t nprops, const int index[3], std::uint64_t after_lines)
+      : src_(std::move(src)), lines_(std::move(lines)), nprops_(nprops), after_lines_(after_lines) {
     count_ = count;
     format_name_ = "ply ascii";
     source_name_ = src_->name();
@@ -159,6 +198,10 @@ class PlyAsciiReader final : public PointReader {
       line_of_[n++] = ln;
     }
     points_read_ += n;
+    if (points_read_ == *count_ && !tail_checked_) {
+      tail_checked_ = true;
+      check_tail();
+    }
     return n;
   }
 
@@ -170,9 +213,29 @@ class PlyAsciiReader final : public PointReader {
   }
 
  private:
+  // After the last vertex: the records of the later elements, then only blank lines.
+  void check_tail() {
+    std::string_view line;
+    for (std::uint64_t r = 0; r < after_lines_;) {
+      if (!lines_->next(line)) {
+        throw InputError::at_line(source_name_, lines_->line_number() + 1,
+                                  "truncated: input ends inside the elements after vertex");
+      }
+      if (line.find_first_not_of(" \t") != std::string_view::npos) ++r;
+    }
+    while (lines_->next(line)) {
+      if (line.find_first_not_of(" \t") != std::string_view::npos) {
+        throw InputError::at_line(source_name_, lines_->line_number(),
+                                  "trailing data after the last element the header declares (a wrong count in the header?)");
+      }
+    }
+  }
+
   std::unique_ptr<ByteSource> src_;
   std::unique_ptr<LineSource> lines_;
   std::size_t nprops_;
+  std::uint64_t after_lines_ = 0;
+  bool tail_checked_ = false;
   int index_[3];
   std::vector<double> values_;
   std::uint64_t chunk_first_ = 0;
@@ -181,7 +244,7 @@ class PlyAsciiReader final : public PointReader {
 
 }  // namespace
 
-std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src) {
+std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src, const PointReadOptions& options) {
   const std::string& file = src->name();
   if (src->ensure(4) < 4 || std::memcmp(src->data(), "ply", 3) != 0 ||
       (src->data()[3] != '\n' && src->data()[3] != '\r')) {
@@ -253,22 +316,8 @@ std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src) {
     if (elements[i].name == "vertex") { vi = i; break; }
   if (vi == elements.size()) throw InputError::at_line(file, header_end_line, "PLY header has no 'vertex' element");
   const PlyElement& vertex = elements[vi];
-  int index[3] = {-1, -1, -1};
-  for (std::size_t k = 0; k < vertex.props.size(); ++k) {
-    const auto& p = vertex.props[k];
-    for (int c = 0; c < 3; ++c) {
-      if (p.name == std::string(1, "xyz"[c])) index[c] = int(k);
-    }
-    if (p.is_list) {
-      throw InputError::at_line(file, vertex.header_line,
-                                "vertex element has a list property '" + p.name + "': not supported");
-    }
-  }
-  for (int c = 0; c < 3; ++c) {
-    if (index[c] < 0)
-      throw InputError::at_line(file, vertex.header_line,
-                                std::string("vertex element has no '") + "xyz"[c] + "' property");
-  }
+  int index[3];
+  find_coordinates(file, vertex, options.properties, index);
   if (vertex.count == 0) {
     throw InputError::at_line(file, vertex.header_line, "the header declares 0 vertices: no points");
   }
@@ -284,8 +333,13 @@ std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src) {
         if (line.find_first_not_of(" \t") != std::string_view::npos) ++r;
       }
     }
+    std::uint64_t after_lines = 0;
+    for (std::size_t i = vi + 1; i < elements.size(); ++i) {
+      if (!checked_add(after_lines, elements[i].count, after_lines))
+        throw InputError::at_line(file, elements[i].header_line, "element counts overflow");
+    }
     return std::make_unique<PlyAsciiReader>(std::move(src), std::move(lines), vertex.count,
-                                            vertex.props.size(), index);
+                                            vertex.props.size(), index, after_lines);
   }
 
   const bool big = encoding == PlyEncoding::kBinaryBig;
@@ -306,6 +360,16 @@ std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src) {
   layout.big_endian = big;
   layout.record = "vertex";
   layout.records = "vertices";
+  if (vi + 1 == elements.size()) {
+    layout.tail = BinaryLayout::Tail::kNothing;
+  } else {
+    layout.tail = BinaryLayout::Tail::kChecked;
+    std::vector<PlyElement> later(elements.begin() + std::ptrdiff_t(vi) + 1, elements.end());
+    layout.after = [later = std::move(later), big](ByteSource& s) {
+      for (const PlyElement& e : later) skip_binary_element(s, e, big);
+      expect_end(s, "last element the header declares");
+    };
+  }
   std::string name = big ? "ply binary_big_endian" : "ply binary_little_endian";
   lines.reset();
   return make_binary_reader(std::move(src), layout, vertex.count, /*promised=*/true, std::move(name));

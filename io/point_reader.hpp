@@ -1,6 +1,7 @@
 #pragma once
 // Streaming point readers: raw float32/float64 records, PLY (binary either endianness,
-// ASCII), NumPy .npy and text. The pipeline pulls chunks:
+// ASCII), NumPy .npy, text, LAS 1.0-1.4 and (when built with it) HDF5 datasets; several
+// files read one after another as one input. The pipeline pulls chunks:
 //
 //   auto reader = io::open_points("cloud.ply", options);
 //   std::vector<double> xyz(3 * kChunk);
@@ -18,6 +19,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace tetstream::io {
 
@@ -28,9 +30,24 @@ struct PointReadOptions {
   std::uint64_t offset = 0;                 // raw only: byte offset of x within a record
   ByteOrder byte_order = ByteOrder::kLittle;  // raw only (PLY and npy say it in the header)
   std::size_t block_bytes = std::size_t(8) << 20;  // read(2) block size
+  // Further files of the same input, read after the first one in this order: the
+  // points of all of them are one point set, indexed across the files (file-major).
+  std::vector<std::string> more_inputs;
+  std::vector<std::string> datasets;    // HDF5: the (N, 3) datasets to read, in order
+  std::vector<std::uint64_t> columns;   // text, npy: 1-based columns of x, y, z; empty: the only three
+  std::vector<std::string> properties;  // PLY: vertex properties of x, y, z; empty: x,y,z, else X,Y,Z
 
-  // Throws UsageError for options that contradict each other (offset + 3 scalars > stride).
+  // The largest --stride (and any binary record) we accept: one record must fit the
+  // read buffer, so a larger one could only be an error.
+  static constexpr std::uint64_t kMaxRecordBytes = std::uint64_t(1) << 20;
+
+  // Throws UsageError for options that contradict each other or are out of range
+  // (offset + 3 scalars > stride, computed without wrapping; columns not three distinct
+  // positive numbers; ...).
   void validate() const;
+  // The options that change which points are read, as one canonical line (for a job's
+  // identity): format, type, stride, offset, byte order, files, datasets, columns, properties.
+  std::string identity() const;
 };
 
 class PointReader {
@@ -59,9 +76,14 @@ class PointReader {
   // read() (older ones give "point N"). For errors the pipeline finds later (a
   // duplicate, a degenerate input), as one line in the same style as the reader's own.
   virtual std::string location(std::uint64_t index) const = 0;
+  // The file point `index` came from (several files: the one that holds it).
+  virtual std::string source_of(std::uint64_t /*index*/) const { return source_name_; }
   InputError error_at(std::uint64_t index, const std::string& problem) const {
-    return InputError(source_name_ + ": " + location(index) + ": " + problem);
+    return InputError(source_of(index) + ": " + location(index) + ": " + problem);
   }
+  // Facts about the input worth showing beside the count ("scale" -> "0.01 0.01 0.01" for
+  // LAS), as label and value; complete once the input has been read to its end.
+  virtual std::vector<std::pair<std::string, std::string>> details() const { return {}; }
 
  protected:
   std::optional<std::uint64_t> count_;
@@ -69,10 +91,29 @@ class PointReader {
   std::uint64_t points_read_ = 0;
 };
 
-// Opens `path` ("-" for stdin) with the format from options.format, else from the
-// extension, else from the first bytes (PLY and npy magic, text); raw input needs
-// the extension or --format. Reads and checks the header. Throws IoError when the file
-// cannot be opened, UsageError when the format cannot be told, InputError on a bad header.
+// Opens `path` ("-" for stdin), then options.more_inputs after it, with the format from
+// options.format, else from each file's extension, else from its first bytes (PLY, npy,
+// LAS and HDF5 magic, text); raw input needs the extension or --format. Reads and checks
+// the headers. Throws IoError when a file cannot be opened, UsageError when the format
+// cannot be told or an option does not apply to it, InputError on a bad header.
 std::unique_ptr<PointReader> open_points(const std::string& path, const PointReadOptions& options = {});
+
+// The files named by command-line input arguments: each argument that is not an
+// existing file and holds a glob character (* ? [) is expanded, its matches in natural
+// order (runs of digits compared as numbers: snap.2 before snap.10); other arguments
+// are kept as given. Throws IoError when a pattern matches nothing, UsageError when "-"
+// (stdin) is one of several inputs.
+std::vector<std::string> expand_inputs(const std::vector<std::string>& args);
+
+// An HDF5 dataset that holds an (N, 3) array of floats: a candidate for --dataset.
+struct Hdf5PointDataset {
+  std::string path;  // "/PartType1/Coordinates"
+  std::uint64_t rows = 0;
+  std::string type;  // "float32", "float64"
+};
+// The (N, 3) float datasets of an HDF5 file, in name order. Throws UsageError when this
+// build has no HDF5, InputError when the file is not HDF5.
+std::vector<Hdf5PointDataset> list_hdf5_point_datasets(const std::string& path);
+bool hdf5_available();  // whether this build reads HDF5
 
 }  // namespace tetstream::io

@@ -1,8 +1,10 @@
 // Text points: one point per line, "x y z" or "x,y,z" (blanks, commas or semicolons),
-// '#' comments, blank lines, and an optional header line (a first data line whose
-// first field is not a number). Numbers are parsed with std::from_chars.
+// '#' comments, blank lines, and an optional header line (the first line with fields,
+// if every field is a name: see is_header_line). With --columns, three chosen fields
+// of a wider table. Numbers are parsed with std::from_chars.
 #include "io/point_detail.hpp"
 
+#include <cctype>
 #include <charconv>
 #include <vector>
 
@@ -42,73 +44,96 @@ bool LineSource::next(std::string_view& line) {
 
 namespace {
 inline bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+inline bool ends_field(char c) { return is_blank(c) || c == ',' || c == ';' || c == '#'; }
 }  // namespace
 
+bool FieldSplitter::next(std::string_view& field) {
+  while (p_ < end_ && is_blank(*p_)) ++p_;
+  if (p_ == end_ || *p_ == '#') return false;
+  if (!first_ && (*p_ == ',' || *p_ == ';')) {  // one separator between fields; a trailing one is fine
+    ++p_;
+    while (p_ < end_ && is_blank(*p_)) ++p_;
+    if (p_ == end_ || *p_ == '#') return false;
+  }
+  first_ = false;
+  const char* start = p_;
+  // A field runs to a blank, a separator, a comment or the end of the line; a lone
+  // separator where a field should start is a (bad) field of its own.
+  if (*p_ == ',' || *p_ == ';') ++p_;
+  while (p_ < end_ && !ends_field(*p_)) ++p_;
+  field = std::string_view(start, p_ - start);
+  return true;
+}
+
+bool parse_double(std::string_view field, double& v) {
+  const char* p = field.data();
+  const char* end = p + field.size();
+  if (p < end && *p == '+') ++p;  // from_chars rejects a leading '+'
+  if (p == end || *p == '+' || (*p == '-' && p != field.data())) return false;  // "+-1", "++1"
+  const auto [ptr, ec] = std::from_chars(p, end, v);
+  if (ptr != end || ptr == p) return false;
+  if (ec == std::errc::result_out_of_range) {
+    // from_chars leaves v unset on overflow: 1e999 is as unusable as inf, 1e-999 is 0.
+    v = std::strtod(std::string(field).c_str(), nullptr);
+  }
+  return true;
+}
+
 int parse_numbers(std::string_view line, double* out, int cap, std::string_view& bad) {
-  const char* p = line.data();
-  const char* end = p + line.size();
+  FieldSplitter fields(line);
+  std::string_view f;
   int n = 0;
-  for (;;) {
-    while (p < end && is_blank(*p)) ++p;
-    if (p == end || *p == '#') return n;
-    if (n > 0 && (*p == ',' || *p == ';')) {  // one separator between fields; a trailing one is fine
-      ++p;
-      while (p < end && is_blank(*p)) ++p;
-      if (p == end || *p == '#') return n;
-    }
-    const char* start = p;
-    if (*p == '+') ++p;  // from_chars rejects a leading '+'
+  while (fields.next(f)) {
     double v;
-    const auto [ptr, ec] = std::from_chars(p, end, v);
-    // A field ends at a blank, a separator, a comment or the end of the line.
-    if (ptr == p || (ptr < end && !is_blank(*ptr) && *ptr != ',' && *ptr != ';' && *ptr != '#')) {
-      const char* stop = start;
-      while (stop < end && !is_blank(*stop) && *stop != ',' && *stop != ';') ++stop;
-      bad = std::string_view(start, stop - start);
+    if (!parse_double(f, v)) {
+      bad = f;
       return -1;
-    }
-    if (ec == std::errc::result_out_of_range) {
-      // from_chars leaves v unset on overflow: 1e999 is as unusable as inf, 1e-999 is 0.
-      bad = std::string_view(start, ptr - start);
-      v = std::strtod(std::string(bad).c_str(), nullptr);
     }
     if (n < cap) out[n] = v;
     ++n;
-    p = ptr;
   }
+  return n;
 }
 
 namespace {
 
+// The header rule: a line is a header only if every field is a name, that is starts
+// with a letter or '_' (after an optional double quote). "x y z", "X,Y,Z", "\"x\";\"y\""
+// are headers; "1e5x 2 3", "--1 2 3", "x 2 z" are not (and are errors).
+bool is_header_line(std::string_view line) {
+  FieldSplitter fields(line);
+  std::string_view f;
+  int n = 0;
+  while (fields.next(f)) {
+    if (!f.empty() && f.front() == '"') f.remove_prefix(1);
+    if (f.empty() || !(std::isalpha(static_cast<unsigned char>(f.front())) || f.front() == '_')) return false;
+    ++n;
+  }
+  return n > 0;
+}
+
 class TextPointReader final : public PointReader {
  public:
-  explicit TextPointReader(std::unique_ptr<ByteSource> src) : src_(std::move(src)), lines_(*src_) {
+  TextPointReader(std::unique_ptr<ByteSource> src, std::vector<std::uint64_t> columns)
+      : src_(std::move(src)), lines_(*src_), columns_(std::move(columns)) {
     format_name_ = "text";
     source_name_ = src_->name();
+    if (!columns_.empty()) {
+      format_name_ += " columns " + std::to_string(columns_[0]) + "," + std::to_string(columns_[1]) + "," +
+                      std::to_string(columns_[2]);
+    }
   }
 
   std::size_t read(double* xyz, std::size_t max_points) override {
     if (line_of_.size() < max_points) line_of_.resize(max_points);
     chunk_first_ = points_read_;
     std::size_t n = 0;
-    std::string_view line, bad;
+    std::string_view line;
     while (n < max_points && lines_.next(line)) {
-      double v[3];
-      const int fields = parse_numbers(line, v, 3, bad);
       const std::uint64_t ln = lines_.line_number();
-      if (fields == 0) continue;  // blank or comment
-      if (fields < 0) {
-        if (!seen_data_ && !bad.empty() && bad.data() == first_field(line)) {
-          seen_data_ = true;  // a header line: names, not numbers
-          continue;
-        }
-        throw InputError::at_line(source_name_, ln, "not a number: '" + std::string(bad.substr(0, 40)) + "'");
-      }
-      seen_data_ = true;
-      if (fields != 3) {
-        throw InputError::at_line(source_name_, ln,
-                                  "expected 3 coordinates (x y z), found " + std::to_string(fields));
-      }
+      double v[3];
+      const int fields = columns_.empty() ? parse_xyz(line, ln, v) : parse_columns(line, ln, v);
+      if (fields == 0) continue;  // blank, comment or header
       for (int c = 0; c < 3; ++c) {
         if (!std::isfinite(v[c])) {
           throw InputError::at_line(source_name_, ln,
@@ -136,14 +161,68 @@ class TextPointReader final : public PointReader {
   }
 
  private:
-  static const char* first_field(std::string_view line) {
-    const char* p = line.data();
-    while (p < line.data() + line.size() && is_blank(*p)) ++p;
-    return p;
+  // Returns 0 for a line with no data (blank, comment, the header), else the number of
+  // fields, and v = x, y, z. Throws on anything else.
+  int skip_or_throw(std::string_view line, std::uint64_t ln, std::string_view bad) {
+    if (!seen_data_ && is_header_line(line)) {  // the first line with fields may name the columns
+      seen_data_ = true;
+      return 0;
+    }
+    throw InputError::at_line(source_name_, ln, "not a number: '" + std::string(bad.substr(0, 40)) + "'");
+  }
+
+  int parse_xyz(std::string_view line, std::uint64_t ln, double* v) {
+    std::string_view bad;
+    const int fields = parse_numbers(line, v, 3, bad);
+    if (fields == 0) return 0;
+    if (fields < 0) return skip_or_throw(line, ln, bad);
+    seen_data_ = true;
+    if (fields != 3) {
+      throw InputError::at_line(source_name_, ln,
+                                "expected 3 coordinates (x y z), found " + std::to_string(fields) +
+                                    " fields (choose three with --columns)");
+    }
+    return fields;
+  }
+
+  // --columns: the chosen fields must be numbers; the others may be anything, but every
+  // data line has as many fields as the first (a table, not ragged lines).
+  int parse_columns(std::string_view line, std::uint64_t ln, double* v) {
+    FieldSplitter split(line);
+    std::string_view f;
+    std::uint64_t k = 0;
+    int found = 0;
+    while (split.next(f)) {
+      ++k;
+      for (int c = 0; c < 3; ++c) {
+        if (columns_[c] != k) continue;
+        if (!parse_double(f, v[c])) return skip_or_throw(line, ln, f);
+        ++found;
+      }
+    }
+    if (k == 0) return 0;
+    if (!seen_data_ && found < 3 && is_header_line(line)) {  // a short header line
+      seen_data_ = true;
+      return 0;
+    }
+    if (found < 3) {
+      throw InputError::at_line(source_name_, ln, "--columns " + std::to_string(columns_[0]) + "," +
+                                                      std::to_string(columns_[1]) + "," + std::to_string(columns_[2]) +
+                                                      ": the line has only " + std::to_string(k) + " fields");
+    }
+    if (seen_data_ && fields_ != 0 && k != fields_) {
+      throw InputError::at_line(source_name_, ln, "expected " + std::to_string(fields_) + " fields like the first data line, found " +
+                                                      std::to_string(k));
+    }
+    seen_data_ = true;
+    fields_ = k;
+    return int(k);
   }
 
   std::unique_ptr<ByteSource> src_;
   LineSource lines_;
+  std::vector<std::uint64_t> columns_;  // 1-based x, y, z columns; empty: exactly three fields
+  std::uint64_t fields_ = 0;            // fields of the first data line (--columns)
   bool seen_data_ = false;
   std::uint64_t chunk_first_ = 0;
   std::vector<std::uint64_t> line_of_;  // line of each point of the last chunk
@@ -151,9 +230,9 @@ class TextPointReader final : public PointReader {
 
 }  // namespace
 
-std::unique_ptr<PointReader> open_text(std::unique_ptr<ByteSource> src) {
+std::unique_ptr<PointReader> open_text(std::unique_ptr<ByteSource> src, const PointReadOptions& options) {
   if (src->size() && *src->size() == 0) throw InputError::at_line(src->name(), 1, "empty file: no points");
-  return std::make_unique<TextPointReader>(std::move(src));
+  return std::make_unique<TextPointReader>(std::move(src), options.columns);
 }
 
 }  // namespace tetstream::io::detail

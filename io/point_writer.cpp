@@ -310,6 +310,9 @@ std::unique_ptr<PointWriter> create_points(const std::string& path, const PointW
       w = std::move(npy);
       break;
     }
+    case PointFormat::kLas: case PointFormat::kHdf5:
+      throw UsageError(std::string("points cannot be written as ") + to_string(format) +
+                       " (input only): write f32, f64, ply, npy or text");
     case PointFormat::kAuto: break;
   }
   w->count_ = count;

@@ -10,6 +10,8 @@ packages=(
   libcgal-dev libgmp-dev libmpfr-dev python3 python3-numpy python3-meshio gmsh libgmsh-dev time
   # field: the SciPy (Qhull) comparison test, the docs' density picture
   python3-scipy python3-matplotlib
+  # HDF5 input (optional at build time) and the h5py files its tests read
+  libhdf5-dev python3-h5py
 )
 
 missing=()

@@ -57,6 +57,37 @@ void bbox_update(const double* p, std::size_t n, double* lo, double* hi) {
   for (int k = 0; k < 12; ++k) lo[k % 3] = std::min(lo[k % 3], l[k]), hi[k % 3] = std::max(hi[k % 3], h[k]);
 }
 
+// An HDF5 file named by extension, --format or its signature.
+bool is_hdf5(const std::string& path, const io::PointReadOptions& read) {
+  if (read.format == io::PointFormat::kHdf5) return true;
+  if (read.format != io::PointFormat::kAuto || io::is_std_stream(path)) return false;
+  if (io::format_from_extension(path).format == io::PointFormat::kHdf5) return true;
+  if (io::format_from_extension(path).format != io::PointFormat::kAuto) return false;
+  char magic[8] = {};
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return false;
+  const std::size_t n = std::fread(magic, 1, sizeof magic, f);
+  std::fclose(f);
+  return io::sniff_format(magic, n) == io::PointFormat::kHdf5;
+}
+
+// `info FILE.hdf5` without --dataset: the datasets that --dataset can name.
+void info_hdf5(const std::string& path, Context& ctx) {
+  const auto list = io::list_hdf5_point_datasets(path);
+  nlohmann::json datasets = nlohmann::json::array();
+  for (const auto& d : list) datasets.push_back({{"path", d.path}, {"rows", d.rows}, {"type", d.type}});
+  if (!ctx.global.json) {
+    std::printf("file:    %s\n", path.c_str());
+    std::printf("format:  hdf5\n");
+    std::printf("(N, 3) datasets (read one with --dataset PATH):%s\n", list.empty() ? " none" : "");
+    for (const auto& d : list) {
+      std::printf("  %s  %llu x 3 %s\n", d.path.c_str(), static_cast<unsigned long long>(d.rows), d.type.c_str());
+    }
+    std::fflush(stdout);
+  }
+  ctx.summary = {{"command", "info"}, {"file", path}, {"format", "hdf5"}, {"datasets", datasets}};
+}
+
 void info_points(const InfoArgs& args, Context& ctx) {
   auto reader = io::open_points(args.path, args.read);
   // Progress in points when the count is known, else in bytes of a file of known size.
@@ -94,6 +125,9 @@ void info_points(const InfoArgs& args, Context& ctx) {
     }
     std::printf("bytes:   %llu (%s)\n", static_cast<unsigned long long>(bytes),
                 pipeline::human_bytes(double(bytes)).c_str());
+    for (const auto& [label, value] : reader->details()) {
+      std::printf("%-8s %s\n", (label + ":").c_str(), value.c_str());
+    }
     std::fflush(stdout);
   }
   spdlog::debug("read {} in {} ({:.0f} MB/s)", pipeline::human_bytes(double(bytes)),
@@ -106,6 +140,7 @@ void info_points(const InfoArgs& args, Context& ctx) {
                  {"bytes", bytes},
                  {"seconds", seconds},
                  {"mb_per_s", seconds > 0 ? double(bytes) / seconds / 1e6 : 0.0}};
+  for (const auto& [label, value] : reader->details()) ctx.summary[label] = value;
 }
 
 void setup_info(CLI::App& app, Context& ctx) {
@@ -113,12 +148,16 @@ void setup_info(CLI::App& app, Context& ctx) {
   CLI::App* cmd = app.add_subcommand(
       "info", "Show a point file's count, bounding box and format (reads it all and checks every\n"
               "coordinate), or a .tets container's summary");
-  cmd->add_option("file", args->path, "Point file ('-' for stdin) or .tets container")->required();
+  add_point_input_files(cmd, "file", args->path, args->read,
+                        "Point file ('-' for stdin; several files are one input) or .tets container; an HDF5 file "
+                        "without --dataset: its (N, 3) datasets");
   add_point_input_options(cmd, args->read);
   cmd->add_flag("--check", args->check, "For a .tets container: also read every point and frame and check their CRCs");
   cmd->callback([args, &ctx] {
-    if (ends_with(args->path, ".tets")) {
+    if (ends_with(args->path, ".tets") && args->read.more_inputs.empty()) {
       info_tets(args->path, ctx, args->check);
+    } else if (args->read.datasets.empty() && args->read.more_inputs.empty() && is_hdf5(args->path, args->read)) {
+      info_hdf5(args->path, ctx);
     } else {
       info_points(*args, ctx);
     }

@@ -78,7 +78,9 @@ void run_run(RunArgs& args, Context& ctx) {
 void setup_run(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<RunArgs>();
   auto* cmd = app.add_subcommand("run", "Triangulate a point file out of core into a .tets container");
-  cmd->add_option("input", args->options.input, "Point file (raw, PLY, .npy, text) or - for stdin")->required();
+  add_point_input_files(cmd, "input", args->options.input, args->options.read,
+                        "Point file (raw, PLY, .npy, text, LAS, HDF5) or - for stdin; several files (or a quoted glob) "
+                        "are read in order as one input");
   cmd->add_option("-o,--output", args->options.output,
                   "Output container (.tets), or - to stream it to standard output (a pipe; not resumable)")
       ->required();

@@ -4,6 +4,7 @@
 #include "io/point_reader.hpp"
 #include "io/point_writer.hpp"
 #include "io/point_generators.hpp"
+#include "point_files.hpp"
 
 #include <gtest/gtest.h>
 
@@ -24,68 +25,6 @@ using namespace tetstream;
 using namespace tetstream::io;
 
 namespace {
-
-class TempDir {
- public:
-  TempDir() {
-    std::string tmpl = (fs::temp_directory_path() / "tetstream_point_io_XXXXXX").string();
-    path_ = ::mkdtemp(tmpl.data());
-  }
-  ~TempDir() { fs::remove_all(path_); }
-  std::string file(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  fs::path path_;
-};
-
-void write_bytes(const std::string& path, const std::string& bytes) {
-  std::ofstream(path, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
-}
-
-template <class T>
-std::string le_bytes(T v) {  // little-endian bytes of v
-  std::string s(sizeof(T), '\0');
-  std::memcpy(s.data(), &v, sizeof(T));
-  if constexpr (std::endian::native == std::endian::big) std::reverse(s.begin(), s.end());
-  return s;
-}
-template <class T>
-std::string be_bytes(T v) {
-  std::string s = le_bytes(v);
-  std::reverse(s.begin(), s.end());
-  return s;
-}
-
-// Reads everything in small, odd chunks, with a tiny read block, so records and lines
-// straddle block boundaries.
-std::vector<double> read_all(const std::string& path, PointReadOptions opt = {}, std::size_t chunk = 7) {
-  opt.block_bytes = 4096;
-  auto r = open_points(path, opt);
-  std::vector<double> out, buf(3 * chunk);
-  while (std::size_t n = r->read(buf.data(), chunk)) out.insert(out.end(), buf.begin(), buf.begin() + 3 * n);
-  EXPECT_EQ(r->read(buf.data(), chunk), 0u);  // stays at the end
-  return out;
-}
-
-// The message of the InputError that reading `path` throws ("" if none).
-std::string read_error(const std::string& path, PointReadOptions opt = {}) {
-  try {
-    read_all(path, opt);
-  } catch (const InputError& e) {
-    EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << "one line: " << e.what();
-    return e.what();
-  }
-  return "";
-}
-
-#define EXPECT_INPUT_ERROR(path, opt, where, what)                            \
-  do {                                                                      \
-    const std::string msg_ = read_error(path, opt);                         \
-    EXPECT_NE(msg_, "") << "no error for " << path;                         \
-    EXPECT_NE(msg_.find(path), std::string::npos) << msg_;                  \
-    EXPECT_NE(msg_.find(where), std::string::npos) << msg_;                 \
-    EXPECT_NE(msg_.find(what), std::string::npos) << msg_;                  \
-  } while (0)
 
 bool same_bits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b); }
 
@@ -265,39 +204,26 @@ TEST(PointIo, PlyExtrasAreSkipped) {
 
 TEST(PointIo, NpyVersionsAndDtypes) {
   TempDir dir;
-  auto npy = [](int major, const std::string& descr, const std::string& shape, const std::string& data,
-                const std::string& fortran = "False") {
-    std::string dict = "{'descr': '" + descr + "', 'fortran_order': " + fortran + ", 'shape': " + shape + ", }";
-    const std::size_t pre = major == 1 ? 10 : 12;
-    while ((pre + dict.size() + 1) % 64) dict += ' ';
-    dict += '\n';
-    std::string s = "\x93NUMPY";
-    s += char(major);
-    s += '\0';
-    if (major == 1) s += le_bytes<std::uint16_t>(std::uint16_t(dict.size()));
-    else s += le_bytes<std::uint32_t>(std::uint32_t(dict.size()));
-    return s + dict + data;
-  };
   const std::vector<double> want = {1, 2, 3, -4, 5.5, 6};
   std::string le8, be8, le4;
   for (double v : want) le8 += le_bytes(v), be8 += be_bytes(v), le4 += le_bytes(float(v));
-  write_bytes(dir.file("v1.npy"), npy(1, "<f8", "(2, 3)", le8));
-  write_bytes(dir.file("v2.npy"), npy(2, ">f8", "(2,3)", be8));
-  write_bytes(dir.file("v3.npy"), npy(3, "<f4", "(2, 3)", le4));
+  write_bytes(dir.file("v1.npy"), npy_bytes(1, "<f8", "(2, 3)", le8));
+  write_bytes(dir.file("v2.npy"), npy_bytes(2, ">f8", "(2,3)", be8));
+  write_bytes(dir.file("v3.npy"), npy_bytes(3, "<f4", "(2, 3)", le4));
   for (const char* f : {"v1.npy", "v2.npy", "v3.npy"}) EXPECT_EQ(read_all(dir.file(f)), want) << f;
 
   // Bad headers: shape, order, dtype.
-  write_bytes(dir.file("shape4.npy"), npy(1, "<f8", "(1, 4)", le8.substr(0, 32)));
+  write_bytes(dir.file("shape4.npy"), npy_bytes(1, "<f8", "(1, 4)", le8.substr(0, 32)));
   EXPECT_INPUT_ERROR(dir.file("shape4.npy"), PointReadOptions{}, "byte 10", "not (N, 3)");
-  write_bytes(dir.file("shape1.npy"), npy(1, "<f8", "(6,)", le8));
+  write_bytes(dir.file("shape1.npy"), npy_bytes(1, "<f8", "(6,)", le8));
   EXPECT_INPUT_ERROR(dir.file("shape1.npy"), PointReadOptions{}, "byte 10", "not (N, 3)");
-  write_bytes(dir.file("fortran.npy"), npy(1, "<f8", "(2, 3)", le8, "True"));
+  write_bytes(dir.file("fortran.npy"), npy_bytes(1, "<f8", "(2, 3)", le8, "True"));
   EXPECT_INPUT_ERROR(dir.file("fortran.npy"), PointReadOptions{}, "byte 10", "fortran_order");
-  write_bytes(dir.file("int.npy"), npy(1, "<i4", "(2, 3)", le8));
+  write_bytes(dir.file("int.npy"), npy_bytes(1, "<i4", "(2, 3)", le8));
   EXPECT_INPUT_ERROR(dir.file("int.npy"), PointReadOptions{}, "byte 10", "unsupported dtype");
-  write_bytes(dir.file("zero.npy"), npy(1, "<f8", "(0, 3)", ""));
+  write_bytes(dir.file("zero.npy"), npy_bytes(1, "<f8", "(0, 3)", ""));
   EXPECT_INPUT_ERROR(dir.file("zero.npy"), PointReadOptions{}, "byte 128", "no points");
-  write_bytes(dir.file("short.npy"), npy(1, "<f8", "(3, 3)", le8));  // header promises 3 rows, 2 present
+  write_bytes(dir.file("short.npy"), npy_bytes(1, "<f8", "(3, 3)", le8));  // header promises 3 rows, 2 present
   EXPECT_INPUT_ERROR(dir.file("short.npy"), PointReadOptions{}, "byte 176", "truncated");
   write_bytes(dir.file("magic.npy"), "\x93NUMPX" + std::string(100, ' '));
   EXPECT_INPUT_ERROR(dir.file("magic.npy"), PointReadOptions{}, "byte 0", "not a .npy file");
