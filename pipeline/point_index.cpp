@@ -9,16 +9,32 @@
 namespace tetstream::pipeline {
 
 namespace {
-// The largest float <= x, and the smallest float >= x (x finite).
-float float_below(double x) {
-  const float f = float(x);
-  return double(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+// The largest float f with f * scale <= x, and the smallest with f * scale >= x, as
+// the query decodes them (x finite, x / scale within float range: block_scale). The
+// division by a power of two is exact unless it underflows; the decode's product may
+// round (to a subnormal) too, so the answer is checked against the decode itself,
+// which is monotonic: a step or two of nextafter at most.
+float float_below(double x, double scale) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  float f = float(scale == 1.0 ? x : x / scale);
+  while (double(f) * scale > x) f = std::nextafter(f, -kInf);
+  return f;
 }
-float float_above(double x) {
-  const float f = float(x);
-  return double(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+float float_above(double x, double scale) {
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  float f = float(scale == 1.0 ? x : x / scale);
+  while (double(f) * scale < x) f = std::nextafter(f, kInf);
+  return f;
 }
 }  // namespace
+
+double PointIndex::block_scale(double max_magnitude) {
+  if (max_magnitude == 0 || (max_magnitude >= 0x1p-100 && max_magnitude <= 0x1p100)) return 1.0;
+  // max_magnitude / 2^e in [2^60, 2^61); e within the normal exponents, so that the
+  // scale itself is a normal double (subnormal blocks: the largest becomes >= 2^8).
+  const int e = std::clamp(std::ilogb(max_magnitude) - 60, -1022, 1023);
+  return std::ldexp(1.0, e);
+}
 
 std::uint32_t PointIndex::block_points_for(std::uint64_t count, double axis_extent, double volume) {
   constexpr double kSpacings = 8;
@@ -39,6 +55,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   // the block) on all threads, then the lists are laid end to end. On one thread it
   // was 2.8% of a 10^7-point run's perf samples, with the other core idle.
   std::vector<std::vector<Node>> block_nodes(block_count);
+  std::vector<double> block_scales(block_count, 1.0);
   const double inf = std::numeric_limits<double>::infinity();
 #pragma omp parallel for schedule(dynamic, 8)
   for (std::int64_t b = 0; b < std::int64_t(block_count); ++b) {
@@ -47,6 +64,11 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
     std::uint32_t* o = &entries_[base];  // the offsets alone until a leaf adds the cells
     for (std::uint32_t i = 0; i < n; ++i) o[i] = i;
     std::vector<Node>& nodes = block_nodes[std::size_t(b)];
+    double max_magnitude = 0;
+    for (std::uint32_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) max_magnitude = std::max(max_magnitude, std::fabs(points[base + i].xyz[k]));
+    const double scale = block_scale(max_magnitude);
+    block_scales[std::size_t(b)] = scale;
     // Recursive median splits, written in preorder. `next` of a node is set when its
     // subtree is complete: the build recurses on the left half, then the right.
     auto build_node = [&](auto&& self, std::uint32_t begin, std::uint32_t end) -> void {
@@ -60,7 +82,8 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
       const std::uint32_t id = std::uint32_t(nodes.size());
       const bool leaf = end - begin <= kLeafPoints;
       Node node{};
-      for (int k = 0; k < 3; ++k) node.box.lo[k] = float_below(lo[k]), node.box.hi[k] = float_above(hi[k]);
+      for (int k = 0; k < 3; ++k)
+        node.box.lo[k] = float_below(lo[k], scale), node.box.hi[k] = float_above(hi[k], scale);
       node.begin = begin, node.end = end, node.leaf = leaf ? 1u : 0u;
       nodes.push_back(node);
       if (!leaf) {
@@ -75,7 +98,9 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
         self(self, mid, end);
       } else {
         std::sort(o + begin, o + end);  // a leaf reads its points in file order
-        const CellGrid grid(node.box);
+        double box_lo[3], box_hi[3];  // as the queries decode it, so that they find the same cells
+        decode<true>(node.box, scale, box_lo, box_hi);
+        const CellGrid grid(box_lo, box_hi);
         for (std::uint32_t j = begin; j < end; ++j) o[j] |= grid.cell_of(points[base + o[j]].xyz) << kOffsetBits;
       }
       nodes[id].next = std::uint32_t(nodes.size());
@@ -89,24 +114,30 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   nodes_.reserve(total);
   blocks_.clear();
   blocks_.reserve(block_count);
-  for (auto& nodes : block_nodes) {
+  for (std::size_t b = 0; b < block_count; ++b) {
+    std::vector<Node>& nodes = block_nodes[b];
     const std::uint32_t first = std::uint32_t(nodes_.size());
     for (Node node : nodes) {
       node.next += first;
       nodes_.push_back(node);
     }
-    blocks_.push_back(Block{first, std::uint32_t(nodes.size())});
+    blocks_.push_back(Block{first, std::uint32_t(nodes.size()), block_scales[b]});
     std::vector<Node>().swap(nodes);
   }
 }
 
 double PointIndex::leaf_spacing_quantile(double q) const {
   std::vector<double> spacing;
-  for (const Node& node : nodes_) {
-    if (!node.leaf || node.end - node.begin < 8) continue;
-    double volume = 1;
-    for (int k = 0; k < 3; ++k) volume *= double(node.box.hi[k]) - double(node.box.lo[k]);
-    if (volume > 0) spacing.push_back(std::cbrt(volume / double(node.end - node.begin)));
+  for (const Block& block : blocks_) {
+    for (std::uint32_t i = block.first_node; i < block.first_node + block.nodes; ++i) {
+      const Node& node = nodes_[i];
+      if (!node.leaf || node.end - node.begin < 8) continue;
+      // In the block's own units (the stored floats), where the volume neither
+      // overflows nor underflows; the spacing is then scaled back.
+      double volume = 1;
+      for (int k = 0; k < 3; ++k) volume *= double(node.box.hi[k]) - double(node.box.lo[k]);
+      if (volume > 0) spacing.push_back(std::cbrt(volume / double(node.end - node.begin)) * block.scale);
+    }
   }
   if (spacing.empty()) return 0;
   const auto nth = spacing.begin() + std::ptrdiff_t(std::clamp(q, 0.0, 1.0) * double(spacing.size() - 1));

@@ -108,38 +108,13 @@ class PointIndex {
     const double axis_lo = keys ? keys->lo : points_[first].xyz[axis_];
     const double axis_hi = keys ? keys->hi : points_[last - 1].xyz[axis_];
     const std::uint64_t b0 = first / block_points_, b1 = (last - 1) / block_points_;
+    // The choice between the scaled and the plain boxes is made once a block, not
+    // once a node (see Block).
     for (std::uint64_t b = b0; b <= b1; ++b) {
-      const std::uint64_t base = b * block_points_;
-      // Nodes in preorder; `next` of a node is the first node after its subtree, so
-      // a node whose box misses the ball is skipped with its whole subtree, and one
-      // that meets it is entered by moving to the node that follows it.
-      const std::uint32_t end = blocks_[b].first_node + blocks_[b].nodes;
-      for (std::uint32_t i = blocks_[b].first_node; i < end;) {
-        const Node& node = nodes_[i];
-        const double lo[3] = {node.box.lo[0], node.box.lo[1], node.box.lo[2]};
-        const double hi[3] = {node.box.hi[0], node.box.hi[1], node.box.hi[2]};
-        if (!may_meet(lo, hi) || hi[axis_] < axis_lo || lo[axis_] > axis_hi || exclude.contains(lo, hi)) {
-          i = node.next;
-          continue;
-        }
-        if (!node.leaf) {
-          ++i;
-          continue;
-        }
-        if (stop()) return;
-        // Each point's cell first: most points of a leaf that a huge ball grazes are
-        // outside it, and the cell says so without reading the file.
-        const CellGrid grid(node.box);
-        for (std::uint32_t j = node.begin; j < node.end; ++j) {
-          const std::uint32_t entry = entries_[base + j];
-          const std::uint64_t label = base + (entry & kOffsetMask);
-          if (label < first || label >= last) continue;
-          double cell_lo[3], cell_hi[3];
-          grid.cell(entry >> kOffsetBits, cell_lo, cell_hi);
-          if (may_meet(cell_lo, cell_hi) && !exclude.contains(cell_lo, cell_hi)) visit(label);
-        }
-        i = node.next;
-      }
+      const bool stopped = blocks_[b].scale == 1.0
+                               ? scan_block<false>(b, may_meet, first, last, axis_lo, axis_hi, visit, stop, exclude)
+                               : scan_block<true>(b, may_meet, first, last, axis_lo, axis_hi, visit, stop, exclude);
+      if (stopped) return;
     }
   }
 
@@ -156,7 +131,11 @@ class PointIndex {
   }
 
   // Whether the box [lo, hi] meets the closed ball (c, r). Conservative: rounding may
-  // only say "meets" when it does not.
+  // only say "meets" when it does not. Any finite or infinite box and ball: a square
+  // that overflows is +inf on both sides only when the distance and the radius are
+  // both past 2^511 (inf <= inf: "meets"); the 2^-1060 covers the absolute error of
+  // squares that round to subnormals (at most 2^-1075 each), where the relative
+  // 1e-12 does not.
   static bool box_meets_ball(const double* lo, const double* hi, const double* c, double r) {
     double d2 = 0;
     for (int k = 0; k < 3; ++k) {
@@ -165,12 +144,14 @@ class PointIndex {
       else if (c[k] > hi[k]) d = c[k] - hi[k];
       d2 += d * d;
     }
-    return d2 <= r * r * (1 + 1e-12);
+    return d2 <= r * r * (1 + 1e-12) + 0x1p-1060;
   }
 
  private:
   // A node's box in floats rounded outward: it contains the points' box, so every
-  // test against it stays conservative, in 36 bytes a node instead of 64.
+  // test against it stays conservative, in 36 bytes a node instead of 64. The floats
+  // hold the coordinates divided by the block's scale (Block), rounded outward so
+  // that float * scale, as the query computes it, still bounds the box.
   struct Box {
     float lo[3], hi[3];
   };
@@ -181,23 +162,89 @@ class PointIndex {
     std::uint32_t leaf : 1;    // a leaf: its points are [begin, end)
   };
   static_assert(sizeof(Node) == 36);
+  // A block's boxes are stored as they are (scale 1) when its points' largest
+  // magnitude lies in [2^-100, 2^100] (or is 0): floats hold such coordinates without
+  // overflow and with their full precision down to 2^-149 away. Otherwise (coordinates
+  // past FLT_MAX ~ 2^128, or so small that floats would round them all to 0 or to a
+  // few subnormal steps, which makes every box meet every ball) they are stored as
+  // multiples of scale = 2^e, a normal double chosen so that the largest magnitude
+  // becomes about 2^60: any finite double input gets finite, tight float boxes
+  // (points 2^-200 times smaller than the block's largest still collapse to 0, which
+  // costs queries time, never answers). The choice is per block, so the query's
+  // branch is taken once a block.
   struct Block {
     std::uint32_t first_node, nodes;
+    double scale = 1.0;
   };
+  static double block_scale(double max_magnitude);
+  // A node's box in doubles, as every query and the build's cells see it.
+  template <bool kScaled>
+  static void decode(const Box& box, double scale, double* lo, double* hi) {
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = kScaled ? double(box.lo[k]) * scale : double(box.lo[k]);
+      hi[k] = kScaled ? double(box.hi[k]) * scale : double(box.hi[k]);
+    }
+  }
+  // Visits the candidates of block b (for_each_candidate_where); true when stop() said so.
+  template <bool kScaled, class MayMeet, class Visit, class Stop>
+  bool scan_block(std::uint64_t b, MayMeet& may_meet, std::uint64_t first, std::uint64_t last, double axis_lo,
+                  double axis_hi, Visit& visit, Stop& stop, const ExcludedSlab& exclude) const {
+    const std::uint64_t base = b * block_points_;
+    const double scale = blocks_[b].scale;
+    // Nodes in preorder; `next` of a node is the first node after its subtree, so
+    // a node whose box misses the ball is skipped with its whole subtree, and one
+    // that meets it is entered by moving to the node that follows it.
+    const std::uint32_t end = blocks_[b].first_node + blocks_[b].nodes;
+    for (std::uint32_t i = blocks_[b].first_node; i < end;) {
+      const Node& node = nodes_[i];
+      double lo[3], hi[3];
+      decode<kScaled>(node.box, scale, lo, hi);
+      if (!may_meet(lo, hi) || hi[axis_] < axis_lo || lo[axis_] > axis_hi || exclude.contains(lo, hi)) {
+        i = node.next;
+        continue;
+      }
+      if (!node.leaf) {
+        ++i;
+        continue;
+      }
+      if (stop()) return true;
+      // Each point's cell first: most points of a leaf that a huge ball grazes are
+      // outside it, and the cell says so without reading the file.
+      const CellGrid grid(lo, hi);
+      for (std::uint32_t j = node.begin; j < node.end; ++j) {
+        const std::uint32_t entry = entries_[base + j];
+        const std::uint64_t label = base + (entry & kOffsetMask);
+        if (label < first || label >= last) continue;
+        double cell_lo[3], cell_hi[3];
+        grid.cell(entry >> kOffsetBits, cell_lo, cell_hi);
+        if (may_meet(cell_lo, cell_hi) && !exclude.contains(cell_lo, cell_hi)) visit(label);
+      }
+      i = node.next;
+    }
+    return false;
+  }
   // A leaf's entry for a point: its label's offset in the block (kOffsetBits) and its
   // cell in the leaf's box above it: the box cut into 16 slices along each axis, the
   // point's slice numbers in 4 bits each. Conservative: the cell, widened by a
   // sixteenth of a slice and by the rounding of the box's coordinates, contains the
-  // point (the slice numbers' own rounding is below 2^-40 of a slice).
+  // point (the slice numbers' own rounding is below 2^-40 of a slice; 2^-1070 covers
+  // the absolute rounding of subnormal bounds). A box too wide for a finite slice
+  // (its decoded bounds infinite, or their difference past DBL_MAX) has one cell on
+  // that axis: the whole box.
   static constexpr int kOffsetBits = 18, kSliceBits = 4;
   static constexpr std::uint32_t kOffsetMask = (1u << kOffsetBits) - 1, kSlices = 1u << kSliceBits;
   static_assert(kOffsetBits + 3 * kSliceBits <= 32 && kMaxBlockPoints <= (1u << kOffsetBits));
   struct CellGrid {
-    explicit CellGrid(const Box& box) {
+    CellGrid(const double* box_lo, const double* box_hi) {
       for (int k = 0; k < 3; ++k) {
-        lo[k] = box.lo[k];
-        step[k] = (double(box.hi[k]) - lo[k]) / kSlices;
-        pad[k] = step[k] / 16 + (std::fabs(lo[k]) + std::fabs(double(box.hi[k]))) * 0x1p-50;
+        lo[k] = box_lo[k];
+        step[k] = (box_hi[k] - lo[k]) / kSlices;
+        if (std::isfinite(step[k])) {
+          first_hi[k] = lo[k] + step[k];
+          pad[k] = step[k] / 16 + (std::fabs(lo[k]) + std::fabs(box_hi[k])) * 0x1p-50 + 0x1p-1070;
+        } else {
+          step[k] = 0, first_hi[k] = box_hi[k], pad[k] = 0;
+        }
       }
     }
     std::uint32_t cell_of(const double* p) const {
@@ -212,10 +259,10 @@ class PointIndex {
       for (int k = 0; k < 3; ++k) {
         const double slice = double(c >> (kSliceBits * k) & (kSlices - 1));
         cell_lo[k] = lo[k] + slice * step[k] - pad[k];
-        cell_hi[k] = lo[k] + (slice + 1) * step[k] + pad[k];
+        cell_hi[k] = first_hi[k] + slice * step[k] + pad[k];
       }
     }
-    double lo[3], step[3], pad[3];
+    double lo[3], step[3], first_hi[3], pad[3];
   };
   const SortedPoint* points_ = nullptr;
   int axis_ = 0;
