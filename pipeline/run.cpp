@@ -386,17 +386,16 @@ void record_work(const SegmentStats& w, std::uint64_t zone_points, RunSummary& s
 // that changes the output's bytes. The thread count and zone size are not among
 // them: the bytes do not depend on them.
 json job_identity(const RunOptions& o) {
+  // Every file of the input (several files read as one are all fingerprinted).
+  json more = json::array();
+  for (const std::string& f : o.read.more_inputs) more.push_back({{"file", f}, {"fingerprint", fingerprint_file(f)}});
   return {{"input", o.input},
-          {"input_fingerprint", fingerprint_file(o.input)},
+          {"input_fingerprint", {fingerprint_file(o.input), more}},
           {"output", std::filesystem::absolute(o.output).lexically_normal().string()},
           {"memory", o.memory_bytes},
           {"buffer_spacings", o.buffer_spacings},
           {"sort_run_points", o.sort_run_points},
-          {"read", {{"format", int(o.read.format)},
-                    {"type", int(o.read.type)},
-                    {"stride", o.read.stride},
-                    {"offset", o.read.offset},
-                    {"byte_order", int(o.read.byte_order)}}}};
+          {"read", o.read.identity()}};
 }
 
 // One line naming what differs between a checkpoint's job and this one.
@@ -896,7 +895,10 @@ RunSummary run_job(const RunOptions& requested) {
   const bool to_stdout = io::is_std_stream(options.output);
   if (to_stdout && options.resume)
     throw UsageError("--resume needs an output file: a job streamed to standard output (-o -) cannot be resumed");
-  if (!io::is_std_stream(options.input)) io::refuse_input_as_output(options.input, options.output);
+  if (!io::is_std_stream(options.input)) {
+    io::refuse_input_as_output(options.input, options.output);
+    for (const std::string& more : options.read.more_inputs) io::refuse_input_as_output(more, options.output);
+  }
   std::optional<io::OutputClaim> claim;
   if (!to_stdout) claim.emplace(options.output);
   if (!options.checkpoint || io::is_std_stream(options.input) || to_stdout) {
