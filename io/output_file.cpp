@@ -166,6 +166,7 @@ void OutputFile::flush() {
 }
 
 void OutputFile::write(const void* data, std::size_t n) {
+  if (n == 0) return;  // callers pass empty vectors, whose data() may be null
   const char* p = static_cast<const char*>(data);
   if (used_ + n > cap_) {
     flush();

@@ -61,6 +61,7 @@ void PointWriter::flush() {
 }
 
 void PointWriter::put(const void* data, std::size_t n) {
+  if (n == 0) return;  // an empty vector's data() may be null
   const char* p = static_cast<const char*>(data);
   bytes_ += n;
   if (used_ + n <= cap_) {
