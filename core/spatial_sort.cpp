@@ -104,14 +104,23 @@ void for_each_grid_point(const double* xyz, std::size_t n, int bits, F&& f) {
       lo[k] = std::min(lo[k], xyz[3 * i + k]);
       hi[k] = std::max(hi[k], xyz[3 * i + k]);
     }
-  const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  // Everything is measured in units of the largest magnitude's power of two (an exact
+  // scaling wherever it matters), so that the extent cannot overflow (coordinates near
+  // +-DBL_MAX) and the scale cannot (subnormal extents); a rounding here only moves a
+  // point to a neighbouring cell, which changes the order, never the triangulation.
+  double big = 0;
+  for (int k = 0; k < 3; ++k) big = std::max({big, std::fabs(lo[k]), std::fabs(hi[k])});
+  const double unit = big > 0 && std::isfinite(big) ? std::ldexp(1.0, std::min(-std::ilogb(big), 1000)) : 1.0;
+  double origin[3];
+  for (int k = 0; k < 3; ++k) origin[k] = lo[k] * unit;
+  const double extent = std::max({hi[0] * unit - origin[0], hi[1] * unit - origin[1], hi[2] * unit - origin[2]});
   const double cells = double(1u << bits);
-  const double scale = extent > 0 ? (cells - 1) / extent : 0.0;
+  const double scale = extent > 0 && std::isfinite((cells - 1) / extent) ? (cells - 1) / extent : 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     std::uint32_t c[3];
     for (int k = 0; k < 3; ++k) {
-      const double g = (xyz[3 * i + k] - lo[k]) * scale;
-      c[k] = std::uint32_t(std::clamp(g, 0.0, cells - 1));
+      const double g = (xyz[3 * i + k] * unit - origin[k]) * scale;
+      c[k] = g > 0 ? std::uint32_t(std::min(g, cells - 1)) : 0;  // NaN (non-finite input) -> 0
     }
     f(i, c);
   }

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -29,7 +30,13 @@ struct FacetPlane {
       n[k] = u[i] * v[j] - u[j] * v[i];
       bound += (std::fabs(u[i] * v[j]) + std::fabs(u[j] * v[i])) * extent[k];
     }
-    error = 16 * kEps * bound * (1 + 16 * kEps);
+    // The bound assumes nothing overflows or underflows. With every extent at most
+    // 2^300 nothing overflows, and an underflowing product (absolute error at most
+    // 2^-1074, carried up by a difference of at most 2^300) adds far less than the
+    // 2^-700 added here. Larger or non-finite extents: an infinite margin, so that
+    // only the exact predicate decides.
+    const bool in_range = extent[0] <= 0x1p300 && extent[1] <= 0x1p300 && extent[2] <= 0x1p300;
+    error = in_range ? 16 * kEps * bound * (1 + 16 * kEps) + 0x1p-700 : std::numeric_limits<double>::infinity();
   }
   double value(const double* p) const {
     return n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]);
@@ -47,7 +54,7 @@ struct FacetPlane {
   bool box_may_reach(const double* lo, const double* hi) const {
     double corner[3];
     for (int k = 0; k < 3; ++k) corner[k] = n[k] >= 0 ? hi[k] : lo[k];
-    return value(corner) >= -error;
+    return !(value(corner) < -error);  // NaN (an overflow): may reach
   }
   const double *a, *b, *c;
   double n[3], error;

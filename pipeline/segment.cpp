@@ -59,15 +59,18 @@ void clipped_extent(const ConflictBall& b, const SortedView& view, int axis, dou
     d *= 1 - 1e-12;  // shrink the distance: a larger extent is always safe
     d2 += d * d;
   }
+  // The squares are compared with an absolute slack of 2^-1060 as well: near the
+  // subnormals each rounds by up to 2^-1075 absolutely, whatever its size.
   const double r2 = b.radius * b.radius * (1 + 1e-12);
-  if (d2 > r2) {
+  if (d2 > r2 + 0x1p-1060) {
     lo = 1, hi = 0;
     return;
   }
   // A centre inside the box across the other axes (most balls) leaves the extent at
   // the radius, with no square root (this function was 2.3% of a 10^7-point run's
-  // samples, a sixth of the checks').
-  const double h = d2 == 0 ? b.radius : std::sqrt(r2 - d2) * (1 + 1e-12);
+  // samples, a sixth of the checks'). So does a ball whose squares are too small for
+  // a relative bound (below 2^-900 the square root of an absolute error is not small).
+  const double h = d2 == 0 || !(r2 - d2 >= 0x1p-900) ? b.radius : std::sqrt(r2 - d2) * (1 + 1e-12);
   const double c = b.center[axis];
   lo = c - h;
   hi = c + h;
@@ -419,16 +422,18 @@ bool SegmentWorker::query_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   VertexId v[4];
   for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
   const double r2 = query_ball.radius * query_ball.radius;
-  // The deepest conflicting point: the one farthest inside the enclosing ball.
+  // The deepest conflicting point: the one nearest the enclosing ball's centre.
   auto conflict = [&](std::uint64_t label, const double* p) {
     double d2 = 0;
     for (int k = 0; k < 3; ++k) d2 += (p[k] - query_ball.center[k]) * (p[k] - query_ball.center[k]);
-    if (d2 > r2) return std::numeric_limits<double>::quiet_NaN();  // outside the enclosing ball
+    if (d2 > r2 + 0x1p-1060) return std::numeric_limits<double>::quiet_NaN();  // outside the enclosing ball (slack: as in clipped_extent)
     ++stats_.query_points;
     const bool conflicts = core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), p,
                                               dt_.label(v[0]), dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]),
                                               label) > 0;
-    return conflicts ? -(r2 - d2) : std::numeric_limits<double>::quiet_NaN();
+    // The score ranks points within this one query, where r2 is fixed: d2 alone (never
+    // NaN; r2 - d2 was inf - inf once the squares overflowed, and dropped the point).
+    return conflicts ? d2 : std::numeric_limits<double>::quiet_NaN();
   };
   auto may_meet = [&](const double* box_lo, const double* box_hi) {
     return PointIndex::box_meets_ball(box_lo, box_hi, query_ball.center, query_ball.radius);

@@ -289,12 +289,28 @@ std::string labels_text(std::initializer_list<std::uint64_t> ls) {
   return s + ")";
 }
 
-// det[b-a, c-a, d-a] in floating point: 6 times the signed volume.
-inline double det3(const double* a, const double* b, const double* c, const double* d) {
-  const double bx = b[0] - a[0], by = b[1] - a[1], bz = b[2] - a[2];
-  const double cx = c[0] - a[0], cy = c[1] - a[1], cz = c[2] - a[2];
-  const double dx = d[0] - a[0], dy = d[1] - a[1], dz = d[2] - a[2];
+// det[b-a, c-a, d-a] in floating point: 6 times the signed volume, in T.
+template <class T>
+inline T det3(const double* a, const double* b, const double* c, const double* d) {
+  const T bx = T(b[0]) - a[0], by = T(b[1]) - a[1], bz = T(b[2]) - a[2];
+  const T cx = T(c[0]) - a[0], cy = T(c[1]) - a[1], cz = T(c[2]) - a[2];
+  const T dx = T(d[0]) - a[0], dy = T(d[1]) - a[1], dz = T(d[2]) - a[2];
   return bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+}
+
+// The volume check's arithmetic. Doubles while every nonzero coordinate lies in
+// [2^-250, 2^250]: nonzero differences then lie in [2^-302, 2^251], and no product of
+// three overflows or underflows. Otherwise (coordinates near 1e103 made the volumes
+// inf - inf = NaN, and tiny ones underflow) long double, whose 15-bit exponent holds
+// any product of three differences of doubles.
+static_assert(std::numeric_limits<long double>::max_exponent >= 4096,
+              "verify's volume check needs a long double with a 15-bit exponent");
+inline bool volume_fits_double(const double* xyz, std::size_t n) {
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    const double m = std::fabs(xyz[i]);
+    if (m != 0 && !(m >= 0x1p-250 && m <= 0x1p250)) return false;
+  }
+  return true;
 }
 
 // Bit set over labels with atomic set.
@@ -513,6 +529,10 @@ class Engine {
 
   // Totals.
   long double tet_volume6_ = 0, hull_volume6_ = 0;
+  bool wide_volume_ = false;  // volumes in long double (volume_fits_double)
+  long double volume6(const double* a, const double* b, const double* c, const double* d) const {
+    return wide_volume_ ? det3<long double>(a, b, c, d) : det3<double>(a, b, c, d);
+  }
   std::atomic<std::uint64_t> orient_tests_{0}, insphere_tests_{0}, hull_tests_{0};
   std::uint64_t good_tets_ = 0, interior_ = 0, boundary_ = 0, bad_facets_ = 0, edges_ = 0, hull_edges_ = 0;
   std::uint64_t facets_checked_ = 0, tets_checked_ = 0;
@@ -616,6 +636,7 @@ void Engine<L>::load_points() {
     if (p[0] < b[0] || (p[0] == b[0] && (p[1] < b[1] || (p[1] == b[1] && p[2] < b[2])))) best = i;
   }
   if (n_ > 0) std::copy(P(best), P(best) + 3, origin_);
+  wide_volume_ = !volume_fits_double(xyz_.data(), std::size_t(n_));
   seconds_points_ = since(t0);
 }
 
@@ -712,13 +733,13 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
   std::vector<std::uint8_t> flags(t);
   constexpr std::size_t kChunk = 4096;  // fixed chunks: volume sums independent of threads
   const std::int64_t chunks = std::int64_t((t + kChunk - 1) / kChunk);
-  std::vector<double> vol(std::size_t(chunks), 0.0);
+  std::vector<long double> vol(std::size_t(chunks), 0.0L);
   std::uint64_t checked = 0, good = 0;
   bool below_min = false;
 #pragma omp parallel for schedule(dynamic, 4) reduction(+ : checked, good) reduction(|| : below_min)
   for (std::int64_t c = 0; c < chunks; ++c) {
     const std::size_t lo = std::size_t(c) * kChunk, hi = std::min(t, lo + kChunk);
-    double sum = 0;
+    long double sum = 0;
     for (std::size_t i = lo; i < hi; ++i) {
       L* v = labels.data() + 4 * i;
       const std::uint64_t ordinal = b.first_tet + i;
@@ -744,7 +765,7 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
       if (std::uint64_t(v[0]) < b.min_label) below_min = true;
       for (int j = 0; j < 4; ++j) used_.set(v[j]);
       const double *p0 = P(g[0]), *p1 = P(g[1]), *p2 = P(g[2]), *p3 = P(g[3]);
-      sum += std::fabs(det3(p0, p1, p2, p3));
+      sum += std::fabs(volume6(p0, p1, p2, p3));
       if (tet_sampled(ordinal)) {
         ++checked;
         const int o = core::orient3d(p0, p1, p2, p3);
@@ -761,7 +782,7 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
   if (below_min)
     throw InputError(src_.name() + ": frame " + std::to_string(k) + ": a label below the frame's declared smallest label " +
                      std::to_string(b.min_label));
-  for (double s : vol) tet_volume6_ += s;
+  for (long double s : vol) tet_volume6_ += s;
   tets_checked_ += checked;
   good_tets_ += good;
   orient_tests_ += checked;
@@ -1081,7 +1102,7 @@ void Engine<L>::final_facet(const Facet& f) {
   L a = f.v[0], b = f.v[1], c = f.v[2];
   if (f.x & kSide) std::swap(b, c);
   hull_used_.set(a), hull_used_.set(b), hull_used_.set(c);
-  hull_volume6_ += det3(origin_, P(a), P(b), P(c));
+  hull_volume6_ += volume6(origin_, P(a), P(b), P(c));
   const std::uint64_t ord = f.x & kPayload;
   auto edge = [&](L p, L q, L w) {
     hull_edges_batch_.push_back(p < q ? HullEdge{p, q, w, ord | kSide} : HullEdge{q, p, w, ord});
@@ -1270,10 +1291,12 @@ void Engine<L>::finish() {
                " + " + std::to_string(r.boundary_facets) + " = " + std::to_string(r.hull_euler) +
                ", not 2: the boundary is not one sphere (a cavity, a loose piece or a tunnel)";
       });
+    // Compared in long double (the volumes of coordinates near DBL_MAX exceed any
+    // double); reported as doubles (inf when they do).
     r.tet_volume = double(tet_volume6_ / 6);
     r.hull_volume = double(hull_volume6_ / 6);
-    const double scale = std::max(std::fabs(r.hull_volume), std::numeric_limits<double>::min());
-    r.volume_rel_error = std::fabs(r.tet_volume - r.hull_volume) / scale;
+    const long double scale = std::max(std::fabs(hull_volume6_), std::numeric_limits<long double>::min());
+    r.volume_rel_error = double(std::fabs(tet_volume6_ - hull_volume6_) / scale);
     if (!(r.volume_rel_error <= opt_.volume_tolerance))
       log_.add(Violation::kVolume, 0, [&] {
         std::ostringstream s;

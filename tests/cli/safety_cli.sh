@@ -4,6 +4,8 @@
 # where the user's own files sit next door:
 #   1. a checkpoint directory the job did not make is never removed (--checkpoint DIR
 #      makes DIR/OUT.ckpt; --force, bad input, --resume without state, --checkpoint .);
+#   2. every finite double: far outliers, sets scaled by 2^200..2^1000 give the exact
+#      tets (the same as the unscaled set's), and verify judges them right;
 #   3. damaged checkpoint files are recomputed or refused, never trusted;
 #   4. the output is never the input; 5. one job per output; 6. no links followed,
 #      no devices or directories written;
@@ -13,11 +15,11 @@
 #      are one line; SIGHUP stops a job like Ctrl-C; degenerate input names its file;
 #      damaged points are refused by cat and found by info --check;
 #  10. a killed job's temporary directory is removed by the next run and by `clean`.
-# Usage: bash safety_cli.sh /path/to/tetstream [BLOCK...]   (blocks: 1 3 4 5 6 7 9 10; default all)
+# Usage: bash safety_cli.sh /path/to/tetstream [BLOCK...]   (blocks: 1 2 3 4 5 6 7 9 10; default all)
 set -euo pipefail
 T=$(realpath "${1:?usage: safety_cli.sh /path/to/tetstream [BLOCK...]}")
 shift
-blocks=" ${*:-1 3 4 5 6 7 9 10} "
+blocks=" ${*:-1 2 3 4 5 6 7 9 10} "
 want() { [[ $blocks == *" $1 "* ]]; }
 dir=$(mktemp -d)
 trap 'chmod -R u+w "$dir"; rm -rf "$dir"' EXIT
@@ -72,6 +74,35 @@ echo mine >out3.tets.ckpt/mine.txt
 [ -f out3.tets.ckpt/mine.txt ] || fail "a file the job did not write was removed with its checkpoint"
 cmp -s out3.tets reference.tets || fail "resumed output differs"
 
+fi
+
+# ---- 2. the whole exponent range (tests/unit/exponent_range_test.cpp goes further) ----
+if want 2; then
+python3 - <<'PY'
+import array, math
+a = array.array('d')
+with open('pts.f64', 'rb') as f:
+    a.frombytes(f.read())
+far = array.array('d', a)
+far.extend([0.5, 4e38, 0.5])  # above FLT_MAX: the index's float boxes overflowed
+with open('far.f64', 'wb') as f:
+    far.tofile(f)
+for k in (200, 600, 1000):  # exact scalings: the same triangulation
+    with open('scaled%d.f64' % k, 'wb') as f:
+        array.array('d', [math.ldexp(x, k) for x in a]).tofile(f)
+with open('e103.f64', 'wb') as f:  # verify's volumes were NaN from about 1e103
+    array.array('d', [x * 1e103 for x in a]).tofile(f)
+PY
+"$T" "${base[@]}" far.f64 -o far.tets --no-checkpoint || fail "the 4e38 outlier failed"
+"$T" -q verify far.tets >/dev/null 2>err.txt || fail "the 4e38 outlier gave an invalid triangulation: $(cat err.txt)"
+for k in 200 600 1000; do
+  "$T" "${base[@]}" scaled$k.f64 -o scaled$k.tets --no-checkpoint || fail "scaled by 2^$k failed"
+  same_tets scaled$k.tets reference.tets || fail "scaling by 2^$k changed the tets"
+  "$T" -q verify scaled$k.tets >/dev/null 2>err.txt || fail "verify rejected the set scaled by 2^$k: $(cat err.txt)"
+done
+"$T" "${base[@]}" e103.f64 -o e103.tets --no-checkpoint
+"$T" -q verify e103.tets >/dev/null 2>err.txt || fail "verify rejected coordinates of 1e103: $(cat err.txt)"
+rm -f far.* scaled* e103.*
 fi
 
 # ---- 3. damaged checkpoint files: recomputed where possible, else refused ----
