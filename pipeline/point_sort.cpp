@@ -1,5 +1,7 @@
 #include "pipeline/point_sort.hpp"
 
+#include "pipeline/memory_budget.hpp"
+
 #include "io/tet_container.hpp"
 
 #include "core/error.hpp"
@@ -14,6 +16,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <optional>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -91,17 +94,19 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   t0 = Clock::now();
   const int axis = result.axis;
   const auto before = [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); };
-  // The run buffer takes half the budget: sorting in place needs nothing more, and
-  // the hull candidates of a run need about as much again in the worst case (a shell).
-  const std::size_t run_points =
-      options.run_points ? options.run_points
-                         : std::max<std::size_t>(kReadChunk, options.memory_bytes / 3 / (sizeof(SortedPoint) + 3 * sizeof(double)));
-  // A quarter of the budget for the hull pieces' kernels (~320 bytes a point), shared
-  // by the threads that run them at once.
-  const std::size_t hull_piece =
-      std::max<std::size_t>(4096, options.memory_bytes / 4 / 320 / std::size_t(std::max(1, detail::max_threads())));
+  if (options.on_scanned) options.on_scanned(done);
+  // The sort's shares of the ledger (run buffer, hull pieces, merge), sized for this
+  // input's count: a small input takes little of a large budget.
+  std::optional<MemoryBudget> own_budget;
+  MemoryBudget* budget = options.budget;
+  if (!budget) budget = &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
+  budget->set_points(result.input_count);
+  const SortShares shares = budget->plan_sort();
+  const std::size_t run_points = options.run_points ? options.run_points : shares.run_points;
+  const std::size_t hull_piece = shares.hull_piece_points;
+  const int hull_threads = shares.hull_threads;
   ExternalSortOptions sorter_options;
-  sorter_options.memory_bytes = options.memory_bytes / 3;
+  sorter_options.memory_bytes = shares.merge_bytes;
   sorter_options.dir = dir;
   sorter_options.name = "points";
   sorter_options.keep_files = resumable;
@@ -137,7 +142,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
       const std::size_t pieces = (run.size() + hull_piece - 1) / hull_piece;
       std::vector<std::vector<std::uint32_t>> piece_hull(pieces);
       std::exception_ptr failure;  // (out of memory) rethrown after the join, never out of the region
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) num_threads(hull_threads)
       for (std::size_t p = 0; p < pieces; ++p) {
         const std::size_t first = p * hull_piece, n = std::min(hull_piece, run.size() - first);
         try {

@@ -22,6 +22,8 @@
 
 namespace tetstream::pipeline {
 
+class MemoryBudget;
+
 // One record of the sorted file: coordinates and the index of the point in the input.
 struct SortedPoint {
   double xyz[3];
@@ -49,8 +51,14 @@ struct SortProgress {
 };
 
 struct PointSortOptions {
-  std::size_t memory_bytes = std::size_t(1) << 30;  // for run buffers and merge blocks
-  std::size_t run_points = 0;  // points per sorted run; 0: from memory_bytes
+  std::size_t memory_bytes = std::size_t(1) << 30;  // the ceiling, when no ledger is given
+  // The job's ledger (pipeline/memory_budget.hpp): the sort takes its shares from it
+  // once pass 1 has counted the points. Null: a ledger of memory_bytes of its own.
+  MemoryBudget* budget = nullptr;
+  std::size_t run_points = 0;  // points per sorted run; 0: from the ledger
+  // Called once the count and bounding box are known, before any sorted run is
+  // written: a plan that cannot hold the job is refused here (it throws).
+  std::function<void(const SortProgress&)> on_scanned;
   bool progress = true;
   // A resumable sort: run files are fsynced and kept (the caller removes them once it
   // has the merged file), `resume` holds (in) what an earlier process finished and

@@ -1,5 +1,7 @@
 #include "pipeline/run.hpp"
 
+#include "pipeline/memory_budget.hpp"
+
 #include "core/error.hpp"
 #include "io/output_file.hpp"
 #include "io/point_format.hpp"
@@ -49,21 +51,6 @@ constexpr double kWindowBytesPerPoint = 480;
 // Bytes per zone point for the emitted tets (ZoneTets: ~6.8 tets of 4 x 4-byte local
 // ids, and 8-byte labels for the zone's window, ~1.2 points per zone point).
 constexpr double kOutputBytesPerPoint = 125;
-// What the budget keeps for everything else: writer buffers, encoders, the runtime.
-constexpr double kFixedOverheadBytes = 64.0 * (1 << 20);
-// Frames the writer thread compresses at once (on as many threads), and as many wait
-// in its queue. A segment's tets reach the writer in one burst, after its last zone;
-// with one encoder the burst kept the segment loop waiting with a core idle (10^7
-// uniform, 2 threads: the CPU at ~120% for a second after each segment). As many as
-// the machine has cores, whatever --threads (with one worker thread, one encoder left
-// a core idle in every burst: 10^8 points waited 77 s of 629 s for the writer).
-// Capped: each encoder holds ~18 MiB of frames and scratch (writer_queue_bytes), one
-// per 512 MiB of budget at most, and between bursts the encoders idle.
-int writer_encoders(std::uint64_t memory_bytes) {
-  return std::clamp(std::min<int>(omp_get_num_procs(), int(memory_bytes >> 29)), 1, 4);
-}
-
-
 // Tets per frame, about: a frame is cut at the first change of minimum label after
 // this many tets. The segments emit their tets grouped by minimum label and the
 // zones follow each other in label order, so the job's whole stream is ordered by
@@ -71,15 +58,6 @@ int writer_encoders(std::uint64_t memory_bytes) {
 // the same for any segment plan or thread count: the same budget gives the same
 // bytes, and two budgets give the same frames but for the header's options.
 constexpr std::size_t kFrameTets = std::size_t(1) << 18;
-// The frames alive around the writer thread: the queued ones, those being
-// compressed and the one being filled, each about kFrameTets tets of 4 8-byte labels
-// (a frame ends where its last minimum label's group does: a few tets more).
-// Each encoder has its scratch besides (about 40 bytes per tet, io/tet_writer.hpp).
-double writer_queue_bytes(std::uint64_t memory_bytes) {
-  const double encoders = writer_encoders(memory_bytes);
-  return ((2 * encoders + 1) * 32 + encoders * 40) * kFrameTets * 1.05;
-}
-
 class FrameCutter {
  public:
   explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer), frame_(next_frame()) {}
@@ -152,19 +130,46 @@ struct ZonePlan {
   std::uint64_t segment_points = 0;
   int zones = 1;
   double buffer_width = 0;
+  double window_bytes = 0;  // the model's memory for this plan (at most the windows' share)
 };
 
+// What the plan is made from: the sorted view and its index once they exist, or,
+// before the sort, the first pass's count and bounding box with the index's size
+// estimated (pipeline/memory_budget.hpp) and the mean spacing for the buffers.
+struct PlanInputs {
+  std::uint64_t points = 0;
+  double extent[3] = {0, 0, 0};
+  int axis = 0, strip_axis = 1;
+  double leaf_spacing = 0;  // 0: unknown (the bounding box's mean spacing is used)
+  std::uint64_t index_bytes = 0;
+};
+
+PlanInputs plan_inputs(const SortedView& view, const PointIndex& index) {
+  PlanInputs in;
+  in.points = view.count;
+  for (int k = 0; k < 3; ++k) in.extent[k] = view.bbox_max[k] - view.bbox_min[k];
+  in.axis = view.axis;
+  in.strip_axis = strip_axis(view);
+  in.leaf_spacing = index.leaf_spacing_quantile(0.9);
+  in.index_bytes = std::uint64_t(index.memory_bytes()) + view.hull_points.capacity() * sizeof(SortedPoint) +
+                   (view.hull_index ? std::uint64_t(view.hull_index->memory_bytes()) : 0);
+  return in;
+}
+
+// The windows' share of the ledger for a budget (pipeline/memory_budget.hpp).
+double window_share(std::uint64_t memory_bytes, const PlanInputs& in, int threads) {
+  MemoryBudget budget(memory_bytes, in.points, threads, omp_get_num_procs());
+  return budget.plan_triangulate(in.index_bytes).window_bytes;
+}
+
 // The plan for o.memory_bytes, or none when the budget cannot hold a window.
-std::optional<ZonePlan> try_plan(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
-  const double index_bytes =
-      double(index.memory_bytes()) + double(view.hull_points.capacity() * sizeof(SortedPoint)) +
-      (view.hull_index ? double(view.hull_index->memory_bytes()) : 0.0);
+std::optional<ZonePlan> try_plan(const PlanInputs& in, const RunOptions& o, int threads) {
   double extent[3], volume = 1;
   for (int k = 0; k < 3; ++k) {
-    extent[k] = view.bbox_max[k] - view.bbox_min[k];
+    extent[k] = in.extent[k];
     volume *= std::max(extent[k], 1e-300);
   }
-  const double n = double(view.count);
+  const double n = double(in.points);
   ZonePlan plan;
   // The spacing the buffers are measured in: the bounding box's mean spacing, or the
   // index leaves' 90th percentile when smaller. On uniform points the two agree (the
@@ -172,14 +177,13 @@ std::optional<ZonePlan> try_plan(const SortedView& view, const PointIndex& index
   // times the spacing where the points are, and buffers that thick were a quarter of
   // the insertions (ellipsoid-shell 10^7: 22%). The 90th percentile rather than the
   // median keeps the sparse regions of mixed inputs from thin buffers and many queries.
-  const double mean_spacing = std::cbrt(volume / n), leaf_spacing = index.leaf_spacing_quantile(0.9);
+  const double mean_spacing = std::cbrt(volume / n), leaf_spacing = in.leaf_spacing;
   plan.buffer_width = o.buffer_spacings * (leaf_spacing > 0 ? std::min(leaf_spacing, mean_spacing) : mean_spacing);
   const double w = plan.buffer_width;
-  const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[view.axis], 1e-300));
-  const double strip_extent = std::max(extent[strip_axis(view)], 1e-300);
+  const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[in.axis], 1e-300));
+  const double strip_extent = std::max(extent[in.strip_axis], 1e-300);
   const double t = double(threads);
-  const double available =
-      0.75 * (double(o.memory_bytes) - kFixedOverheadBytes - writer_queue_bytes(o.memory_bytes)) - index_bytes;
+  const double available = window_share(o.memory_bytes, in, threads);
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k);
@@ -202,7 +206,8 @@ std::optional<ZonePlan> try_plan(const SortedView& view, const PointIndex& index
     // the input), or the input too small for k zones.
     if (o.zone_points == 0 && s < std::min(n, 1000.0 * k)) continue;
     const double r = evaluate(k, s).first;
-    if (r < best - 1e-9) best = r, plan.zones = k, plan.segment_points = std::uint64_t(s);
+    if (r < best - 1e-9)
+      best = r, plan.zones = k, plan.segment_points = std::uint64_t(s), plan.window_bytes = evaluate(k, s).second;
   }
   if (plan.segment_points == 0) return std::nullopt;
   return plan;
@@ -210,12 +215,12 @@ std::optional<ZonePlan> try_plan(const SortedView& view, const PointIndex& index
 
 // The plan for the budget; when it cannot hold a window, a UsageError that names the
 // smallest budget that can (to a mebibyte, found by bisection: the plan is cheap).
-ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const RunOptions& o, int threads) {
-  if (std::optional<ZonePlan> plan = try_plan(view, index, o, threads)) return *plan;
+ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads) {
+  if (std::optional<ZonePlan> plan = try_plan(in, o, threads)) return *plan;
   RunOptions larger = o;
   auto works = [&](std::uint64_t bytes) {
     larger.memory_bytes = bytes;
-    return try_plan(view, index, larger, threads).has_value();
+    return try_plan(in, larger, threads).has_value();
   };
   std::uint64_t lo = o.memory_bytes, hi = std::max<std::uint64_t>(2 * lo, std::uint64_t(64) << 20);
   constexpr std::uint64_t kMost = std::uint64_t(1) << 50;
@@ -227,7 +232,33 @@ ZonePlan plan_for_budget(const SortedView& view, const PointIndex& index, const 
   }
   const std::uint64_t need_mib = (hi + (std::uint64_t(1) << 20) - 1) >> 20;
   throw UsageError("--memory " + human_bytes(double(o.memory_bytes)) + " is too small for this input (" +
-                   std::to_string(view.count) + " points): use --memory " + std::to_string(need_mib) + "M or more");
+                   std::to_string(in.points) + " points): use --memory " + std::to_string(need_mib) + "M or more");
+}
+
+// A budget refused before the sort: nothing worth keeping was done.
+class BudgetTooSmall : public UsageError {
+ public:
+  using UsageError::UsageError;
+};
+
+// After the first pass (count and bounding box, nothing written): refuses a budget
+// that cannot hold this many points even with buffers of width 0 and the index's
+// smallest size, i.e. when no plan after the sort could work either. A budget that
+// passes may still be refused after the sort, by the exact plan, with the sort's work
+// kept for a --resume.
+void refuse_budget_before_sort(const SortProgress& p, const RunOptions& o, int threads) {
+  PlanInputs in;
+  in.points = p.input_count;
+  for (int k = 0; k < 3; ++k) in.extent[k] = p.bbox_max[k] - p.bbox_min[k];
+  in.axis = p.axis;
+  in.strip_axis = in.extent[(p.axis + 1) % 3] >= in.extent[(p.axis + 2) % 3] ? (p.axis + 1) % 3 : (p.axis + 2) % 3;
+  in.leaf_spacing = std::numeric_limits<double>::min();  // buffers of width ~0: a lower bound of the need
+  in.index_bytes = std::uint64_t(kIndexBytesLowerBound * double(p.input_count));
+  try {
+    plan_for_budget(in, o, threads);
+  } catch (const UsageError& e) {
+    throw BudgetTooSmall(std::string(e.what()) + " (refused before the sort)");
+  }
 }
 
 }  // namespace
@@ -255,8 +286,8 @@ std::uint64_t parse_memory_size(const std::string& text) {
 void RunOptions::validate() const {
   if (input.empty()) throw UsageError("no input given");
   if (output.empty()) throw UsageError("no output given (-o OUT.tets)");
-  if (memory_bytes < (std::uint64_t(64) << 20))
-    throw UsageError("--memory " + std::to_string(memory_bytes >> 20) + "M is too small: at least 64M");
+  if (memory_bytes < (std::uint64_t(32) << 20))
+    throw UsageError("--memory " + std::to_string(memory_bytes >> 20) + "M is too small: at least 32M");
   if (!(buffer_spacings >= 0) || buffer_spacings > 1000) throw UsageError("--buffer must be in [0, 1000]");
   read.validate();
 }
@@ -414,7 +445,13 @@ std::string identity_difference(const json& saved, const json& now) {
 class Job {
  public:
   Job(const RunOptions& options, std::string dir, Checkpoint* checkpoint, json state, const io::OutputClaim* claim)
-      : options_(options), dir_(std::move(dir)), checkpoint_(checkpoint), state_(std::move(state)), claim_(claim) {}
+      : options_(options),
+        dir_(std::move(dir)),
+        checkpoint_(checkpoint),
+        state_(std::move(state)),
+        claim_(claim),
+        threads_(options.threads > 0 ? options.threads : omp_get_max_threads()),
+        budget_(options.memory_bytes, 0, threads_, omp_get_num_procs()) {}
   RunSummary run();
 
  private:
@@ -428,6 +465,8 @@ class Job {
   Checkpoint* checkpoint_;  // null: not resumable
   json state_;              // what the checkpoint holds (maintained even without one)
   const io::OutputClaim* claim_;  // the output, locked for this job since it began
+  const int threads_;             // the zones triangulated at once
+  MemoryBudget budget_;           // the ledger: every stage's share of --memory
   RunSummary summary_;
   Clock::time_point start_ = Clock::now();
 };
@@ -445,7 +484,11 @@ SortedPoints Job::sort() {
   }
   PointSortOptions sort_options;
   sort_options.memory_bytes = std::size_t(options_.memory_bytes);
+  sort_options.budget = &budget_;
   sort_options.run_points = std::size_t(options_.sort_run_points);
+  // Before any run is written: a budget that cannot hold even the thinnest windows
+  // of this many points is refused now, not after the sort.
+  sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, options_, threads_); };
   sort_options.progress = options_.progress;
   SortProgress progress;
   if (checkpoint_) {
@@ -538,8 +581,13 @@ RunSummary Job::run() {
   view.hull_index = &hull_index;
 
   // ---- segment plan from the budget ----
-  const int threads = options_.threads > 0 ? options_.threads : omp_get_max_threads();
-  const ZonePlan zone_plan = plan_for_budget(view, index, options_, threads);
+  const int threads = threads_;
+  const PlanInputs inputs = plan_inputs(view, index);
+  const ZonePlan zone_plan = plan_for_budget(inputs, options_, threads);
+  budget_.set_points(view.count);
+  const TriangulateShares shares = budget_.plan_triangulate(inputs.index_bytes, zone_plan.window_bytes);
+  for (const MemoryBudget::Share& share : budget_.shares())
+    spdlog::debug("memory: {} {} {}", share.phase, share.name, human_bytes(double(share.bytes)));
   // An eighth of the budget, shared by the workers, for the pages of the sorted file
   // their queries read, counted in the 2 MiB regions that a read may map
   // (MappedRegions). The queries of a zone read the file along the sort axis, and a
@@ -548,7 +596,8 @@ RunSummary Job::run() {
   // with a twentieth of the budget, 61 s with a tenth, 56 s with an eighth (53 s before
   // the regions were counted, peaking over the budget); mixed at 512M 60 s with a
   // tenth, 50 s with an eighth, 41 s with a fifth (49 s before, over the budget).
-  MappedRegions query_regions(mapping.data(), mapping.size(), options_.memory_bytes / 8 / MappedRegions::kRegionBytes,
+  MappedRegions query_regions(mapping.data(), mapping.size(),
+                              std::max<std::size_t>(1, std::size_t(shares.query_page_bytes / MappedRegions::kRegionBytes)),
                               sorted.path);
   view.query_regions = &query_regions;
   const double buffer_width = zone_plan.buffer_width;
@@ -575,7 +624,7 @@ RunSummary Job::run() {
                         {"duplicates_merged", sorted.duplicates}}
                        .dump();
   io::TetWriterOptions writer_options;
-  writer_options.threads = writer_encoders(options_.memory_bytes);  // the writer stage's own team
+  writer_options.threads = shares.encoders;  // the writer stage's own team
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
   writer_options.frame_tets = 2 * kFrameTets;
   writer_options.keep_partial = checkpoint_ != nullptr;
@@ -615,7 +664,7 @@ RunSummary Job::run() {
   // Stage 5 on its own thread behind a bounded queue of frames: compression and I/O
   // overlap the segments. Declared after the writer, so destroyed (cancelled, joined)
   // before it on the way out of a failure.
-  const std::size_t encoders = std::size_t(writer_encoders(options_.memory_bytes));
+  const std::size_t encoders = std::size_t(shares.encoders);
   AsyncTetWriter writer(*writer_holder, encoders, encoders);
   if (!state_.contains("output")) {
     // The points section, in label order, on the writer's thread while the first
@@ -816,6 +865,8 @@ RunSummary Job::run() {
   summary.output_bytes = writer_holder->bytes_written();
   summary.tet_bytes = writer_holder->tet_bytes();
   summary.seconds_total = since(start_);
+  summary.memory_ceiling = budget_.ceiling();
+  summary.memory_shares = budget_.shares();
   return summary;
 }
 
@@ -991,6 +1042,11 @@ RunSummary run_job(const RunOptions& requested) {
     throw;  // left for the user to inspect or --force away
   } catch (const InputError&) {
     // Bad input: nothing to resume.
+    checkpoint.remove();
+    remove_file(options.output + ".partial");
+    throw;
+  } catch (const BudgetTooSmall&) {
+    // Refused after the first pass: nothing was written worth resuming.
     checkpoint.remove();
     remove_file(options.output + ".partial");
     throw;

@@ -8,6 +8,7 @@
 //                                        minimum vertex filter
 //   io::TetWriter                        the compressed container
 #include "io/point_reader.hpp"
+#include "pipeline/memory_budget.hpp"
 
 #include <cstdint>
 #include <string>
@@ -73,6 +74,10 @@ struct RunSummary {
   double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
   double seconds_writer_busy = 0;  // the writer thread compressing and writing (overlapped)
   double seconds_writer_wait = 0;  // the segment loop blocked on the writer (full queue, drains)
+  // The ledger (pipeline/memory_budget.hpp): --memory after any cap, and each share as
+  // planned for this input (empty when a finished checkpoint was only collected).
+  std::uint64_t memory_ceiling = 0;
+  std::vector<MemoryBudget::Share> memory_shares;
   double redundant_ratio() const {  // points inserted beyond one per point, per point
     return points ? double(window_points + repair_points) / double(points) - 1.0 : 0.0;
   }

@@ -73,6 +73,10 @@ void run_run(RunArgs& args, Context& ctx) {
                  {"tets_per_second", tets_per_s},
                  {"resumed", s.resumed},
                  {"segments_resumed", s.segments_resumed}};
+  // The ledger's shares, by phase: what this input was planned to take of --memory.
+  nlohmann::json memory = {{"ceiling", s.memory_ceiling}};
+  for (const pipeline::MemoryBudget::Share& share : s.memory_shares) memory[share.phase][share.name] = share.bytes;
+  ctx.summary["memory_planned"] = memory;
 }
 
 void setup_run(CLI::App& app, Context& ctx) {

@@ -198,13 +198,20 @@ fi
 # ---- 7. budgets: a failure keeps the checkpoint and names a budget that works ----
 if want 7; then
 "$T" -q gen --dist uniform --n 200000 --seed 7 -o b.f64
-expect 2 "use --memory [0-9]*M or more" "$T" -q run b.f64 -o b.tets --memory 64M
+# Far too small: refused after the first pass (count and box), before the sort writes
+# anything, naming a budget; nothing is left behind.
+expect 2 "use --memory [0-9]*M or more (refused before the sort)" "$T" -q run b.f64 -o b.tets --memory 32M
+[ ! -e b.tets.ckpt ] && [ ! -e b.tets.partial ] || fail "a refusal before the sort left files"
+grep -q -- "--resume" err.txt && fail "a refusal before the sort advises a --resume"
+# Too small only for this input's real windows (thick buffers): refused after the
+# sort, whose work is kept for a --resume with the budget named.
+expect 2 "use --memory [0-9]*M or more" "$T" -q run b.f64 -o b.tets --memory 80M --buffer 20
 grep -o "use --memory [0-9]*M" err.txt | head -1 >need.txt
 need=$(sed 's/use --memory //' need.txt)
 [ -e b.tets.ckpt/state.json ] || fail "a budget failure removed the checkpoint"
 grep -q -- "--resume" err.txt || fail "the budget failure does not say how to continue"
-"$T" -q run b.f64 -o b.tets --memory "$need" --resume || fail "--resume with the named budget $need failed"
-"$T" -q run b.f64 -o b2.tets --memory "$need" --no-checkpoint
+"$T" -q run b.f64 -o b.tets --memory "$need" --buffer 20 --resume || fail "--resume with the named budget $need failed"
+"$T" -q run b.f64 -o b2.tets --memory "$need" --buffer 20 --no-checkpoint
 cmp -s b.tets b2.tets || fail "a resume with a new budget differs from a run with that budget"
 "$T" -q run pts.f64 -o huge.tets --memory 1T --zone-points 2000 2>err.txt || fail "--memory 1T failed: $(cat err.txt)"
 grep -q "capped" err.txt || fail "--memory 1T was not capped with a warning"
