@@ -133,13 +133,13 @@ TEST_F(PipelineTest, BudgetPlansZones) {
     o.threads = 2;
     o.input = input;
     o.output = (dir_ / "out.tets").string();
-    o.memory_bytes = std::uint64_t(128) << 20;
+    o.memory_bytes = std::uint64_t(96) << 20;
     o.progress = false;
     const auto summary = pipeline::run_job(o);
     EXPECT_GE(summary.segments, 3u);
     // On uniform points the slabs are thin at this budget and the planner cuts them
-    // into strips. The shell's windows each hold its ~5700 hull vertices, a third of a
-    // segment: strips would repeat them, and the planner rightly keeps whole segments.
+    // into strips (5 segments, 15 zones). The shell's cut depends on its hull
+    // vertices, which every window holds; only its exactness is checked.
     if (g.dist == io::Distribution::kUniform) {
       EXPECT_GT(summary.zones, summary.segments) << "the planner cut no zones";
     }
