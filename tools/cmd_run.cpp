@@ -94,8 +94,11 @@ void setup_run(CLI::App& app, Context& ctx) {
   cmd->add_option("--buffer", args->options.buffer_spacings,
                   "Buffer thickness on each side of a segment, in mean point spacings")
       ->capture_default_str();
-  cmd->add_option("--zone-points", args->options.zone_points,
-                  "Points per segment (default: from --memory; small values force many segments)");
+  // A segment is a label range of the sorted file, a zone a strip of a segment: the
+  // option that sets a segment's size was named --zone-points, which stays an alias.
+  cmd->add_option("--segment-points,--zone-points", args->options.zone_points,
+                  "Points per segment (default: from --memory; small values force many segments). "
+                  "--zone-points is the old name, kept as an alias for one release");
   cmd->add_option("--zones", args->options.zones,
                   "Zones per segment (strips across the sort axis, triangulated --threads at a time); "
                   "0: the number that wastes the least on buffers for --memory")

@@ -24,6 +24,12 @@ s=$("$T" -q --json run points.f64 -o out.tets --memory 64M --tmpdir tmp --zone-p
 [ "$(echo "$s" | json "d['points'], d['segments'] >= 10, d['tets'] > 100000")" = "20000 True True" ] || fail "run --json: $s"
 "$T" -q verify out.tets >/dev/null || fail "verify rejected the output of run"
 no_leftovers
+# --segment-points is the option's name; --zone-points its old one: the same job.
+"$T" -q run points.f64 -o seg.tets --memory 64M --tmpdir tmp --segment-points 2000
+cmp -s out.tets seg.tets || fail "--segment-points and --zone-points differ"
+# The ledger's shares in --json, each phase within the budget.
+[ "$(echo "$s" | json "all(sum(d['memory_planned'][p].values()) <= d['memory_planned']['ceiling'] for p in ('sort', 'triangulate'))")" = "True" ] \
+  || fail "memory_planned over the ceiling or missing: $s"
 for f in points.ply points.npy points.txt; do
   "$T" -q gen --dist ellipsoid-shell --n 20000 --seed 7 -o "$f"
   "$T" -q run "$f" -o "out-${f#points.}.tets" --memory 64M --tmpdir tmp --zone-points 2000
