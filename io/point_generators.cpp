@@ -75,8 +75,63 @@ class PointRng {
 constexpr std::uint64_t kPurposePoint = 0x706f696e74ULL;     // "point"
 constexpr std::uint64_t kPurposeDup = 0x6475706cULL;         // "dupl"
 constexpr std::uint64_t kPurposeClusters = 0x636c7573ULL;    // "clus"
+constexpr std::uint64_t kPurposeTerrain = 0x74657272ULL;     // "terr"
+constexpr std::uint64_t kPurposeBuildings = 0x626c6467ULL;   // "bldg"
 
 std::uint64_t key_for(std::uint64_t seed, std::uint64_t purpose) { return mix64(mix64(seed) ^ purpose); }
+
+// The terrain: a 1 km x 1 km airborne LiDAR tile (see distribution_help).
+constexpr double kTileMetres = 1000, kCellMetres = 40, kFootprintMetres = 24;
+constexpr double kOffsetX = 500000, kOffsetY = 4000000, kOffsetZ = 100;  // UTM-like
+
+double terrain_ground(const double* phase, double x, double y) {
+  constexpr double tau = 2 * std::numbers::pi;
+  return 30 * std::sin(tau * x / 700 + phase[0]) * std::cos(tau * y / 900 + phase[1]) +
+         8 * std::sin(tau * (x + y) / 230 + phase[2]) + 1.5 * std::sin(tau * x / 57 + phase[3]) * std::sin(tau * y / 43);
+}
+
+// The building of 40 m cell (cx, cy), if any: 30% of the cells hold one, a 24 m square
+// in the cell's middle with a flat roof 5 to 25 m above the ground at its centre.
+bool terrain_building(std::uint64_t key, const double* phase, std::int64_t cx, std::int64_t cy, double* lo,
+                      double* hi, double* roof) {
+  PointRng rng(key, std::uint64_t(cx) * 1000003u + std::uint64_t(cy));
+  if (!(rng.uniform() < 0.3)) return false;
+  const double margin = (kCellMetres - kFootprintMetres) / 2;
+  lo[0] = double(cx) * kCellMetres + margin, lo[1] = double(cy) * kCellMetres + margin;
+  hi[0] = lo[0] + kFootprintMetres, hi[1] = lo[1] + kFootprintMetres;
+  *roof = terrain_ground(phase, lo[0] + kFootprintMetres / 2, lo[1] + kFootprintMetres / 2) + 5 + 20 * rng.uniform();
+  return true;
+}
+
+// A centimetre-quantised coordinate, as a LAS file with scale 0.01 stores it.
+double centimetres(double v) { return std::round(v * 100) / 100; }
+
+void terrain_point(PointRng& rng, std::uint64_t key_buildings, const double* phase, double* p) {
+  const double kind = rng.uniform();
+  double x = kTileMetres * rng.uniform(), y = kTileMetres * rng.uniform();
+  double ground = terrain_ground(phase, x, y), z = ground;
+  double lo[2], hi[2], roof = 0;
+  const auto cx = std::int64_t(x / kCellMetres), cy = std::int64_t(y / kCellMetres);
+  const bool building = terrain_building(key_buildings, phase, cx, cy, lo, hi, &roof);
+  const bool inside = building && x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1];
+  if (kind < 0.08 && building) {
+    // A wall: the point moved to the nearest side of the footprint, anywhere up to the roof.
+    const double d[4] = {x - lo[0], hi[0] - x, y - lo[1], hi[1] - y};
+    const int side = int(std::min_element(d, d + 4) - d);
+    if (side == 0) x = lo[0];
+    else if (side == 1) x = hi[0];
+    else if (side == 2) y = lo[1];
+    else y = hi[1];
+    x = std::clamp(x, lo[0], hi[0]), y = std::clamp(y, lo[1], hi[1]);
+    ground = terrain_ground(phase, x, y);
+    z = ground + (roof - ground) * rng.uniform();
+  } else if (inside) {
+    z = roof;  // flat roofs: many coplanar points
+  } else if (kind < 0.2) {
+    z = ground + 15 * rng.uniform() * rng.uniform();  // vegetation returns, mostly low
+  }
+  p[0] = centimetres(x) + kOffsetX, p[1] = centimetres(y) + kOffsetY, p[2] = centimetres(z + kOffsetZ);
+}
 
 }  // namespace
 
@@ -89,6 +144,8 @@ const char* to_string(Distribution d) {
     case Distribution::kClusters: return "clusters";
     case Distribution::kGrid: return "grid";
     case Distribution::kSphere: return "sphere";
+    case Distribution::kTerrain: return "terrain";
+    case Distribution::kTwoPlates: return "two-plates";
   }
   return "?";
 }
@@ -96,12 +153,14 @@ const char* to_string(Distribution d) {
 Distribution parse_distribution(std::string_view name) {
   for (Distribution d : {Distribution::kUniform, Distribution::kBall, Distribution::kEllipsoidShell,
                          Distribution::kMixed, Distribution::kClusters, Distribution::kGrid,
-                         Distribution::kSphere}) {
+                         Distribution::kSphere, Distribution::kTerrain, Distribution::kTwoPlates}) {
     if (name == to_string(d)) return d;
   }
   if (name == "shell" || name == "ellipsoid") return Distribution::kEllipsoidShell;
+  if (name == "lidar") return Distribution::kTerrain;
   throw UsageError("unknown distribution '" + std::string(name) +
-                   "' (expected uniform, ball, ellipsoid-shell, mixed, clusters, grid or sphere)");
+                   "' (expected uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain or "
+                   "two-plates)");
 }
 
 const char* distribution_help() {
@@ -130,6 +189,14 @@ const char* distribution_help() {
       "                   x varies fastest. Degenerate: many cospherical and coplanar points.\n"
       "  sphere           on the sphere of radius --radius (default 1) centred at 0: normalised\n"
       "                   Gaussian vectors, so |p| = r up to rounding (within 1e-15 r).\n"
+      "  terrain          (alias lidar) an airborne LiDAR tile of 1 km x 1 km: a height field of\n"
+      "                   hills (about +-40 m) with 24 m square buildings in 30% of the 40 m\n"
+      "                   cells (flat roofs 5-25 m up), 8% of the points on their walls and 12%\n"
+      "                   vegetation returns up to 15 m above the ground; UTM-like offsets\n"
+      "                   (x + 500000, y + 4000000, z + 100) and 1 cm quantisation, as a LAS\n"
+      "                   file with scale 0.01 holds them. A surface: most tets are flat.\n"
+      "  two-plates       two parallel plates, z = 0.25 and z = 0.75 (one point in two on each),\n"
+      "                   x, y uniform in [0, 1), z jittered uniformly by +-0.1 * --spread.\n"
       "--duplicates F: each point i > 0 is, with probability F, an exact copy of point\n"
       "floor(v * i) for a uniform v (resolved to an original point), so about F * n points\n"
       "repeat an earlier one.\n";
@@ -189,6 +256,12 @@ PointGenerator::PointGenerator(const GeneratorOptions& options) : opt_(options) 
       cluster_cdf_.back() = 1.0;
       break;
     }
+    case Distribution::kTerrain: {
+      PointRng rng(key_for(opt_.seed, kPurposeTerrain), 0);
+      for (double& ph : terrain_phase_) ph = 2 * std::numbers::pi * rng.uniform();
+      key_buildings_ = key_for(opt_.seed, kPurposeBuildings);
+      break;
+    }
     default: break;
   }
 }
@@ -244,6 +317,14 @@ void PointGenerator::base_point(std::uint64_t i, double* p) const {
       const auto it = std::upper_bound(cluster_cdf_.begin(), cluster_cdf_.end(), u);
       const Cluster& cl = clusters_[std::min<std::size_t>(it - cluster_cdf_.begin(), clusters_.size() - 1)];
       for (int c = 0; c < 3; ++c) p[c] = cl.centre[c] + cl.sigma * rng.normal();
+      return;
+    }
+    case Distribution::kTerrain:
+      terrain_point(rng, key_buildings_, terrain_phase_, p);
+      return;
+    case Distribution::kTwoPlates: {
+      const double plate = rng.uniform() < 0.5 ? 0.25 : 0.75;
+      p[0] = rng.uniform(), p[1] = rng.uniform(), p[2] = plate + 0.1 * opt_.spread * rng.symmetric();
       return;
     }
     case Distribution::kGrid: {

@@ -17,7 +17,7 @@
 
 namespace tetstream::io {
 
-enum class Distribution { kUniform, kBall, kEllipsoidShell, kMixed, kClusters, kGrid, kSphere };
+enum class Distribution { kUniform, kBall, kEllipsoidShell, kMixed, kClusters, kGrid, kSphere, kTerrain, kTwoPlates };
 
 const char* to_string(Distribution d);
 Distribution parse_distribution(std::string_view name);  // throws UsageError
@@ -58,6 +58,8 @@ class PointGenerator {
   double h_ = 0;
   // ellipsoid-shell: max of the area element, for the rejection step
   double shell_gmax_ = 0;
+  double terrain_phase_[4] = {0, 0, 0, 0};  // the terrain's height field, drawn from the seed
+  std::uint64_t key_buildings_ = 0;         // which 40 m cells hold a building, and how high
   // clusters
   struct Cluster {
     double centre[3];

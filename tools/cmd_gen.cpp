@@ -87,7 +87,7 @@ void setup_gen(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<GenArgs>();
   CLI::App* cmd = app.add_subcommand("gen", "Generate a seeded synthetic point set");
   cmd->footer(io::distribution_help());
-  cmd->add_option("--dist", args->dist, "Distribution: uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere")
+  cmd->add_option("--dist", args->dist, "Distribution: uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain, two-plates")
       ->capture_default_str();
   cmd->add_option("-n,--n", args->gen.n, "Number of points (grid: rounded to the nearest cube)")->required();
   cmd->add_option("--seed", args->gen.seed, "Random seed")->capture_default_str();

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <set>
 #include <tuple>
 #include <vector>
@@ -30,7 +31,7 @@ std::vector<double> gen(Distribution d, std::uint64_t n, std::uint64_t seed = kS
 
 const Distribution kAll[] = {Distribution::kUniform,  Distribution::kBall, Distribution::kEllipsoidShell,
                              Distribution::kMixed,    Distribution::kClusters, Distribution::kGrid,
-                             Distribution::kSphere};
+                             Distribution::kSphere,   Distribution::kTerrain, Distribution::kTwoPlates};
 
 }  // namespace
 
@@ -207,6 +208,45 @@ TEST(Generators, ClustersAreReproducibleAndBounded) {
     ASSERT_GT(v, -0.3);
     ASSERT_LT(v, 1.3);
   }
+}
+
+// The LiDAR-like tile: UTM-like offsets, centimetre quantisation, a 1 km square, and
+// its classes (flat roofs: many points at one height; walls: points that share x or y).
+TEST(Generators, TerrainIsALidarTile) {
+  const auto p = gen(Distribution::kTerrain, 50000);
+  std::map<std::pair<int, int>, std::map<double, int>> cell_heights;  // 40 m cell -> height -> points
+  for (std::size_t i = 0; i < p.size(); i += 3) {
+    const double x = p[i] - 500000, y = p[i + 1] - 4000000, z = p[i + 2] - 100;
+    ASSERT_GE(x, 0.0);
+    ASSERT_LE(x, 1000.0);
+    ASSERT_GE(y, 0.0);
+    ASSERT_LE(y, 1000.0);
+    ASSERT_LT(std::fabs(z), 70.0) << "height field of +-40 m, roofs and trees up to 25 m above it";
+    for (double v : {x, y, p[i + 2]}) ASSERT_NEAR(v * 100, std::round(v * 100), 1e-4) << "centimetres";
+    ++cell_heights[{int(x / 40), int(y / 40)}][p[i + 2]];
+  }
+  // Flat roofs: about 30% of the 625 cells hold ~29 points at one height, which the
+  // smooth, centimetre-quantised ground (about 80 points a cell over metres of
+  // relief) does not.
+  int roofs = 0;
+  for (const auto& [cell, heights] : cell_heights) {
+    int most = 0;
+    for (const auto& [z, count] : heights) most = std::max(most, count);
+    roofs += most >= 10;
+  }
+  EXPECT_GT(roofs, 120);
+  EXPECT_LT(roofs, 260);
+}
+
+TEST(Generators, TwoPlatesAreThin) {
+  const auto p = gen(Distribution::kTwoPlates, 20000);
+  std::size_t low = 0;
+  for (std::size_t i = 0; i < p.size(); i += 3) {
+    const double z = p[i + 2];
+    ASSERT_TRUE(std::fabs(z - 0.25) <= 0.001 || std::fabs(z - 0.75) <= 0.001) << z;
+    low += z < 0.5;
+  }
+  EXPECT_NEAR(double(low) / 20000, 0.5, 0.02);
 }
 
 TEST(Generators, OptionsAreValidated) {

@@ -109,6 +109,10 @@ TEST_F(PipelineTest, EllipsoidShell) { expect_same_as_incore(dist(io::Distributi
 TEST_F(PipelineTest, Mixed) { expect_same_as_incore(dist(io::Distribution::kMixed, 20000, 4), 1500, 10); }
 TEST_F(PipelineTest, Clusters) { expect_same_as_incore(dist(io::Distribution::kClusters, 20000, 5), 1500, 10); }
 TEST_F(PipelineTest, GridIsDegenerateButExact) { expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 600, 10); }
+// Surfaces: a LiDAR-like tile (flat roofs, walls, centimetre lattice, UTM offsets) and
+// two jittered plates: most tets are flat and their balls huge.
+TEST_F(PipelineTest, TerrainManySegments) { expect_same_as_incore(dist(io::Distribution::kTerrain, 20000, 7), 1500, 10); }
+TEST_F(PipelineTest, TwoPlatesManySegments) { expect_same_as_incore(dist(io::Distribution::kTwoPlates, 20000, 8), 1500, 10); }
 TEST_F(PipelineTest, SphereCospherical) { expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 150, 10); }
 
 // Parallel zonal insertion: each segment split into 3 strips, whose boundaries are
@@ -121,6 +125,8 @@ TEST_F(PipelineTest, ZonesInsideSegments) {
   expect_same_as_incore(dist(io::Distribution::kClusters, 20000, 5), 5000, 4, 3);
   expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 2000, 4, 3);
   expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 800, 2, 3);
+  expect_same_as_incore(dist(io::Distribution::kTerrain, 20000, 7), 5000, 4, 3);
+  expect_same_as_incore(dist(io::Distribution::kTwoPlates, 20000, 8), 5000, 4, 3);
 }
 
 // The planner's own choice: a budget small enough that the segments are cut into
