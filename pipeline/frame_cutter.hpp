@@ -1,0 +1,69 @@
+#pragma once
+// Frames of the output: where the tets of the zones become the container's frames.
+#include "pipeline/async_tet_writer.hpp"
+#include "pipeline/segment.hpp"
+
+#include <cstddef>
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// Tets per frame, about: a frame is cut at the first change of minimum label after
+// this many tets. The segments emit their tets grouped by minimum label and the
+// zones follow each other in label order, so the job's whole stream is ordered by
+// minimum label, and the frames (each a set, stored canonically by the codec) are
+// the same for any segment plan or thread count: the same budget gives the same
+// bytes, and two budgets give the same frames but for the header's options.
+inline constexpr std::size_t kFrameTets = std::size_t(1) << 18;
+
+// The last stage before the writer: turns the zones' output, in minimum-label order,
+// into frames of about kFrameTets tets, cut where the minimum label changes.
+class FrameCutter {
+ public:
+  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer), frame_(next_frame()) {}
+
+  // Appends the tets [begin, end) of a zone's output, translated to labels straight
+  // into the frame being filled (they come in increasing minimum-label order; a group
+  // may go on in the next call). A frame is handed to the writer, not copied, at the
+  // first change of minimum label after kFrameTets tets.
+  void add(const ZoneTets& part, std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const std::uint64_t q[4] = {part.label(i, 0), part.label(i, 1), part.label(i, 2), part.label(i, 3)};
+      const std::uint64_t m = tet_min_label(q);
+      if (frame_.size() >= 4 * kFrameTets && m != last_min_) write();
+      frame_.insert(frame_.end(), q, q + 4);
+      last_min_ = m;
+    }
+  }
+  void flush() {
+    if (!frame_.empty()) write();
+  }
+  // The tets of the frame being filled: a checkpoint saves them, a resumed job
+  // restores them, and its frames come out as an uninterrupted job's.
+  const std::vector<std::uint64_t>& pending() const { return frame_; }
+  void restore(std::vector<std::uint64_t> pending) {
+    frame_ = std::move(pending);
+    if (!frame_.empty()) last_min_ = tet_min_label(&frame_[frame_.size() - 4]);
+  }
+
+ private:
+  void write() {
+    writer_.add_tets(std::move(frame_));
+    frame_ = next_frame();
+  }
+  // An empty frame with room for kFrameTets tets and a group's overrun (a recycled
+  // buffer keeps its capacity).
+  std::vector<std::uint64_t> next_frame() {
+    std::vector<std::uint64_t> f = writer_.take_buffer();
+    f.reserve(4 * kFrameTets + 4096);
+    return f;
+  }
+
+  AsyncTetWriter& writer_;
+  std::vector<std::uint64_t> frame_;
+  std::uint64_t last_min_ = ~std::uint64_t(0);
+};
+
+}  // namespace tetstream::pipeline

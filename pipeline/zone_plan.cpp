@@ -1,0 +1,143 @@
+#include "pipeline/zone_plan.hpp"
+
+#include "pipeline/memory_budget.hpp"
+#include "pipeline/progress.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <string>
+#include <utility>
+
+namespace tetstream::pipeline {
+
+namespace {
+
+// Bytes per window point at the kernel's peak: tets (~6.75 x 32 bytes), the kernel's
+// coordinate copy and vertex arrays, the window's coordinates and labels, the mapped
+// sorted record and the spatial index, with headroom for the allocator; measured with
+// /usr/bin/time on uniform data (480 overshot 1G by 2% at 10^7 points once the kernel
+// kept its own coordinates: scripts/bench-pipeline --sizes 10000000, peak 1047 MiB).
+constexpr double kWindowBytesPerPoint = 480;
+// Bytes per zone point for the emitted tets (ZoneTets: ~6.8 tets of 4 x 4-byte local
+// ids, and 8-byte labels for the zone's window, ~1.2 points per zone point).
+constexpr double kOutputBytesPerPoint = 125;
+
+// The windows' share of the ledger for a budget (pipeline/memory_budget.hpp).
+double window_share(std::uint64_t memory_bytes, const PlanInputs& in, int threads) {
+  MemoryBudget budget(memory_bytes, in.points, threads, omp_get_num_procs());
+  return budget.plan_triangulate(in.index_bytes).window_bytes;
+}
+
+// The plan for o.memory_bytes, or none when the budget cannot hold a window.
+std::optional<ZonePlan> try_plan(const PlanInputs& in, const RunOptions& o, int threads) {
+  double extent[3], volume = 1;
+  for (int k = 0; k < 3; ++k) {
+    extent[k] = in.extent[k];
+    volume *= std::max(extent[k], 1e-300);
+  }
+  const double n = double(in.points);
+  ZonePlan plan;
+  // The spacing the buffers are measured in: the bounding box's mean spacing, or the
+  // index leaves' 90th percentile when smaller. On uniform points the two agree (the
+  // percentile is 1.00 of the mean at 10^6); on a shell or in clusters the mean is 2-4
+  // times the spacing where the points are, and buffers that thick were a quarter of
+  // the insertions (ellipsoid-shell 10^7: 22%). The 90th percentile rather than the
+  // median keeps the sparse regions of mixed inputs from thin buffers and many queries.
+  const double mean_spacing = std::cbrt(volume / n), leaf_spacing = in.leaf_spacing;
+  plan.buffer_width = o.buffer_spacings * (leaf_spacing > 0 ? std::min(leaf_spacing, mean_spacing) : mean_spacing);
+  const double w = plan.buffer_width;
+  const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[in.axis], 1e-300));
+  const double strip_extent = std::max(extent[in.strip_axis], 1e-300);
+  const double t = double(threads);
+  const double available = window_share(o.memory_bytes, in, threads);
+  auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
+  auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
+    const double window = (segment_points + axis_buffers) * share(k);
+    const double zone = segment_points / k;
+    const double memory =
+        t * window * kWindowBytesPerPoint + (double(k) + t - 1) * zone * kOutputBytesPerPoint;
+    return std::pair{window / zone - 1, memory};
+  };
+  auto largest_segment = [&](int k) {  // S with memory(S) = available (linear in S)
+    const double fixed = evaluate(k, 0).second;
+    return (available - fixed) / (evaluate(k, 1).second - fixed);
+  };
+  int first_k = 1, last_k = 256;
+  if (o.zones > 0) first_k = last_k = o.zones;
+  else if (o.zone_points > 0) last_k = 1;  // --zone-points alone: whole segments
+  double best = std::numeric_limits<double>::infinity();
+  for (int k = first_k; k <= last_k; ++k) {
+    const double s = o.zone_points > 0 ? double(o.zone_points) : std::min(n, largest_segment(k));
+    // Zones under 1000 points: the budget is too small for this k (for k = 1, for
+    // the input), or the input too small for k zones.
+    if (o.zone_points == 0 && s < std::min(n, 1000.0 * k)) continue;
+    const double r = evaluate(k, s).first;
+    if (r < best - 1e-9)
+      best = r, plan.zones = k, plan.segment_points = std::uint64_t(s), plan.window_bytes = evaluate(k, s).second;
+  }
+  if (plan.segment_points == 0) return std::nullopt;
+  return plan;
+}
+
+}  // namespace
+
+PlanInputs plan_inputs(const SortedView& view, const PointIndex& index) {
+  PlanInputs in;
+  in.points = view.count;
+  for (int k = 0; k < 3; ++k) in.extent[k] = view.bbox_max[k] - view.bbox_min[k];
+  in.axis = view.axis;
+  in.strip_axis = strip_axis(view);
+  in.leaf_spacing = index.leaf_spacing_quantile(0.9);
+  in.index_bytes = std::uint64_t(index.memory_bytes()) + view.hull_points.capacity() * sizeof(SortedPoint) +
+                   (view.hull_index ? std::uint64_t(view.hull_index->memory_bytes()) : 0);
+  return in;
+}
+
+// The plan for the budget; when it cannot hold a window, a UsageError that names the
+// smallest budget that can (to a mebibyte, found by bisection: the plan is cheap).
+ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads) {
+  if (std::optional<ZonePlan> plan = try_plan(in, o, threads)) return *plan;
+  RunOptions larger = o;
+  auto works = [&](std::uint64_t bytes) {
+    larger.memory_bytes = bytes;
+    return try_plan(in, larger, threads).has_value();
+  };
+  std::uint64_t lo = o.memory_bytes, hi = std::max<std::uint64_t>(2 * lo, std::uint64_t(64) << 20);
+  constexpr std::uint64_t kMost = std::uint64_t(1) << 50;
+  while (hi < kMost && !works(hi)) lo = hi, hi *= 2;
+  if (hi >= kMost) throw UsageError("no memory budget can hold a window of this input");
+  while (hi - lo > (std::uint64_t(1) << 20)) {
+    const std::uint64_t mid = lo + (hi - lo) / 2;
+    (works(mid) ? hi : lo) = mid;
+  }
+  const std::uint64_t need_mib = (hi + (std::uint64_t(1) << 20) - 1) >> 20;
+  throw UsageError("--memory " + human_bytes(double(o.memory_bytes)) + " is too small for this input (" +
+                   std::to_string(in.points) + " points): use --memory " + std::to_string(need_mib) + "M or more");
+}
+
+// After the first pass (count and bounding box, nothing written): refuses a budget
+// that cannot hold this many points even with buffers of width 0 and the index's
+// smallest size, i.e. when no plan after the sort could work either. A budget that
+// passes may still be refused after the sort, by the exact plan, with the sort's work
+// kept for a --resume.
+void refuse_budget_before_sort(const SortProgress& p, const RunOptions& o, int threads) {
+  PlanInputs in;
+  in.points = p.input_count;
+  for (int k = 0; k < 3; ++k) in.extent[k] = p.bbox_max[k] - p.bbox_min[k];
+  in.axis = p.axis;
+  in.strip_axis = in.extent[(p.axis + 1) % 3] >= in.extent[(p.axis + 2) % 3] ? (p.axis + 1) % 3 : (p.axis + 2) % 3;
+  in.leaf_spacing = std::numeric_limits<double>::min();  // buffers of width ~0: a lower bound of the need
+  in.index_bytes = std::uint64_t(kIndexBytesLowerBound * double(p.input_count));
+  try {
+    plan_for_budget(in, o, threads);
+  } catch (const UsageError& e) {
+    throw BudgetTooSmall(std::string(e.what()) + " (refused before the sort)");
+  }
+}
+
+
+}  // namespace tetstream::pipeline
