@@ -239,6 +239,16 @@ class Job {
 
  private:
   SortedPoints sort();
+  void index_and_hull(const SortedPoints& sorted, const boost::iostreams::mapped_file_source& mapping,
+                      SortedView& view, PointIndex& index, PointIndex& hull_index);
+  struct OpenedOutput {
+    std::unique_ptr<io::TetWriter> writer;
+    SegmentStats work;             // of the segments an earlier process wrote
+    std::uint64_t zone_points = 0;
+    std::uint64_t first_label = 0;  // where the segments go on
+    std::vector<std::uint64_t> pending;  // the frame that was being filled (4 labels a tet)
+  };
+  OpenedOutput open_output(const SortedPoints& sorted, const SortedView& view, const TriangulateShares& shares);
   void save() {
     if (checkpoint_) checkpoint_->save(state_);
   }
@@ -297,6 +307,108 @@ SortedPoints Job::sort() {
   return sorted;
 }
 
+// Stage 2: the spatial index over the sorted file, and the global hull's boundary
+// points (the hull of the runs' candidates) with their own small index.
+void Job::index_and_hull(const SortedPoints& sorted, const boost::iostreams::mapped_file_source& mapping,
+                         SortedView& view, PointIndex& index, PointIndex& hull_index) {
+  view.sample_keys(/*release_file_pages=*/true);
+  // An index over sorted records spread in the job's bounding box (its blocks' size
+  // from their count in that box).
+  auto build_index = [&view](PointIndex& into, const SortedPoint* points, std::uint64_t count, bool release_pages) {
+    double volume = 1;
+    for (int k = 0; k < 3; ++k) volume *= view.bbox_max[k] - view.bbox_min[k];
+    into.build(points, count, view.axis,
+                PointIndex::block_points_for(count, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume),
+                release_pages);
+  };
+  build_index(index, view.points, view.count, /*release_pages=*/true);
+  view.index = &index;
+
+  // The global hull: the hull of the runs' candidates.
+  {
+    std::vector<double> xyz;
+    // In label order, handing the pages back behind: a shell's hull candidates are
+    // all over the file.
+    ReleaseBehind release(view.points, 0, true);
+    for (std::uint64_t label : sorted.hull_labels) {
+      xyz.insert(xyz.end(), view.points[label].xyz, view.points[label].xyz + 3);
+      release.reached(label);
+    }
+    std::vector<std::uint32_t> hull = hull_vertex_candidates(xyz.data(), sorted.hull_labels.size());
+    std::sort(hull.begin(), hull.end());  // candidates are sorted by label: so are these
+    for (std::uint32_t i : hull) {
+      SortedPoint p;
+      std::copy_n(&xyz[3 * std::size_t(i)], 3, p.xyz);
+      p.original = sorted.hull_labels[i];
+      view.hull_points.push_back(p);
+    }
+    release_mapped_pages(mapping.data(), mapping.size());
+    summary_.hull_vertices = view.hull_points.size();
+  }
+  if (!view.hull_points.empty()) build_index(hull_index, view.hull_points.data(), view.hull_points.size(), false);
+  view.hull_index = &hull_index;
+}
+
+// Stage 5's file: the container's header and writer, new, or the checkpoint's partial
+// output reopened at its last commit with the frame pending there and the counters.
+Job::OpenedOutput Job::open_output(const SortedPoints& sorted, const SortedView& view, const TriangulateShares& shares) {
+  // The budget the output's header names: the one its first process wrote it with (a
+  // resumed job may run with another; the frames do not depend on it).
+  if (!state_.contains("header_memory")) state_["header_memory"] = options_.memory_bytes;
+  const std::uint64_t header_memory = state_["header_memory"].get<std::uint64_t>();
+  if (header_memory != options_.memory_bytes)
+    spdlog::info("resumed with --memory {}: the output keeps the budget it was started with, {}",
+                 human_bytes(double(options_.memory_bytes)), human_bytes(double(header_memory)));
+  io::TetFileHeader header;
+  header.point_count = view.count;
+  header.input_count = sorted.input_count;
+  header.coord_type = io::CoordType::kFloat64;
+  for (int k = 0; k < 3; ++k) header.bbox_min[k] = view.bbox_min[k], header.bbox_max[k] = view.bbox_max[k];
+  header.tool = "tetstream 0.1.0";
+  header.options = json{{"command", "run"},
+                        {"input", options_.input},
+                        {"memory", header_memory},
+                        {"buffer_spacings", options_.buffer_spacings},
+                        {"axis", std::string(1, "xyz"[view.axis])},
+                        {"duplicates_merged", sorted.duplicates}}
+                       .dump();
+  io::TetWriterOptions writer_options;
+  writer_options.threads = shares.encoders;  // the writer stage's own team
+  // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
+  writer_options.frame_tets = 2 * kFrameTets;
+  writer_options.keep_partial = checkpoint_ != nullptr;
+  writer_options.claim = claim_;
+  OpenedOutput o;
+  if (state_.contains("output")) {
+    const json& out = state_["output"];
+    const std::uint64_t committed = out.at("committed").get<std::uint64_t>();
+    std::error_code ec;
+    const std::string partial = options_.output + ".partial";
+    const std::uintmax_t have = std::filesystem::file_size(partial, ec);
+    if (ec || have < committed)
+      throw DamagedCheckpoint(partial + ": " + (ec ? std::string("missing") : std::to_string(have) + " bytes") +
+                              ", but the checkpoint committed " + std::to_string(committed) + " (damaged checkpoint)");
+    try {
+      o.writer = io::TetWriter::resume(options_.output, header, committed, writer_options);
+    } catch (const InputError& e) {
+      throw DamagedCheckpoint(std::string(e.what()) + " (damaged checkpoint)");
+    }
+    o.first_label = out.at("next_label").get<std::uint64_t>();
+    o.pending.resize(4 * out.at("pending_tets").get<std::size_t>());
+    if (!o.pending.empty())
+      read_file_exactly(checkpoint_->path(out.at("pending_file").get<std::string>()), o.pending.data(),
+                        o.pending.size() * sizeof(std::uint64_t), out.at("pending_crc32c").get<std::uint32_t>());
+    counters_from(out.at("counters"), o.work, o.zone_points);
+    record_work(o.work, o.zone_points, summary_);
+    summary_.segments_resumed = out.at("segments").get<std::uint64_t>();
+    spdlog::info("resuming after {} segments: labels from {} of {}, {} tets written", summary_.segments_resumed,
+                 o.first_label, view.count, summary_.tets);
+  } else {
+    o.writer = std::make_unique<io::TetWriter>(options_.output, header, writer_options);
+  }
+  return o;
+}
+
 RunSummary Job::run() {
   RunSummary& summary = summary_;
   summary.resumed = state_.contains("sort") || state_.contains("sorted");
@@ -324,44 +436,8 @@ RunSummary Job::run() {
   view.axis = sorted.axis;
   for (int k = 0; k < 3; ++k) view.bbox_min[k] = sorted.bbox_min[k], view.bbox_max[k] = sorted.bbox_max[k];
 
-  view.sample_keys(/*release_file_pages=*/true);
-  // An index over sorted records spread in the job's bounding box (its blocks' size
-  // from their count in that box).
-  auto build_index = [&view](PointIndex& index, const SortedPoint* points, std::uint64_t count, bool release_pages) {
-    double volume = 1;
-    for (int k = 0; k < 3; ++k) volume *= view.bbox_max[k] - view.bbox_min[k];
-    index.build(points, count, view.axis,
-                PointIndex::block_points_for(count, view.bbox_max[view.axis] - view.bbox_min[view.axis], volume),
-                release_pages);
-  };
-  PointIndex index;
-  build_index(index, view.points, view.count, /*release_pages=*/true);
-  view.index = &index;
-
-  // The global hull: the hull of the runs' candidates.
-  {
-    std::vector<double> xyz;
-    // In label order, handing the pages back behind: a shell's hull candidates are
-    // all over the file.
-    ReleaseBehind release(view.points, 0, true);
-    for (std::uint64_t label : sorted.hull_labels) {
-      xyz.insert(xyz.end(), view.points[label].xyz, view.points[label].xyz + 3);
-      release.reached(label);
-    }
-    std::vector<std::uint32_t> hull = hull_vertex_candidates(xyz.data(), sorted.hull_labels.size());
-    std::sort(hull.begin(), hull.end());  // candidates are sorted by label: so are these
-    for (std::uint32_t i : hull) {
-      SortedPoint p;
-      std::copy_n(&xyz[3 * std::size_t(i)], 3, p.xyz);
-      p.original = sorted.hull_labels[i];
-      view.hull_points.push_back(p);
-    }
-    release_mapped_pages(mapping.data(), mapping.size());
-    summary.hull_vertices = view.hull_points.size();
-  }
-  PointIndex hull_index;
-  if (!view.hull_points.empty()) build_index(hull_index, view.hull_points.data(), view.hull_points.size(), false);
-  view.hull_index = &hull_index;
+  PointIndex index, hull_index;
+  index_and_hull(sorted, mapping, view, index, hull_index);
 
   // ---- segment plan from the budget ----
   const int threads = threads_;
@@ -386,64 +462,12 @@ RunSummary Job::run() {
   const double buffer_width = zone_plan.buffer_width;
 
   // ---- writer: header and points (or the checkpoint's partial output) ----
-  // The budget the output's header names: the one its first process wrote it with (a
-  // resumed job may run with another; the frames do not depend on it).
-  if (!state_.contains("header_memory")) state_["header_memory"] = options_.memory_bytes;
-  const std::uint64_t header_memory = state_["header_memory"].get<std::uint64_t>();
-  if (header_memory != options_.memory_bytes)
-    spdlog::info("resumed with --memory {}: the output keeps the budget it was started with, {}",
-                 human_bytes(double(options_.memory_bytes)), human_bytes(double(header_memory)));
-  io::TetFileHeader header;
-  header.point_count = view.count;
-  header.input_count = sorted.input_count;
-  header.coord_type = io::CoordType::kFloat64;
-  for (int k = 0; k < 3; ++k) header.bbox_min[k] = view.bbox_min[k], header.bbox_max[k] = view.bbox_max[k];
-  header.tool = "tetstream 0.1.0";
-  header.options = json{{"command", "run"},
-                        {"input", options_.input},
-                        {"memory", header_memory},
-                        {"buffer_spacings", options_.buffer_spacings},
-                        {"axis", std::string(1, "xyz"[view.axis])},
-                        {"duplicates_merged", sorted.duplicates}}
-                       .dump();
-  io::TetWriterOptions writer_options;
-  writer_options.threads = shares.encoders;  // the writer stage's own team
-  // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
-  writer_options.frame_tets = 2 * kFrameTets;
-  writer_options.keep_partial = checkpoint_ != nullptr;
-  writer_options.claim = claim_;
-  std::unique_ptr<io::TetWriter> writer_holder;
-  SegmentStats work;                  // of the segments written, this process's and earlier ones'
-  std::uint64_t zone_points_done = 0;
-  std::uint64_t first_label = 0;
-  std::vector<std::uint64_t> pending;
-  if (state_.contains("output")) {
-    const json& out = state_["output"];
-    const std::uint64_t committed = out.at("committed").get<std::uint64_t>();
-    std::error_code ec;
-    const std::string partial = options_.output + ".partial";
-    const std::uintmax_t have = std::filesystem::file_size(partial, ec);
-    if (ec || have < committed)
-      throw DamagedCheckpoint(partial + ": " + (ec ? std::string("missing") : std::to_string(have) + " bytes") +
-                              ", but the checkpoint committed " + std::to_string(committed) + " (damaged checkpoint)");
-    try {
-      writer_holder = io::TetWriter::resume(options_.output, header, committed, writer_options);
-    } catch (const InputError& e) {
-      throw DamagedCheckpoint(std::string(e.what()) + " (damaged checkpoint)");
-    }
-    first_label = out.at("next_label").get<std::uint64_t>();
-    pending.resize(4 * out.at("pending_tets").get<std::size_t>());
-    if (!pending.empty())
-      read_file_exactly(checkpoint_->path(out.at("pending_file").get<std::string>()), pending.data(),
-                        pending.size() * sizeof(std::uint64_t), out.at("pending_crc32c").get<std::uint32_t>());
-    counters_from(out.at("counters"), work, zone_points_done);
-    record_work(work, zone_points_done, summary);
-    summary.segments_resumed = out.at("segments").get<std::uint64_t>();
-    spdlog::info("resuming after {} segments: labels from {} of {}, {} tets written", summary.segments_resumed,
-                 first_label, view.count, summary.tets);
-  } else {
-    writer_holder = std::make_unique<io::TetWriter>(options_.output, header, writer_options);
-  }
+  OpenedOutput opened = open_output(sorted, view, shares);
+  std::unique_ptr<io::TetWriter> writer_holder = std::move(opened.writer);
+  SegmentStats work = opened.work;  // of the segments written, this process's and earlier ones'
+  std::uint64_t zone_points_done = opened.zone_points;
+  const std::uint64_t first_label = opened.first_label;
+  std::vector<std::uint64_t> pending = std::move(opened.pending);
   // Stage 5 on its own thread behind a bounded queue of frames: compression and I/O
   // overlap the segments. Declared after the writer, so destroyed (cancelled, joined)
   // before it on the way out of a failure.
