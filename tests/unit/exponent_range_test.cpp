@@ -15,6 +15,7 @@
 #include "io/tet_reader.hpp"
 #include "pipeline/run.hpp"
 #include "pipeline/verify.hpp"
+#include "scratch_dir.hpp"
 #include "tet_sets.hpp"
 
 #include <gtest/gtest.h>
@@ -35,25 +36,12 @@ namespace {
 
 using testing_util::Quad;
 
-class ExponentRangeTest : public ::testing::Test {
+class ExponentRangeTest : public testing_util::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("tetstream-exponent-test-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(dir_);
-  }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
+  ExponentRangeTest() : ScratchDirTest("exponent-test") {}
 
   static std::vector<double> generated(io::Distribution d, std::uint64_t n, std::uint64_t seed) {
-    io::GeneratorOptions g;
-    g.dist = d;
-    g.n = n;
-    g.seed = seed;
-    const io::PointGenerator gen(g);
-    std::vector<double> xyz(3 * gen.count());
-    gen.generate(0, gen.count(), xyz.data());
-    return xyz;
+    return testing_util::generated_points(d, n, seed);
   }
 
   // Runs the pipeline on xyz with many small segments (and zones when asked), compares
@@ -65,11 +53,7 @@ class ExponentRangeTest : public ::testing::Test {
     const std::string output = (dir_ / "out.tets").string();
     std::filesystem::remove(input);
     std::filesystem::remove(output);
-    {
-      auto w = io::create_points(input, {}, xyz.size() / 3);
-      w->write(xyz.data(), xyz.size() / 3);
-      w->commit();
-    }
+    testing_util::write_points_file(input, xyz);
     pipeline::RunOptions o;
     o.threads = 2;
     o.zones = zones;
@@ -83,16 +67,8 @@ class ExponentRangeTest : public ::testing::Test {
     EXPECT_GE(summary.segments, 2u);
 
     const std::vector<Quad> ours = testing_util::container_quads(output);
-    io::TetReader reader(output);
-    const std::size_t n = std::size_t(reader.point_count());
-    std::vector<double> sorted(3 * n);
-    std::vector<std::uint64_t> ids(n);
-    reader.read_points(0, n, sorted.data(), ids.data());
-    core::Delaunay dt;
-    ASSERT_EQ(dt.build(sorted.data(), nullptr, n), core::BuildStatus::kOk);
-    std::vector<Quad> ref;
-    dt.for_each_finite_tet([&](const core::VertexId* v) { testing_util::add_quad(ref, v[0], v[1], v[2], v[3]); });
-    std::sort(ref.begin(), ref.end());
+    const std::vector<Quad> ref = testing_util::incore_quads(output);
+    ASSERT_FALSE(ref.empty()) << "the in-core kernel failed";
     std::vector<Quad> missing, extra;
     std::set_difference(ref.begin(), ref.end(), ours.begin(), ours.end(), std::back_inserter(missing));
     std::set_difference(ours.begin(), ours.end(), ref.begin(), ref.end(), std::back_inserter(extra));
@@ -103,11 +79,11 @@ class ExponentRangeTest : public ::testing::Test {
     pipeline::VerifyOptions v;
     v.progress = false;
     v.tmpdir = dir_.string();
+    io::TetReader reader(output);
     const pipeline::VerifyReport report = pipeline::verify(pipeline::ContainerSource(reader), v);
     EXPECT_TRUE(report.ok()) << report.summary();
   }
 
-  std::filesystem::path dir_;
 };
 
 // Unit-scale sets scaled by 2^k: exact (a power of two) until the values reach the

@@ -12,6 +12,9 @@
 #include "pipeline/field_geometry.hpp"
 #include "pipeline/run.hpp"
 
+#include "scratch_dir.hpp"
+#include "tet_sets.hpp"
+
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -158,30 +161,14 @@ struct Reference {
   }
 };
 
-class FieldTest : public ::testing::Test {
+class FieldTest : public testing_util::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("tetstream-field-test-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(dir_);
-  }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  FieldTest() : ScratchDirTest("field-test") {}
 
   // gen -> run (out of core, several zones) -> the container rewritten with small
   // frames, so a field job has many frames and batches to combine.
   std::string container(io::Distribution dist, std::uint64_t n, std::uint64_t seed, std::uint32_t frame_tets = 3000) {
-    io::GeneratorOptions g;
-    g.dist = dist;
-    g.n = n;
-    g.seed = seed;
-    const io::PointGenerator gen(g);
-    std::vector<double> xyz(3 * gen.count());
-    gen.generate(0, gen.count(), xyz.data());
-    auto w = io::create_points(path("points.f64"), {}, gen.count());
-    w->write(xyz.data(), gen.count());
-    w->commit();
+    testing_util::write_points_file(path("points.f64"), testing_util::generated_points(dist, n, seed));
     pipeline::RunOptions o;
     o.input = path("points.f64");
     o.output = path("run.tets");
@@ -266,7 +253,6 @@ class FieldTest : public ::testing::Test {
     return s;
   }
 
-  std::filesystem::path dir_;
 };
 
 // Voronoi tolerances: 1e-12 where the cells are well shaped; clustered points make

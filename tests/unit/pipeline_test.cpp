@@ -5,6 +5,7 @@
 #include "io/point_writer.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/run.hpp"
+#include "scratch_dir.hpp"
 #include "tet_sets.hpp"
 
 #include <gtest/gtest.h>
@@ -22,15 +23,9 @@ namespace {
 
 using testing_util::Quad;
 
-class PipelineTest : public ::testing::Test {
+class PipelineTest : public testing_util::ScratchDirTest {
  protected:
-  void SetUp() override {
-    dir_ = std::filesystem::temp_directory_path() /
-           ("tetstream-pipeline-test-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    std::filesystem::create_directories(dir_);
-  }
-  void TearDown() override { std::filesystem::remove_all(dir_); }
+  PipelineTest() : ScratchDirTest("pipeline-test") {}
 
   std::string write_points(const io::GeneratorOptions& g) {
     const io::PointGenerator gen(g);
@@ -59,19 +54,7 @@ class PipelineTest : public ::testing::Test {
   // The container's tets as sorted quadruples, and, from its own sorted points, the
   // in-core kernel's tets (labels = positions in the container's point order).
   static std::vector<Quad> container_tets(const std::string& path) { return testing_util::container_quads(path); }
-  static std::vector<Quad> incore_tets(const std::string& path) {
-    io::TetReader reader(path);
-    const std::size_t n = std::size_t(reader.point_count());
-    std::vector<double> xyz(3 * n);
-    std::vector<std::uint64_t> ids(n);
-    reader.read_points(0, n, xyz.data(), ids.data());
-    core::Delaunay dt;
-    EXPECT_EQ(dt.build(xyz.data(), nullptr, n), core::BuildStatus::kOk);
-    std::vector<Quad> out;
-    dt.for_each_finite_tet([&](const core::VertexId* v) { testing_util::add_quad(out, v[0], v[1], v[2], v[3]); });
-    std::sort(out.begin(), out.end());
-    return out;
-  }
+  static std::vector<Quad> incore_tets(const std::string& path) { return testing_util::incore_quads(path); }
 
   void expect_same_as_incore(const io::GeneratorOptions& g, std::uint64_t zone_points, std::uint64_t min_segments,
                              int zones = 1) {
@@ -92,7 +75,6 @@ class PipelineTest : public ::testing::Test {
     EXPECT_EQ(extra.size(), 0u) << "tets in the output that the in-core triangulation lacks";
   }
 
-  std::filesystem::path dir_;
 };
 
 io::GeneratorOptions dist(io::Distribution d, std::uint64_t n, std::uint64_t seed = 1) {

@@ -1,6 +1,9 @@
 #pragma once
 // Tet sets for comparisons in tests: a container's tets, or a triangulation's, as a
 // sorted list of sorted label quadruples (orientation and order do not matter).
+#include "core/delaunay.hpp"
+#include "io/point_generators.hpp"
+#include "io/point_writer.hpp"
 #include "io/tet_reader.hpp"
 
 #include <algorithm>
@@ -29,6 +32,41 @@ inline std::vector<Quad> container_quads(const std::string& path) {
   }
   std::sort(out.begin(), out.end());
   return out;
+}
+
+// The in-core kernel's tets of a container's own points (labels = positions in the
+// container's point order): what the out-of-core output must equal.
+inline std::vector<Quad> incore_quads(const std::string& path) {
+  io::TetReader reader(path);
+  const std::size_t n = std::size_t(reader.point_count());
+  std::vector<double> xyz(3 * n);
+  std::vector<std::uint64_t> ids(n);
+  reader.read_points(0, n, xyz.data(), ids.data());
+  core::Delaunay dt;
+  std::vector<Quad> out;
+  if (dt.build(xyz.data(), nullptr, n) != core::BuildStatus::kOk) return out;  // empty: never equal to a real output
+  dt.for_each_finite_tet([&](const core::VertexId* v) { add_quad(out, v[0], v[1], v[2], v[3]); });
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A generated point set (io/point_generators.hpp) as xyz triples.
+inline std::vector<double> generated_points(io::Distribution dist, std::uint64_t n, std::uint64_t seed) {
+  io::GeneratorOptions g;
+  g.dist = dist;
+  g.n = n;
+  g.seed = seed;
+  const io::PointGenerator gen(g);
+  std::vector<double> xyz(3 * gen.count());
+  gen.generate(0, gen.count(), xyz.data());
+  return xyz;
+}
+
+// Writes xyz as a raw float64 point file.
+inline void write_points_file(const std::string& path, const std::vector<double>& xyz) {
+  auto w = io::create_points(path, {}, xyz.size() / 3);
+  w->write(xyz.data(), xyz.size() / 3);
+  w->commit();
 }
 
 }  // namespace tetstream::testing_util
