@@ -1,0 +1,427 @@
+#pragma once
+// verify's engine (pipeline/verify.hpp says what it proves): the records of facets and
+// edges, their orders, the violation log, and the Engine class, for 32- or 64-bit
+// labels. Its members are defined by concern in the .ipp files beside this one and
+// compiled in one translation unit (engine.cpp), which instantiates both widths:
+//   engine_run.ipp      memory plan, points, the frame loop, the radix sorts;
+//   frames.ipp          a frame's tets: storage, orientation, volume, facets and edges;
+//   pairing.ipp         facet pairing and local Delaunay, open facets and edges, spills;
+//   hull.ipp            the boundary surface (closed, convex), Euler, volume, the report.
+// Internal: included only by pipeline/verify/engine.cpp (it defines non-inline helpers).
+#include "pipeline/verify.hpp"
+
+#include "pipeline/interrupt.hpp"
+
+#include "core/error.hpp"
+#include "core/predicates.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/external_sort.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <spdlog/spdlog.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <exception>
+#include <filesystem>
+#include <future>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <numeric>
+#include <omp.h>
+#include <optional>
+#include <sstream>
+#include <type_traits>
+
+namespace tetstream::pipeline::verify_engine {
+
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// ---------------------------------------------------------------------------------
+// Violations: every one counted, the first max_listed of each kind (by ordinal) kept.
+// Thread-safe; violations are rare, so a mutex is fine.
+class ViolationLog {
+ public:
+  explicit ViolationLog(std::size_t max_listed) : max_(max_listed) {}
+
+  template <class Describe>
+  void add(Violation kind, std::uint64_t where, Describe&& describe) {
+    const auto k = std::size_t(kind);
+    counts_[k].fetch_add(1, std::memory_order_relaxed);
+    if (max_ == 0) return;
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto& list = listed_[k];
+    if (list.size() == max_ && list.back().where <= where) return;
+    VerifyReport::Listed l{kind, where, describe()};
+    auto at = std::upper_bound(list.begin(), list.end(), where,
+                               [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
+    list.insert(at, std::move(l));
+    if (list.size() > max_) list.pop_back();
+  }
+
+  void into(VerifyReport& r) const {
+    for (std::size_t k = 0; k < std::size_t(kViolationKinds); ++k) {
+      r.counts[k] = counts_[k].load();
+      r.listed.insert(r.listed.end(), listed_[k].begin(), listed_[k].end());
+    }
+  }
+
+ private:
+  std::size_t max_;
+  std::mutex mutex_;
+  std::array<std::atomic<std::uint64_t>, kViolationKinds> counts_{};
+  std::array<std::vector<VerifyReport::Listed>, kViolationKinds> listed_;
+};
+
+// ---------------------------------------------------------------------------------
+// Records.
+//
+// FacetRec: one facet (triangle) as seen so far. v: its labels, sorted. x: flags in
+// the top byte, a payload in the low 56 bits:
+//   single  (no flag)  one tet: d is its fourth vertex, payload its ordinal; kSide set
+//                      when that tet, if positively oriented, is (v0, v1, v2, d) in this
+//                      order, i.e. d lies on the positive side of (v0, v1, v2);
+//   kPair              two tets on opposite sides, already checked: d is the vertex on
+//                      the positive side, the payload the one on the negative side;
+//   kBad               already reported (repeated or overused); payload: an ordinal.
+constexpr std::uint64_t kPayload = (std::uint64_t(1) << 56) - 1;
+constexpr std::uint64_t kSide = std::uint64_t(1) << 56;
+constexpr std::uint64_t kPair = std::uint64_t(1) << 57;
+constexpr std::uint64_t kBad = std::uint64_t(1) << 58;
+
+template <class L>
+struct FacetRec {
+  L v[3];
+  L d;
+  std::uint64_t x;
+};
+static_assert(sizeof(FacetRec<std::uint32_t>) == 24);
+
+template <class L>
+struct FacetLess {
+  bool operator()(const FacetRec<L>& a, const FacetRec<L>& b) const {
+    if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
+    if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
+    if (a.v[2] != b.v[2]) return a.v[2] < b.v[2];
+    const std::uint64_t pa = a.x & kPayload, pb = b.x & kPayload;
+    if (pa != pb) return pa < pb;
+    return a.x < b.x;
+  }
+};
+
+template <class L>
+bool same_key(const FacetRec<L>& a, const FacetRec<L>& b) {
+  return a.v[0] == b.v[0] && a.v[1] == b.v[1] && a.v[2] == b.v[2];
+}
+
+// A boundary edge of a boundary facet: u < v, w the facet's third vertex, x: kSide when
+// the facet, oriented outwards, runs u -> v; payload the tet's ordinal.
+template <class L>
+struct HullEdgeRec {
+  L u, v, w;
+  std::uint64_t x;
+};
+
+template <class L>
+struct HullEdgeLess {
+  bool operator()(const HullEdgeRec<L>& a, const HullEdgeRec<L>& b) const {
+    if (a.u != b.u) return a.u < b.u;
+    if (a.v != b.v) return a.v < b.v;
+    return a.x < b.x;
+  }
+};
+
+// Edge keys: (u, v), u < v, ordered by u then v. 32-bit labels pack into one integer.
+struct Edge64 {
+  std::uint64_t u, v;
+  bool operator<(const Edge64& o) const { return u != o.u ? u < o.u : v < o.v; }
+  bool operator==(const Edge64& o) const = default;
+};
+template <class L>
+using EdgeKey = std::conditional_t<sizeof(L) == 4, std::uint64_t, Edge64>;
+inline std::uint64_t make_edge(std::uint32_t u, std::uint32_t v) { return std::uint64_t(u) << 32 | v; }
+inline Edge64 make_edge(std::uint64_t u, std::uint64_t v) { return {u, v}; }
+inline std::uint64_t edge_u(std::uint64_t e) { return e >> 32; }
+inline std::uint64_t edge_u(const Edge64& e) { return e.u; }
+
+// Counter-based hash for the sample (splitmix64's mixer).
+inline std::uint64_t mix(std::uint64_t z) {
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+std::string labels_text(std::initializer_list<std::uint64_t> ls) {
+  std::string s = "(";
+  bool first = true;
+  for (std::uint64_t l : ls) {
+    if (!first) s += ' ';
+    s += std::to_string(l);
+    first = false;
+  }
+  return s + ")";
+}
+
+// det[b-a, c-a, d-a] in floating point: 6 times the signed volume, in T.
+template <class T>
+inline T det3(const double* a, const double* b, const double* c, const double* d) {
+  const T bx = T(b[0]) - a[0], by = T(b[1]) - a[1], bz = T(b[2]) - a[2];
+  const T cx = T(c[0]) - a[0], cy = T(c[1]) - a[1], cz = T(c[2]) - a[2];
+  const T dx = T(d[0]) - a[0], dy = T(d[1]) - a[1], dz = T(d[2]) - a[2];
+  return bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+}
+
+// The volume check's arithmetic. Doubles while every nonzero coordinate lies in
+// [2^-250, 2^250]: nonzero differences then lie in [2^-302, 2^251], and no product of
+// three overflows or underflows. Otherwise (coordinates near 1e103 made the volumes
+// inf - inf = NaN, and tiny ones underflow) long double, whose 15-bit exponent holds
+// any product of three differences of doubles.
+static_assert(std::numeric_limits<long double>::max_exponent >= 4096,
+              "verify's volume check needs a long double with a 15-bit exponent");
+inline bool volume_fits_double(const double* xyz, std::size_t n) {
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    const double m = std::fabs(xyz[i]);
+    if (m != 0 && !(m >= 0x1p-250 && m <= 0x1p250)) return false;
+  }
+  return true;
+}
+
+// Bit set over labels with atomic set.
+class Bitmap {
+ public:
+  explicit Bitmap(std::uint64_t n) : words_((n + 63) / 64) {}
+  void set(std::uint64_t i) {
+    std::atomic_ref<std::uint64_t> w(words_[i >> 6]);
+    const std::uint64_t bit = std::uint64_t(1) << (i & 63);
+    if (!(w.load(std::memory_order_relaxed) & bit)) w.fetch_or(bit, std::memory_order_relaxed);
+  }
+  bool get(std::uint64_t i) const { return words_[i >> 6] >> (i & 63) & 1; }
+  std::uint64_t count() const {
+    std::uint64_t c = 0;
+    for (std::uint64_t w : words_) c += std::uint64_t(std::popcount(w));
+    return c;
+  }
+  std::size_t bytes() const { return words_.size() * 8; }
+
+ private:
+  std::vector<std::uint64_t> words_;
+};
+
+// Calls f(begin, end) for `parts` pieces of [0, n) whose boundaries are moved forward
+// to group boundaries (is_start(i): element i starts a group), in parallel.
+inline int chunk_count(std::size_t n) { return n < (1u << 14) ? 1 : std::max(1, omp_get_max_threads() * 4); }
+
+template <class IsStart, class F>
+void for_group_chunks(std::size_t n, IsStart&& is_start, F&& f, std::vector<std::size_t>& bounds) {
+  const int parts = chunk_count(n);
+  bounds.assign(std::size_t(parts) + 1, n);
+  bounds[0] = 0;
+  for (int p = 1; p < parts; ++p) {
+    std::size_t b = std::max(bounds[std::size_t(p) - 1], n * std::size_t(p) / std::size_t(parts));
+    while (b < n && !is_start(b)) ++b;
+    bounds[std::size_t(p)] = b;
+  }
+#pragma omp parallel for schedule(dynamic, 1) if (parts > 1)
+  for (int p = 0; p < parts; ++p) f(std::size_t(p), bounds[std::size_t(p)], bounds[std::size_t(p) + 1]);
+}
+
+// Stable k-way merge of sorted ranges into out (ties: the earlier range first).
+template <class T, class Less>
+void multiway_merge(std::vector<std::pair<const T*, const T*>>& rs, T* out, const Less& less) {
+  std::erase_if(rs, [](const auto& r) { return r.first == r.second; });
+  if (rs.empty()) return;
+  if (rs.size() == 1) {
+    std::copy(rs[0].first, rs[0].second, out);
+    return;
+  }
+  if (rs.size() == 2) {
+    std::merge(rs[0].first, rs[0].second, rs[1].first, rs[1].second, out, less);
+    return;
+  }
+  detail::MergeHeap heap([&](std::size_t a, std::size_t b) { return less(*rs[a].first, *rs[b].first); }, rs.size());
+  for (std::size_t i = 0; i < rs.size(); ++i) heap.push(i);
+  heap.build();
+  while (!heap.empty()) {
+    auto& r = rs[heap.top()];
+    *out++ = *r.first++;
+    heap.advance_top(r.first == r.second);
+  }
+}
+
+// Merges sorted inputs into `out`, one key range per thread (ties: the earlier input
+// first). Ranges are cut between keys (key_less), so the records of one key meet in
+// one range. finish(r, first, m) post-processes range r in place on its thread and
+// returns how many records it kept at the front; the kept records are then packed.
+// Returns their number.
+template <class T, class Less, class KeyLess, class Finish>
+std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<T>& out, const Less& less,
+                         const KeyLess& key_less, std::vector<std::size_t>& kept, Finish&& finish) {
+  std::size_t total = 0, biggest = 0;
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    total += in[i].size();
+    if (in[i].size() > in[biggest].size()) biggest = i;
+  }
+  if (out.capacity() < total) {
+    out = {};
+    out.reserve(total);  // exactly: no doubling of the biggest buffer
+  }
+  out.resize(total);
+  const std::size_t ranges = total < (1u << 15) ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
+  const std::size_t k = in.size();
+  // bounds[i * (ranges + 1) + r]: where range r starts in input i; splitters are
+  // evenly spaced keys of the biggest input.
+  std::vector<std::size_t> bounds(k * (ranges + 1)), offset(ranges + 1, 0);
+  for (std::size_t r = 0; r <= ranges; ++r) {
+    const bool inner = r > 0 && r < ranges;
+    const T* split = inner ? &in[biggest][in[biggest].size() * r / ranges] : nullptr;
+    for (std::size_t i = 0; i < k; ++i) {
+      std::size_t b = r == 0 ? 0 : in[i].size();
+      if (inner) b = std::size_t(std::lower_bound(in[i].begin(), in[i].end(), *split, key_less) - in[i].begin());
+      bounds[i * (ranges + 1) + r] = b;
+      offset[r] += b;
+    }
+  }
+  kept.assign(ranges, 0);
+#pragma omp parallel for num_threads(int(ranges)) schedule(static, 1) if (ranges > 1)
+  for (std::int64_t rr = 0; rr < std::int64_t(ranges); ++rr) {
+    const std::size_t r = std::size_t(rr);
+    std::vector<std::pair<const T*, const T*>> rs(k);
+    for (std::size_t i = 0; i < k; ++i)
+      rs[i] = {in[i].data() + bounds[i * (ranges + 1) + r], in[i].data() + bounds[i * (ranges + 1) + r + 1]};
+    T* first = out.data() + offset[r];
+    multiway_merge(rs, first, less);
+    kept[r] = finish(r, first, offset[r + 1] - offset[r]);
+  }
+  std::size_t w = 0;
+  for (std::size_t r = 0; r < ranges; ++r) {
+    if (w != offset[r] && kept[r]) std::memmove(static_cast<void*>(out.data() + w), out.data() + offset[r], kept[r] * sizeof(T));
+    w += kept[r];
+  }
+  return w;
+}
+
+// ---------------------------------------------------------------------------------
+// The engine, for 32- or 64-bit labels.
+template <class L>
+class Engine {
+ public:
+  using Facet = FacetRec<L>;
+  using HullEdge = HullEdgeRec<L>;
+  using Edge = EdgeKey<L>;
+
+  Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep)
+      : src_(src), opt_(opt), rep_(rep), log_(opt.max_listed), n_(src.point_count()), used_(n_), hull_used_(n_) {
+    sampled_ = opt.sample < 1.0;
+    label_bits_ = std::max(1, int(std::bit_width(n_ > 0 ? n_ - 1 : 0)));
+    if (sampled_) sample_cut_ = std::uint64_t(std::ldexp(opt.sample, 64));  // sample < 1: below 2^64
+  }
+
+  void run();
+
+ private:
+  struct PairCheck {
+    L v[3];
+    L dpos, dneg;
+    std::uint64_t tpos, tneg;
+  };
+
+  const double* P(std::uint64_t l) const { return xyz_.data() + 3 * l; }
+  bool tet_sampled(std::uint64_t ordinal) const { return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_; }
+  bool facet_sampled(L a, L b, L c) const {
+    if (!sampled_) return true;
+    return mix(mix(mix(opt_.seed ^ std::uint64_t(a)) + std::uint64_t(b)) + std::uint64_t(c)) < sample_cut_;
+  }
+  std::string tet_text(std::uint64_t ordinal, L a, L b, L c, L d) const {
+    return "tet #" + std::to_string(ordinal) + " " + labels_text({a, b, c, d});
+  }
+  std::string facet_text(const Facet& f) const { return "facet " + labels_text({f.v[0], f.v[1], f.v[2]}); }
+
+  // Stable radix sorts into FacetLess / edge order (records of one key keep their
+  // order, which is ordinal order for freshly generated records).
+  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const;
+  void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const;
+  std::string make_tmpdir();
+  void plan_memory();
+  void load_points();
+  void process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min);
+  // Per-thread buffers of a step's slice of tets.
+  struct Part {
+    std::vector<Facet> a, b, f, tmp;   // A and B facets, merged
+    std::vector<Edge> ea, eb, e, etmp;
+  };
+  void process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
+                    bool sorted_by_min, std::uint64_t threshold);
+  void build_part(Part& part, const L* canon, const std::uint8_t* flags, std::size_t lo, std::size_t hi,
+                  std::uint64_t first_ordinal, bool sorted_by_min);
+  // Folds runs of equal keys in place (returns the new size); new pairs go to chunk_checks_.
+  std::size_t fold(Facet* first, Facet* last);
+  void combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks);
+  // Combines each run of equal keys in [first, first + n) into its first record,
+  // packed at the front; returns how many records remain.
+  std::size_t fold_equal_keys(Facet* first, std::size_t n, std::vector<PairCheck>& checks);
+  void check_pairs();  // the pairs fold() found
+  void check_pairs(const std::vector<PairCheck>& checks);  // on this thread
+  void retire_facets(std::uint64_t threshold);
+  void final_facet(const Facet& f);
+  void merge_edges(std::uint64_t threshold);
+  void finish_facets();
+  void finish_edges();
+  void finish_hull();
+  void finish();
+
+  const VerifySource& src_;
+  const VerifyOptions& opt_;
+  VerifyReport& rep_;
+  ViolationLog log_;
+  const std::uint64_t n_;
+  bool sampled_ = false;
+  std::uint64_t sample_cut_ = ~0ull;
+
+  std::vector<double> xyz_;
+  double origin_[3] = {0, 0, 0};  // the lexicographically smallest point: a hull vertex
+  Bitmap used_, hull_used_;
+
+  // Budgets (bytes).
+  std::size_t live_facet_budget_ = 0, live_edge_budget_ = 0, sorter_budget_ = 0;
+  std::optional<TempDir> tmp_;
+  std::string tmp_parent_;
+
+  // Open facets and edges, sorted; spills.
+  std::vector<Facet> live_, merged_;
+  std::vector<Edge> live_e_, merged_e_;
+  std::unique_ptr<ExternalSorter<Facet, FacetLess<L>>> facet_spill_;
+  std::unique_ptr<ExternalSorter<Edge, std::less<Edge>>> edge_spill_;
+  std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
+  std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
+
+  int label_bits_ = 1;  // bits of the largest label
+  std::vector<Part> parts_;
+  std::vector<std::vector<PairCheck>> chunk_checks_;
+  std::vector<std::size_t> bounds_, chunk_sizes_;
+  std::vector<HullEdge> hull_edges_batch_;
+
+  // Totals.
+  long double tet_volume6_ = 0, hull_volume6_ = 0;
+  bool wide_volume_ = false;  // volumes in long double (volume_fits_double)
+  long double volume6(const double* a, const double* b, const double* c, const double* d) const {
+    return wide_volume_ ? det3<long double>(a, b, c, d) : det3<double>(a, b, c, d);
+  }
+  std::atomic<std::uint64_t> orient_tests_{0}, insphere_tests_{0}, hull_tests_{0};
+  std::uint64_t good_tets_ = 0, interior_ = 0, boundary_ = 0, bad_facets_ = 0, edges_ = 0, hull_edges_ = 0;
+  std::uint64_t facets_checked_ = 0, tets_checked_ = 0;
+  double seconds_points_ = 0, seconds_tets_ = 0, seconds_final_ = 0;
+};
+
+
+}  // namespace tetstream::pipeline::verify_engine

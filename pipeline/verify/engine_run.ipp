@@ -1,0 +1,185 @@
+// The memory plan, the points, the frame loop and the radix sorts (members of Engine, pipeline/verify/engine.hpp; compiled in engine.cpp).
+// Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
+
+template <class L>
+void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const {
+  const int b = label_bits_;
+  if (3 * b <= 64) {
+    radix_sort(v.data(), v.size(), tmp, 3 * b, [b](const Facet& f) {
+      return std::uint64_t(f.v[0]) << (2 * b) | std::uint64_t(f.v[1]) << b | std::uint64_t(f.v[2]);
+    });
+  } else {
+    for (int j = 2; j >= 0; --j)
+      radix_sort(v.data(), v.size(), tmp, b, [j](const Facet& f) { return std::uint64_t(f.v[j]); });
+  }
+}
+
+template <class L>
+void Engine<L>::sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const {
+  const int b = label_bits_;
+  if constexpr (sizeof(L) == 4) {
+    radix_sort(v.data(), v.size(), tmp, 2 * b,
+               [b](std::uint64_t e) { return (e >> 32) << b | (e & 0xFFFFFFFFu); });
+  } else if (2 * b <= 64) {
+    radix_sort(v.data(), v.size(), tmp, 2 * b, [b](const Edge& e) { return e.u << b | e.v; });
+  } else {
+    radix_sort(v.data(), v.size(), tmp, b, [](const Edge& e) { return e.v; });
+    radix_sort(v.data(), v.size(), tmp, b, [](const Edge& e) { return e.u; });
+  }
+}
+
+template <class L>
+std::string Engine<L>::make_tmpdir() {
+  if (!tmp_) {
+    tmp_.emplace(tmp_parent_, "tetstream-verify");
+    spdlog::debug("verify: spilling to {}", tmp_->dir());
+  }
+  return tmp_->dir();
+}
+
+template <class L>
+void Engine<L>::plan_memory() {
+  const std::size_t points = std::size_t(n_) * 24 + used_.bytes() + hull_used_.bytes();
+  // A frame: two label buffers (one decoding) and flags. A step, per tet: the slices'
+  // A, B, merged and radix buffers (11 facets, 15 edges), the merged copy (4 facets,
+  // 6 edges) and up to 2 pair checks.
+  std::size_t max_frame = 0;
+  for (std::size_t k = 0; k < src_.batch_count(); ++k)
+    max_frame = std::max<std::size_t>(max_frame, std::size_t(src_.batch(k).tet_count));
+  const std::size_t step = std::min<std::size_t>(max_frame, opt_.batch_tets);
+  const std::size_t scratch = max_frame * (2 * 4 * sizeof(L) + 1) +
+                              step * (15 * sizeof(Facet) + 21 * sizeof(Edge) + 2 * sizeof(PairCheck));
+  const std::size_t fixed = points + scratch;
+  std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
+  if (rest < (std::size_t(16) << 20)) {
+    spdlog::warn("verify: --memory {} is below what the points and one batch need ({}); going over it",
+                 human_bytes(double(opt_.memory_bytes)), human_bytes(double(fixed)));
+    rest = std::size_t(16) << 20;
+  }
+  // During the pass: the open sets, each with a merged copy of the same size (3/8 +
+  // 1/8 of the rest, doubled). After it, the open sets are gone and one spill merges
+  // at a time (5/8), while the boundary-edge sort may hold its buffer (1/8) and the
+  // merged facets wait to be folded (1/8).
+  live_facet_budget_ = rest * 3 / 16;
+  live_edge_budget_ = rest / 16;
+  if (opt_.open_bytes) live_facet_budget_ = opt_.open_bytes, live_edge_budget_ = opt_.open_bytes / 3;
+  sorter_budget_ = rest * 5 / 8;
+  rep_.memory_planned = fixed + rest;
+  spdlog::debug("verify: memory: points {}, scratch {}, open facets {}, open edges {}, sorts {}",
+                human_bytes(double(points)), human_bytes(double(scratch)), human_bytes(double(live_facet_budget_)),
+                human_bytes(double(live_edge_budget_)), human_bytes(double(sorter_budget_)));
+}
+
+template <class L>
+void Engine<L>::load_points() {
+  const auto t0 = Clock::now();
+  xyz_.resize(3 * std::size_t(n_));
+  constexpr std::uint64_t kChunk = 1 << 20;
+  const std::int64_t chunks = std::int64_t((n_ + kChunk - 1) / kChunk);
+  std::exception_ptr error;
+  std::mutex error_mutex;
+#pragma omp parallel for schedule(dynamic, 1)
+  for (std::int64_t c = 0; c < chunks; ++c) {
+    const std::uint64_t first = std::uint64_t(c) * kChunk;
+    try {
+      src_.read_points(first, std::size_t(std::min(kChunk, n_ - first)), xyz_.data() + 3 * first);
+    } catch (...) {
+      std::lock_guard<std::mutex> lock(error_mutex);
+      if (!error) error = std::current_exception();
+    }
+  }
+  if (error) std::rethrow_exception(error);
+  // The lexicographically smallest point is a vertex of the convex hull: the cones
+  // from it over the hull facets have non-negative volume (no cancellation).
+  std::uint64_t best = 0;
+  for (std::uint64_t i = 1; i < n_; ++i) {
+    const double* p = P(i);
+    const double* b = P(best);
+    if (p[0] < b[0] || (p[0] == b[0] && (p[1] < b[1] || (p[1] == b[1] && p[2] < b[2])))) best = i;
+  }
+  if (n_ > 0) std::copy(P(best), P(best) + 3, origin_);
+  wide_volume_ = !volume_fits_double(xyz_.data(), std::size_t(n_));
+  seconds_points_ = since(t0);
+}
+
+template <class L>
+void Engine<L>::run() {
+  const auto t0 = Clock::now();
+  tmp_parent_ = opt_.tmpdir;
+  if (tmp_parent_.empty()) {
+    const char* env = std::getenv("TMPDIR");
+    tmp_parent_ = env && *env ? std::string(env) : src_.directory();
+    if (tmp_parent_.empty()) tmp_parent_ = ".";
+  }
+  plan_memory();
+  load_points();
+
+  auto make_dir = [this] { return make_tmpdir(); };
+  {
+    ExternalSortOptions o;
+    o.memory_bytes = sorter_budget_;
+    o.make_dir = make_dir;
+    o.name = "facets";
+    facet_spill_ = std::make_unique<ExternalSorter<Facet, FacetLess<L>>>(o);
+    o.name = "edges";
+    edge_spill_ = std::make_unique<ExternalSorter<Edge, std::less<Edge>>>(o);
+    edge_spill_->set_reducer([](Edge* first, std::size_t n) { return std::size_t(std::unique(first, first + n) - first); });
+    o.name = "hull-edges";
+    o.memory_bytes = std::max<std::size_t>(sorter_budget_ / 5, std::size_t(4) << 20);
+    hull_sorter_ = std::make_unique<ExternalSorter<HullEdge, HullEdgeLess<L>>>(o);
+  }
+
+  // Pass over the tets, frame by frame in order of their smallest label (frames
+  // are independent, so any order is allowed, and this one retires keys soonest even
+  // when a writer appended a late frame); the next frame decodes while this one is
+  // checked. later_min[j]: the smallest label of the frames after position j.
+  const auto t1 = Clock::now();
+  const std::size_t frames = src_.batch_count();
+  std::vector<std::size_t> order(frames);
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return src_.batch(a).min_label < src_.batch(b).min_label; });
+  std::vector<std::uint64_t> later_min(frames + 1, ~0ull);
+  for (std::size_t j = frames; j-- > 0;) later_min[j] = std::min(later_min[j + 1], src_.batch(order[j]).min_label);
+  Progress progress("verifying", "tets", src_.tet_count(), opt_.progress);
+  std::vector<L> current, next;
+  std::future<void> pending;
+  if (frames > 0) pending = std::async(std::launch::async, [&] { src_.read_batch(order[0], next); });
+  for (std::size_t j = 0; j < frames; ++j) {
+    pending.get();
+    std::swap(current, next);
+    if (j + 1 < frames) pending = std::async(std::launch::async, [&, j] { src_.read_batch(order[j + 1], next); });
+    try {
+      process_frame(order[j], current, later_min[j + 1]);
+    } catch (...) {
+      if (pending.valid()) pending.wait();
+      throw;
+    }
+    progress.add(current.size() / 4);
+    check_interrupted();
+  }
+  progress.finish();
+  current = {}, next = {};
+  seconds_tets_ = since(t1);
+
+  // Everything still open is final now (or goes to the spills): free the open sets
+  // before the spills merge.
+  const auto t2 = Clock::now();
+  if (!sampled_) merge_edges(~0ull);
+  live_e_ = {}, merged_e_ = {};
+  retire_facets(~0ull);
+  live_ = {}, merged_ = {}, parts_ = {};
+  finish_facets();
+  if (!sampled_) {
+    finish_hull();
+    finish_edges();
+  }
+  seconds_final_ = since(t2);
+  finish();
+  rep_.seconds = since(t0);
+  spdlog::debug("verify: points {:.2f}s, tets {:.2f}s, final merges {:.2f}s", seconds_points_, seconds_tets_,
+                seconds_final_);
+}
+
+// One frame: storage, orientation and volume of every tet, then its facets and edges
+// in steps of batch_tets tets.

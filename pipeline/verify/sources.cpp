@@ -1,0 +1,88 @@
+// Where verify reads from: points and tets held in memory, or a container.
+#include "pipeline/verify.hpp"
+
+#include "core/error.hpp"
+#include "io/tet_reader.hpp"
+
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// ---------------------------------------------------------------------------------
+// Sources.
+
+MemorySource::MemorySource(std::vector<double> xyz, std::vector<std::uint64_t> tets, std::size_t batch_tets)
+    : xyz_(std::move(xyz)), tets_(std::move(tets)) {
+  if (batch_tets == 0) batch_tets = 1;
+  const std::uint64_t t = tets_.size() / 4;
+  for (std::uint64_t first = 0; first < t; first += batch_tets) {
+    Batch b;
+    b.first_tet = first;
+    b.tet_count = std::min<std::uint64_t>(batch_tets, t - first);
+    b.min_label = std::numeric_limits<std::uint64_t>::max();
+    for (std::uint64_t i = 4 * first; i < 4 * (first + b.tet_count); ++i) b.min_label = std::min(b.min_label, tets_[i]);
+    batches_.push_back(b);
+  }
+}
+
+void MemorySource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
+  std::copy(xyz_.begin() + std::ptrdiff_t(3 * first), xyz_.begin() + std::ptrdiff_t(3 * (first + n)), xyz);
+}
+
+void MemorySource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
+  const Batch& b = batches_[k];
+  labels.resize(4 * b.tet_count);
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    const std::uint64_t l = tets_[4 * b.first_tet + i];
+    if (l > 0xFFFFFFFFu) throw InputError("memory: label " + std::to_string(l) + " does not fit 32 bits");
+    labels[i] = std::uint32_t(l);
+  }
+}
+
+void MemorySource::read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const {
+  const Batch& b = batches_[k];
+  labels.assign(tets_.begin() + std::ptrdiff_t(4 * b.first_tet),
+                tets_.begin() + std::ptrdiff_t(4 * (b.first_tet + b.tet_count)));
+}
+
+ContainerSource::ContainerSource(const io::TetReader& reader) : reader_(reader) {}
+std::uint64_t ContainerSource::point_count() const { return reader_.point_count(); }
+std::uint64_t ContainerSource::tet_count() const { return reader_.tet_count(); }
+std::size_t ContainerSource::batch_count() const { return std::size_t(reader_.frame_count()); }
+VerifySource::Batch ContainerSource::batch(std::size_t k) const {
+  const io::FrameEntry& f = reader_.frames()[k];
+  return Batch{f.first_tet, f.tet_count, f.base_label};
+}
+void ContainerSource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
+  reader_.read_points(first, n, xyz, nullptr);
+  // The reader maps the whole file; the copied records are not needed again, so drop
+  // their pages from this process's resident set (a read-only file mapping: they are
+  // read back from the file if anyone touches them again).
+  const std::span<const std::uint8_t> rec = reader_.point_records();
+  const std::size_t size = reader_.header().point_record_bytes();
+  const std::uintptr_t page = std::uintptr_t(::sysconf(_SC_PAGESIZE));
+  const std::uintptr_t b = std::uintptr_t(rec.data() + first * size), e = b + n * size;
+  const std::uintptr_t lo = (b + page - 1) / page * page, hi = e / page * page;
+  if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
+}
+void ContainerSource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
+  reader_.read_frame(k, labels);
+}
+void ContainerSource::read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const {
+  reader_.read_frame(k, labels);
+}
+std::string ContainerSource::name() const { return reader_.path(); }
+std::string ContainerSource::directory() const {
+  const std::filesystem::path p = std::filesystem::path(reader_.path()).parent_path();
+  return p.empty() ? std::string(".") : p.string();
+}
+
+
+}  // namespace tetstream::pipeline
