@@ -76,6 +76,9 @@ std::unique_ptr<PointReader> open_one(const std::string& path, const PointReadOp
     src->ensure(4096);
     if (src->available() == 0) throw InputError::at_byte(src->name(), 0, "empty input: no points");
     format = sniff_format(src->data(), src->available());
+    // Not text, PLY, npy, LAS or HDF5, and the user named a scalar type (`--type f64`):
+    // raw records of that type, as they said.
+    if (format == PointFormat::kAuto && options.type != ScalarType::kAuto) format = PointFormat::kRaw;
     if (format == PointFormat::kAuto) {
       throw UsageError("cannot tell the format of " + src->name() +
                        ": name it with --format (raw, f32, f64, ply, npy, text, las, hdf5)");

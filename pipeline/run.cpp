@@ -27,6 +27,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -47,22 +48,28 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 }  // namespace
 
 std::uint64_t parse_memory_size(const std::string& text) {
+  // As people write sizes: 512M, 512m, 512MB, 512MiB, 1.5G, 1g, 4096K, 100000 (bytes).
+  // Every unit is binary (M = MB = MiB = 2^20): a memory budget is counted in pages.
   std::size_t used = 0;
   double value = 0;
   try {
     value = std::stod(text, &used);
   } catch (const std::exception&) {
-    throw UsageError("bad memory size '" + text + "': expected e.g. 512M, 4G");
+    throw UsageError("bad memory size '" + text + "': expected e.g. 512M, 4G, 1.5G");
   }
   std::string unit = text.substr(used);
-  double scale = 1;
+  for (char& c : unit) c = char(std::toupper(static_cast<unsigned char>(c)));
+  if (unit.size() == 3 && unit.substr(1) == "IB") unit = unit.substr(0, 1);  // KiB, MiB, ...
+  else if (unit.size() == 2 && unit[1] == 'B') unit = unit.substr(0, 1);     // KB, MB, ...
+  double scale = 0;
   if (unit == "" || unit == "B") scale = 1;
-  else if (unit == "K" || unit == "KiB" || unit == "k") scale = 1024.0;
-  else if (unit == "M" || unit == "MiB") scale = 1024.0 * 1024;
-  else if (unit == "G" || unit == "GiB") scale = 1024.0 * 1024 * 1024;
-  else if (unit == "T" || unit == "TiB") scale = 1024.0 * 1024 * 1024 * 1024;
-  else throw UsageError("bad memory size '" + text + "': unknown unit '" + unit + "' (use K, M, G, T)");
-  if (!(value > 0) || !std::isfinite(value)) throw UsageError("bad memory size '" + text + "': must be positive");
+  else if (unit == "K") scale = 1024.0;
+  else if (unit == "M") scale = 1024.0 * 1024;
+  else if (unit == "G") scale = 1024.0 * 1024 * 1024;
+  else if (unit == "T") scale = 1024.0 * 1024 * 1024 * 1024;
+  else throw UsageError("bad memory size '" + text + "': unknown unit '" + text.substr(used) + "' (use K, M, G, T)");
+  if (!(value > 0) || !std::isfinite(value) || value * scale >= 0x1p63)
+    throw UsageError("bad memory size '" + text + "': must be positive and below 8 EiB");
   return std::uint64_t(value * scale);
 }
 

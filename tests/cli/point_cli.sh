@@ -71,7 +71,18 @@ done
 "$T" -q gen --n 5000 --seed 7 -o file.ply
 cmp -s piped.ply file.ply || fail "stdout PLY differs from file PLY"
 
+# Unrecognised bytes on stdin: refused without a format, raw with a named type.
+"$T" -q gen --dist uniform --n 100 --seed 3 -o raw100.f64
+"$T" -q run - -o nofmt.tets --no-checkpoint <raw100.f64 2>err.txt && fail "raw stdin without --format or --type was accepted"
+grep -q "cannot tell the format" err.txt || fail "raw stdin without a format: $(cat err.txt)"
+"$T" -q run - --type f64 -o typed.tets --no-checkpoint <raw100.f64 || fail "raw stdin with --type f64 refused"
+"$T" -q run raw100.f64 -o file.tets --no-checkpoint
+cmp -s <("$T" -q cat typed.tets) <("$T" -q cat file.tets) || fail "stdin --type f64 gives other tets than the file"
+
 # Help documents the distributions and the exit codes.
-"$T" gen --help | grep -q 'ellipsoid-shell  area-uniform' || fail "gen --help"
-"$T" --help | grep -q '1  bad input' || fail "exit codes in --help"
+# (Captured first: `grep -q` may close the pipe before a long help is written, and
+# the tool then dies of SIGPIPE like any other, which pipefail reports.)
+"$T" gen --help >help.txt && grep -q 'ellipsoid-shell  area-uniform' help.txt || fail "gen --help"
+grep -q 'terrain          (alias lidar)' help.txt || fail "gen --help lacks terrain"
+"$T" --help >help.txt && grep -q '1  bad input' help.txt || fail "exit codes in --help"
 echo "point_cli: ok"

@@ -2,6 +2,9 @@
 // ceiling, and a small input takes little of a large budget.
 #include "pipeline/memory_budget.hpp"
 
+#include "core/error.hpp"
+#include "pipeline/run.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cstdint>
@@ -79,6 +82,23 @@ TEST(MemoryBudget, WriterFramesFollowTheOutput) {
   EXPECT_EQ(MemoryBudget::encoders_for(64 * kMiB, 16), 1);
   EXPECT_EQ(MemoryBudget::encoders_for(kMiB << 20, 16), 4);
   EXPECT_EQ(MemoryBudget::encoders_for(kMiB << 20, 2), 2);
+}
+
+// --memory as people write it: every unit binary, any case, with or without B / iB.
+TEST(MemorySize, ParsedAsPeopleWriteIt) {
+  EXPECT_EQ(parse_memory_size("512M"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512m"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512MB"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512MiB"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512mb"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("1g"), 1024 * kMiB);
+  EXPECT_EQ(parse_memory_size("1GiB"), 1024 * kMiB);
+  EXPECT_EQ(parse_memory_size("1.5G"), 1536 * kMiB);
+  EXPECT_EQ(parse_memory_size("4096K"), 4 * kMiB);
+  EXPECT_EQ(parse_memory_size("2T"), 2 * (kMiB << 20));
+  EXPECT_EQ(parse_memory_size("100000"), 100000u);
+  for (const char* bad : {"", "G", "12Q", "-1G", "0", "nan", "inf", "1e30T", "5 G", "1.5GG"})
+    EXPECT_THROW(parse_memory_size(bad), UsageError) << bad;
 }
 
 }  // namespace
