@@ -21,10 +21,13 @@ ROOT = os.path.dirname(os.path.abspath(__file__))
 class CMakeBuild(build_ext):
     def build_extension(self, ext):
         build = os.environ.get("TETSTREAM_BUILD_DIR") or os.path.join(ROOT, "build-python")
-        configure = ["cmake", "-S", ROOT, "-B", build, "-DCMAKE_BUILD_TYPE=Release", "-DTETSTREAM_PYTHON=ON",
-                     "-DTETSTREAM_BUILD_TESTS=OFF", f"-DPython3_EXECUTABLE={sys.executable}"]
-        if not os.path.exists(os.path.join(build, "CMakeCache.txt")) and shutil.which("ninja"):
-            configure += ["-G", "Ninja"]
+        configure = ["cmake", "-S", ROOT, "-B", build, "-DTETSTREAM_PYTHON=ON", f"-DPython3_EXECUTABLE={sys.executable}"]
+        if not os.path.exists(os.path.join(build, "CMakeCache.txt")):
+            # a new build directory: Release, and no test suite (an existing one, e.g.
+            # TETSTREAM_BUILD_DIR=build, keeps its own settings)
+            configure += ["-DCMAKE_BUILD_TYPE=Release", "-DTETSTREAM_BUILD_TESTS=OFF"]
+            if shutil.which("ninja"):
+                configure += ["-G", "Ninja"]
         subprocess.check_call(configure)
         jobs = os.environ.get("CMAKE_BUILD_PARALLEL_LEVEL") or str(os.cpu_count() or 1)
         subprocess.check_call(["cmake", "--build", build, "--target", "tetstream_python", "-j", jobs])
@@ -36,4 +39,6 @@ class CMakeBuild(build_ext):
         shutil.copyfile(built[0], dest)
 
 
-setup(ext_modules=[Extension("tetstream._core", sources=[])], cmdclass={"build_ext": CMakeBuild})
+setup(ext_modules=[Extension("tetstream._core", sources=[])], cmdclass={"build_ext": CMakeBuild},
+      # setuptools' own staging, kept out of the CMake build directory build/
+      options={"build": {"build_base": os.path.join("build-python", "setuptools")}})
