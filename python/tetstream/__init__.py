@@ -141,9 +141,9 @@ def delaunay(points: ArrayLike, threads: Optional[int] = None, dtype: Any = np.i
         C-contiguous float64 array is used in place, without a copy; every coordinate
         must be finite.
     threads : int or None
-        Accepted for symmetry with :func:`run`; the in-memory kernel inserts the points
-        one after another on one thread today (``None``: the default). Larger inputs, or
-        parallel work, belong to :func:`run`.
+        Threads that turn the kernel's tetrahedra into the returned arrays (``None``: all
+        cores). The insertion itself runs on one thread (the in-memory kernel is
+        sequential); for parallel triangulation of large inputs use :func:`run`.
     dtype : numpy integer type, np.int64 (default) or np.int32
         The type of the index arrays (``simplices``, ``neighbors``, ``convex_hull``,
         ``duplicates``). np.int32 halves their memory.
