@@ -21,9 +21,10 @@ from __future__ import annotations
 import builtins
 import json
 import os
-from typing import Any, Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterator, Optional, Sequence, Union
 
 import numpy as np
+import numpy.typing as npt
 
 from . import _core
 from ._core import InputError, IoError, UsageError
@@ -43,7 +44,7 @@ __all__ = [
 __version__ = "0.1.0"
 
 PathLike = Union[str, "os.PathLike[str]"]
-ArrayLike = Any  # anything np.asarray turns into an (N, 3) array
+ArrayLike = npt.ArrayLike  # anything np.asarray turns into an (N, 3) array
 
 
 class VerificationError(ValueError):
@@ -131,7 +132,7 @@ class Triangulation:
                 f"{len(self.convex_hull)} hull facets, {len(self.duplicates)} duplicates>")
 
 
-def delaunay(points: ArrayLike, threads: Optional[int] = None, dtype: Any = np.int64) -> Triangulation:
+def delaunay(points: ArrayLike, threads: Optional[int] = None, dtype: npt.DTypeLike = np.int64) -> Triangulation:
     """Delaunay triangulation of 3D points, computed in memory with exact predicates.
 
     Parameters
@@ -218,9 +219,10 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
         docs/inputs.md), several files read in order as one input, or an array. An array
         is written to a raw file first (float32 stays float32, anything else becomes
         float64): with checkpoints on (the default) to ``OUTPUT.input.f64`` (or
-        ``.f32``) beside the checkpoint, kept when the job fails so that
-        ``resume=True`` with the same array continues it, and removed when it succeeds;
-        with ``checkpoint=False`` to a private temporary file, always removed.
+        ``.f32``) beside the output (in ``tmpdir`` when given), kept when the job fails
+        so that ``resume=True`` with the same array continues it (another array is
+        refused), and removed when it succeeds; with ``checkpoint=False`` to a private
+        temporary file, always removed.
     output : path
         The container to write (``.tets``). Written as ``OUTPUT.partial`` and renamed
         at the end: nothing incomplete is ever left under this name.
@@ -281,16 +283,28 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
         if checkpointed:
             spill = os.path.join(directory, os.path.basename(output) + ".input" + ext)
             if os.path.lexists(spill):
-                if not (resume and _spill_matches(spill, arr)):
-                    if not (resume or opts.get("force")):
-                        raise UsageError(f"{spill} exists (the input of an earlier job on this output): resume=True "
-                                         f"continues that job, force=True starts over")
+                # The input of an earlier job on this output, kept for its resumption. It
+                # is never rewritten for resume=True (its fingerprint, modification time
+                # included, identifies the checkpointed job's input).
+                if resume:
+                    if not _spill_matches(spill, arr):
+                        raise UsageError(f"{spill} holds other points than `source`: the checkpointed job was "
+                                         f"started with other points (force=True starts over)")
+                elif opts.get("force"):
                     os.remove(spill)
+                else:
+                    raise UsageError(f"{spill} exists (the input of an earlier job on this output): resume=True "
+                                     f"continues that job, force=True starts over")
             if not os.path.lexists(spill):
                 tmp = spill + ".partial"
-                with builtins.open(tmp, "xb") as f:
-                    arr.tofile(f)
-                os.replace(tmp, spill)
+                try:
+                    with builtins.open(tmp, "xb") as f:
+                        arr.tofile(f)
+                    os.replace(tmp, spill)
+                except BaseException:
+                    if os.path.lexists(tmp):
+                        os.remove(tmp)
+                    raise
         else:
             import tempfile
             fd, spill = tempfile.mkstemp(prefix=".tetstream-input-", suffix=ext, dir=directory)
@@ -372,11 +386,11 @@ class TetFile:
         """Per frame: ``first_tet``, ``tet_count``, ``min_label``, ``max_label`` (int64 arrays)."""
         return self._reader.frame_index()
 
-    def frame(self, k: int, original_ids: bool = False, dtype: Any = np.int64) -> np.ndarray:
+    def frame(self, k: int, original_ids: bool = False, dtype: npt.DTypeLike = np.int64) -> np.ndarray:
         """Frame ``k``'s tets as a (t, 4) array (labels, or original ids)."""
         return self._reader.frame(k, original_ids, _narrow(dtype), False)
 
-    def frames(self, original_ids: bool = False, dtype: Any = np.int64) -> Iterator[np.ndarray]:
+    def frames(self, original_ids: bool = False, dtype: npt.DTypeLike = np.int64) -> Iterator[np.ndarray]:
         """Iterate over the tets frame by frame, as (k, 4) arrays in stored order.
 
         ``original_ids``: indices into the job's input instead of labels. ``dtype``:

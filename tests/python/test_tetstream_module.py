@@ -280,6 +280,10 @@ def test_io_failure_then_resume(tmp_path):
     assert not os.path.exists(out)
     with pytest.raises(ValueError, match="resume"):  # a checkpoint exists: refused without resume
         tetstream.run(pts, out, memory="64M", progress=False, zone_points=10000)
+    other = pts.copy()
+    other[123, 0] += 1e-6
+    with pytest.raises(ValueError, match="other points"):  # another array cannot resume it
+        tetstream.run(other, out, memory="64M", progress=False, zone_points=10000, resume=True)
     s = tetstream.run(pts, out, memory="64M", progress=False, zone_points=10000, resume=True)
     assert s["resumed"] and s["points"] == len(pts)
     assert not os.path.exists(out + ".input.f64") and not os.path.exists(out + ".ckpt")
