@@ -23,6 +23,7 @@ from matplotlib.collections import PolyCollection
 
 import tetstream
 
+WINDOW = ((0.15, 0.5), (0.3, 0.65))  # the part of the slice drawn: a cluster and its surroundings
 EDGES = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 
 
@@ -69,18 +70,19 @@ def main():
     tri = tetstream.delaunay(pts)
     print(f"delaunay: {tri} in {time.perf_counter() - t:.2f} s")
     volume = tri.volumes()
-    print(f"total volume {volume.sum():.12f} (the hull's), smallest tet {volume.min():.3g}")
+    print(f"total volume {volume.sum():.12f}, smallest tet {volume.min():.3g}")
 
     polygons, cut = slice_polygons(tri.points, tri.simplices, 0.5)
-    window = [(p[:, 0].min() > 0.25) & (p[:, 0].max() < 0.75) & (p[:, 1].min() > 0.25) & (p[:, 1].max() < 0.75)
+    (x0, x1), (y0, y1) = WINDOW
+    window = [(p[:, 0].min() > x0) & (p[:, 0].max() < x1) & (p[:, 1].min() > y0) & (p[:, 1].max() < y1)
               for p in polygons]
     shown = [p for p, w in zip(polygons, window) if w]
-    fig, ax = plt.subplots(figsize=(6, 6), dpi=100)
+    fig, ax = plt.subplots(figsize=(5.5, 5), dpi=80)
     pc = PolyCollection(shown, array=np.log10(volume[cut][window]), cmap="viridis", edgecolors="face",
                         linewidths=0.1)
     ax.add_collection(pc)
-    ax.set_xlim(0.25, 0.75)
-    ax.set_ylim(0.25, 0.75)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.set_title(f"z = 0.5 through the Delaunay tetrahedra of {len(pts):,} points")
     fig.colorbar(pc, ax=ax, shrink=0.8, label="log10 tetrahedron volume")
