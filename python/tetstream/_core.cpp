@@ -40,6 +40,7 @@
 #include <exception>
 #include <future>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -272,8 +273,15 @@ void apply_run_options(pipeline::RunOptions& o, const py::dict& options) {
 // from Python's handler) asks the job to stop (pipeline::request_interrupt), the job
 // unwinds through its cleanup (a checkpointed run keeps its checkpoint), and the Python
 // exception is raised here once it has.
+// One job (run or verify) at a time per process: they share the interrupt flag and
+// the log level.
+std::mutex g_job_mutex;
+
 template <class R>
 R run_interruptible(std::function<R()> work) {
+  std::unique_lock<std::mutex> one_job(g_job_mutex, std::try_to_lock);
+  if (!one_job.owns_lock())
+    throw UsageError("another tetstream.run() or verify() is running in this process: one at a time");
   pipeline::clear_interrupt();
   std::packaged_task<R()> task(std::move(work));
   std::future<R> done = task.get_future();
@@ -328,8 +336,8 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
   if (o.resume && o.force) throw UsageError("resume and force exclude each other");
   if (io::is_std_stream(o.input) || io::is_std_stream(o.output))
     throw UsageError("standard input/output ('-') is for the command line; give file names");
-  configure_logging(progress);
   return run_interruptible<std::string>([o] {
+    configure_logging(o.progress);
     if (o.threads > 0) omp_set_num_threads(o.threads);
     const pipeline::RunSummary s = pipeline::run_job(o);
     return pipeline::run_summary_json(o, s).dump();
@@ -358,8 +366,8 @@ std::string verify(const std::string& path, const py::object& memory, double sam
   o.max_listed = max_listed;
   o.progress = progress;
   o.validate();
-  configure_logging(progress);
   return run_interruptible<std::string>([o, path] {
+    configure_logging(o.progress);
     return pipeline::verify_report_json(pipeline::verify_file(path, o), path).dump();
   });
 }

@@ -297,13 +297,22 @@ def test_ctrl_c_raises_keyboard_interrupt(tmp_path):
         pytest.skip("signals reach the main thread only")
     pts = uniform(300_000, 11)
     out = str(tmp_path / "i.tets")
-    timer = threading.Timer(0.4, lambda: os.kill(os.getpid(), signal.SIGINT))
-    timer.start()
+    done = threading.Event()
+
+    def interrupt():  # once the job has made its checkpoint, and a little later
+        while not done.is_set() and not os.path.isdir(out + ".ckpt"):
+            done.wait(0.01)
+        if not done.wait(0.2):
+            os.kill(os.getpid(), signal.SIGINT)
+
+    sender = threading.Thread(target=interrupt)
+    sender.start()
     try:
         with pytest.raises(KeyboardInterrupt):
             tetstream.run(pts, out, memory="64M", progress=False, zone_points=20000)
     finally:
-        timer.cancel()
+        done.set()
+        sender.join()
     assert not os.path.exists(out)
     assert os.path.isdir(out + ".ckpt")
 
