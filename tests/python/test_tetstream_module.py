@@ -165,7 +165,9 @@ def big_run(tmp_path_factory):
     d = tmp_path_factory.mktemp("run")
     pts = uniform(100_000, 7)
     out = str(d / "p.tets")
-    summary = tetstream.run(pts, out, memory="64M", threads=2, progress=False, zone_points=25_000)
+    # 110M: a little above the least budget run() accepts for 10^5 points (106M), which
+    # plans several segments (7 on 2 threads)
+    summary = tetstream.run(pts, out, memory="110M", threads=2, progress=False)
     return pts, out, summary
 
 
