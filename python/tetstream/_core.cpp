@@ -131,26 +131,38 @@ py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threa
     }
     for (std::size_t b = 0; b < blocks; ++b) first[b + 1] += first[b];
     m = first[blocks];
-    Buffer<std::uint32_t> index(slots);
-    std::uint32_t* ix = index.get();
+    // Neighbours first, through the slot -> index map, which is freed before the
+    // simplices are allocated: the peak holds the kernel and two of the three.
+    neighbors = Buffer<I>(4 * m);
+    I* nb = neighbors.get();
+    {
+      Buffer<std::uint32_t> index(slots);
+      std::uint32_t* ix = index.get();
 #pragma omp parallel for schedule(static) num_threads(threads)
-    for (std::size_t b = 0; b < blocks; ++b) {
-      std::uint32_t next = std::uint32_t(first[b]);
-      for (std::size_t t = b * kBlock, e = std::min(slots, t + kBlock); t < e; ++t) ix[t] = finite(t) ? next++ : kNone;
+      for (std::size_t b = 0; b < blocks; ++b) {
+        std::uint32_t next = std::uint32_t(first[b]);
+        for (std::size_t t = b * kBlock, e = std::min(slots, t + kBlock); t < e; ++t) ix[t] = finite(t) ? next++ : kNone;
+      }
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : h)
+      for (std::size_t t = 0; t < slots; ++t) {
+        const std::uint32_t i = ix[t];
+        if (i == kNone) continue;
+        for (int j = 0; j < 4; ++j) {
+          const std::uint32_t other = ix[dt.neighbor(core::TetId(t), j) >> 2];
+          if (other == kNone) ++h;  // across facet j: an infinite tet, the hull
+          nb[4 * std::size_t(i) + j] = other == kNone ? I(-1) : I(other);
+        }
+      }
     }
     simplices = Buffer<I>(4 * m);
-    neighbors = Buffer<I>(4 * m);
     I* s = simplices.get();
-    I* nb = neighbors.get();
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : h)
-    for (std::size_t t = 0; t < slots; ++t) {
-      const std::uint32_t i = ix[t];
-      if (i == kNone) continue;
-      for (int j = 0; j < 4; ++j) {
-        s[4 * std::size_t(i) + j] = I(dt.vertex(core::TetId(t), j));
-        const std::uint32_t other = ix[dt.neighbor(core::TetId(t), j) >> 2];
-        if (other == kNone) ++h;  // across facet j: an infinite tet, the hull
-        nb[4 * std::size_t(i) + j] = other == kNone ? I(-1) : I(other);
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (std::size_t b = 0; b < blocks; ++b) {
+      std::size_t i = first[b];
+      for (std::size_t t = b * kBlock, e = std::min(slots, t + kBlock); t < e; ++t) {
+        if (!finite(t)) continue;
+        for (int j = 0; j < 4; ++j) s[4 * i + j] = I(dt.vertex(core::TetId(t), j));
+        ++i;
       }
     }
     // Hull facets, oriented outwards (counter-clockwise seen from outside). The
