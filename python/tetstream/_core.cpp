@@ -27,6 +27,7 @@
 #include <spdlog/spdlog.h>
 
 #include <omp.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <chrono>
@@ -74,6 +75,27 @@ py::array_t<T> to_array(Buffer<T>&& b, std::vector<py::ssize_t> shape) {
   py::capsule owner(p, [](void* q) { delete[] static_cast<T*>(q); });
   return py::array_t<T>(shape, p, owner);
 }
+
+// Scratch memory straight from mmap, so that freeing it hands it back to the system
+// at once (from malloc it may stay in the heap, and count in the peak, when glibc's
+// adaptive mmap threshold has grown past its size).
+template <class T>
+class MappedArray {
+ public:
+  explicit MappedArray(std::size_t n) : bytes_(std::max<std::size_t>(1, n * sizeof(T))) {
+    void* p = mmap(nullptr, bytes_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    data_ = static_cast<T*>(p);
+  }
+  ~MappedArray() { munmap(data_, bytes_); }
+  MappedArray(const MappedArray&) = delete;
+  MappedArray& operator=(const MappedArray&) = delete;
+  T* get() { return data_; }
+
+ private:
+  std::size_t bytes_;
+  T* data_ = nullptr;
+};
 
 // Capacity for n values, on huge pages when large (see Buffer), before the first touch.
 template <class T>
@@ -136,7 +158,7 @@ py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threa
     neighbors = Buffer<I>(4 * m);
     I* nb = neighbors.get();
     {
-      Buffer<std::uint32_t> index(slots);
+      MappedArray<std::uint32_t> index(slots);
       std::uint32_t* ix = index.get();
 #pragma omp parallel for schedule(static) num_threads(threads)
       for (std::size_t b = 0; b < blocks; ++b) {
