@@ -20,7 +20,11 @@ import threading
 import numpy as np
 import pytest
 
-import tetstream
+try:
+    import tetstream
+except ImportError:  # not installed and no PYTHONPATH: the module of the default build tree
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "build", "python"))
+    import tetstream
 
 scipy_spatial = pytest.importorskip("scipy.spatial")
 
