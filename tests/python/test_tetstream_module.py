@@ -279,7 +279,9 @@ def test_io_failure_then_resume(tmp_path):
         except OSError as e:
             print("OSError:", type(e).__name__)
     """)
-    env = dict(os.environ, TETSTREAM_FAULT="write:1")
+    package_dir = os.path.dirname(os.path.dirname(os.path.abspath(tetstream.__file__)))
+    env = dict(os.environ, TETSTREAM_FAULT="write:1",
+               PYTHONPATH=os.pathsep.join([package_dir] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
     r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
     assert "OSError: IoError" in r.stdout, r.stdout + r.stderr
     assert os.path.exists(out + ".input.f64") and os.path.isdir(out + ".ckpt")
