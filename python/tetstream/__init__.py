@@ -248,6 +248,7 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
     dict
         The summary ``tetstream run --json`` prints: ``points``, ``duplicates``,
         ``tets``, ``segments``, ``zones``, ``output_bytes``, ``seconds`` (a dict), ...
+        (for an array, ``input`` names the file it was written to).
 
     Raises
     ------
@@ -473,13 +474,13 @@ def open(path: PathLike) -> TetFile:  # noqa: A001 - the module's verb, like gzi
 
 def verify(path: PathLike, memory: Union[str, int] = "1G", sample: float = 1.0, seed: int = 1,
            tmpdir: Optional[PathLike] = None, volume_tolerance: float = 1e-9, max_listed: int = 10,
-           progress: bool = False, check: bool = True) -> Dict[str, Any]:
+           progress: bool = False, check: bool = True, threads: Optional[int] = None) -> Dict[str, Any]:
     """Check that a container holds the Delaunay triangulation of its points (``tetstream verify``).
 
     Exact orientation, facet pairing, local Delaunay on every interior facet, a closed
     convex hull, coverage of every point, Euler characteristic and volume (docs/verify.md).
     ``sample`` < 1 checks a seeded fraction (a quick look). Out of core within ``memory``;
-    spills go to ``tmpdir``.
+    spills go to ``tmpdir``; ``threads``: None for all cores.
 
     Returns the report ``tetstream verify --json`` prints (``valid``, ``violations``,
     ``violation_counts``, ``listed``, ...). With ``check`` (the default) a failed
@@ -488,7 +489,7 @@ def verify(path: PathLike, memory: Union[str, int] = "1G", sample: float = 1.0, 
     """
     p = os.fspath(path)
     text = _core.verify(p, memory, float(sample), int(seed), os.fspath(tmpdir) if tmpdir else "",
-                        float(volume_tolerance), int(max_listed), bool(progress))
+                        float(volume_tolerance), int(max_listed), bool(progress), _threads(threads))
     report = json.loads(text)
     if check and not report["valid"]:
         raise VerificationError(f"{p}: verification failed: {report['violations']} violation(s)", report)

@@ -390,7 +390,9 @@ std::uint64_t memory_size(const py::object& memory) {
 // ---- verify ----
 
 std::string verify(const std::string& path, const py::object& memory, double sample, std::uint64_t seed,
-                   const std::string& tmpdir, double volume_tolerance, std::size_t max_listed, bool progress) {
+                   const std::string& tmpdir, double volume_tolerance, std::size_t max_listed, bool progress,
+                   int threads) {
+  if (threads < 0 || threads > 1024) throw UsageError("threads must be in [1, 1024] (or None: all cores)");
   pipeline::VerifyOptions o;
   o.memory_bytes = memory_size(memory);
   o.sample = sample;
@@ -400,8 +402,9 @@ std::string verify(const std::string& path, const py::object& memory, double sam
   o.max_listed = max_listed;
   o.progress = progress;
   o.validate();
-  return run_interruptible<std::string>([o, path] {
+  return run_interruptible<std::string>([o, path, threads] {
     configure_logging(o.progress);
+    if (threads > 0) omp_set_num_threads(threads);
     return pipeline::verify_report_json(pipeline::verify_file(path, o), path).dump();
   });
 }
@@ -600,7 +603,7 @@ PYBIND11_MODULE(_core, m) {
         "The out-of-core job; its summary as JSON text (what `tetstream run --json` prints).");
   m.def("parse_memory", &memory_size, py::arg("memory"), "Bytes of a budget such as '4G', '512M' or an int.");
   m.def("verify", &verify, py::arg("path"), py::arg("memory"), py::arg("sample"), py::arg("seed"), py::arg("tmpdir"),
-        py::arg("volume_tolerance"), py::arg("max_listed"), py::arg("progress"),
+        py::arg("volume_tolerance"), py::arg("max_listed"), py::arg("progress"), py::arg("threads") = 0,
         "Verifies a container; the report as JSON text (what `tetstream verify --json` prints).");
   m.attr("max_in_core_points") = kMaxInCorePoints;
   py::class_<Reader>(m, "Reader")

@@ -211,7 +211,7 @@ def test_run_matches_delaunay(big_run):
 
 def test_verify(big_run):
     _, out, s = big_run
-    report = tetstream.verify(out)
+    report = tetstream.verify(out, threads=2)
     assert report["valid"] and report["tets"] == s["tets"] and report["violations"] == 0
 
 
