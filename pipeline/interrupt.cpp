@@ -40,6 +40,10 @@ void install_interrupt_handlers() {
   std::signal(SIGPIPE, SIG_IGN);
 }
 
+void request_interrupt(int signal) { g_signal.store(signal, std::memory_order_relaxed); }
+
+void clear_interrupt() { g_signal.store(0, std::memory_order_relaxed); }
+
 void check_interrupted() {
   if (const int sig = g_signal.load(std::memory_order_relaxed)) throw Interrupted(sig);
 }

@@ -17,4 +17,10 @@ void install_interrupt_handlers();
 // Throws Interrupted when a signal has arrived since install_interrupt_handlers().
 void check_interrupted();
 
+// For embedders that keep their own signal handling (the Python module): ask the job
+// running in this process to stop, as a signal would (the next check_interrupted()
+// throws Interrupted(signal)), and forget such a request before the next job.
+void request_interrupt(int signal);
+void clear_interrupt();
+
 }  // namespace tetstream::pipeline

@@ -3,6 +3,7 @@
 #include "io/point_format.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/run.hpp"
+#include "pipeline/summary_json.hpp"
 #include "tools/command.hpp"
 #include "tools/point_options.hpp"
 
@@ -34,49 +35,7 @@ void run_run(RunArgs& args, Context& ctx) {
                pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.segment_buffer_points,
                s.zone_buffer_points, 100 * s.zone_buffer_share(), s.hull_window_points, s.repair_points, s.queries,
                s.query_points, s.seconds_build, s.seconds_check);
-  ctx.summary = {{"command", "run"},
-                 {"input", o.input},
-                 {"output", o.output},
-                 {"input_points", s.input_points},
-                 {"points", s.points},
-                 {"duplicates", s.duplicates},
-                 {"axis", std::string(1, "xyz"[s.axis])},
-                 {"hull_vertices", s.hull_vertices},
-                 {"segments", s.segments},
-                 {"zones", s.zones},
-                 {"window_points", s.window_points},
-                 {"repair_points", s.repair_points},
-                 {"range_failures", s.range_failures},
-                 {"queries", s.queries},
-                 {"query_points", s.query_points},
-                 {"query_region_releases", s.query_region_releases},
-                 {"redundant_ratio", s.redundant_ratio()},
-                 {"redundant_points", {{"segment_buffers", s.segment_buffer_points},
-                                       {"zone_buffers", s.zone_buffer_points},
-                                       {"hull", s.hull_window_points},
-                                       {"repairs", s.repair_points}}},
-                 {"zone_buffer_share", s.zone_buffer_share()},
-                 {"tets", s.tets},
-                 {"output_bytes", s.output_bytes},
-                 {"disk_planned_bytes", s.disk_planned_bytes},
-                 {"tet_bytes", s.tet_bytes},
-                 {"bytes_per_tet", s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0},
-                 {"seconds", {{"sort", s.seconds_sort},
-                              {"segments_summed", s.seconds_segments},
-                              {"segments_build_summed", s.seconds_build},
-                              {"segments_check_summed", s.seconds_check},
-                              {"triangulate", s.seconds_triangulate},
-                              {"write", s.seconds_write},
-                              {"writer_thread_busy", s.seconds_writer_busy},
-                              {"waiting_for_writer", s.seconds_writer_wait},
-                              {"total", s.seconds_total}}},
-                 {"tets_per_second", tets_per_s},
-                 {"resumed", s.resumed},
-                 {"segments_resumed", s.segments_resumed}};
-  // The ledger's shares, by phase: what this input was planned to take of --memory.
-  nlohmann::json memory = {{"ceiling", s.memory_ceiling}};
-  for (const pipeline::MemoryBudget::Share& share : s.memory_shares) memory[share.phase][share.name] = share.bytes;
-  ctx.summary["memory_planned"] = memory;
+  ctx.summary = pipeline::run_summary_json(o, s);
 }
 
 void setup_run(CLI::App& app, Context& ctx) {

@@ -3,6 +3,7 @@
 #include "core/error.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/run.hpp"
+#include "pipeline/summary_json.hpp"
 #include "pipeline/verify.hpp"
 #include "tools/command.hpp"
 
@@ -34,53 +35,11 @@ struct VerifyArgs {
   pipeline::VerifyOptions options;
 };
 
-nlohmann::json to_json(const pipeline::VerifyReport& r, const std::string& path) {
-  nlohmann::json counts = nlohmann::json::object();
-  for (int k = 0; k < pipeline::kViolationKinds; ++k)
-    counts[pipeline::violation_name(pipeline::Violation(k))] = r.counts[std::size_t(k)];
-  nlohmann::json listed = nlohmann::json::array();
-  for (const auto& l : r.listed)
-    listed.push_back({{"kind", pipeline::violation_name(l.kind)}, {"where", l.where}, {"text", l.text}});
-  nlohmann::json j = {{"command", "verify"},
-                      {"input", path},
-                      {"valid", r.ok()},
-                      {"sampled", r.sampled},
-                      {"sample", r.sample},
-                      {"points", r.points},
-                      {"tets", r.tets},
-                      {"vertices", r.vertices},
-                      {"facets", r.facets},
-                      {"interior_facets", r.interior_facets},
-                      {"boundary_facets", r.boundary_facets},
-                      {"violations", r.violations()},
-                      {"violation_counts", counts},
-                      {"listed", listed},
-                      {"checked", {{"tets", r.tets_checked},
-                                   {"facets", r.facets_checked},
-                                   {"orient3d", r.orient_tests},
-                                   {"insphere", r.insphere_tests},
-                                   {"hull_tests", r.hull_tests}}},
-                      {"peak_open_facets", r.peak_open_facets},
-                      {"peak_open_edges", r.peak_open_edges},
-                      {"spilled_records", r.spilled_records},
-                      {"spill_bytes", r.spill_bytes},
-                      {"memory_planned", r.memory_planned},
-                      {"seconds", r.seconds}};
-  if (!r.sampled) {
-    j["edges"] = r.edges;
-    j["euler"] = r.euler;
-    j["hull"] = {{"vertices", r.hull_vertices}, {"edges", r.hull_edges}, {"facets", r.boundary_facets},
-                 {"euler", r.hull_euler}};
-    j["volume"] = {{"tets", r.tet_volume}, {"hull", r.hull_volume}, {"relative_difference", r.volume_rel_error}};
-  }
-  return j;
-}
-
 void run_verify(VerifyArgs& args, Context& ctx) {
   args.options.memory_bytes = pipeline::parse_memory_size(args.memory);
   args.options.progress = !ctx.global.quiet;
   const pipeline::VerifyReport r = pipeline::verify_file(args.input, args.options);
-  ctx.summary = to_json(r, args.input);
+  ctx.summary = pipeline::verify_report_json(r, args.input);
   if (!ctx.global.json) {
     std::cout << args.input << ": " << r.summary() << std::endl;
   } else if (!r.ok()) {

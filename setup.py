@@ -1,0 +1,44 @@
+"""Builds the extension tetstream._core with the project's CMake (pyproject.toml has the metadata).
+
+    pip install --no-build-isolation .        # Debian: apt install python3-pip python3-setuptools
+
+The CMake build directory is build-python/ (TETSTREAM_BUILD_DIR overrides it); the
+module is built for the interpreter running pip. Needs pybind11 (pybind11-dev) and the
+Python headers (python3-dev): scripts/setup.sh installs them.
+"""
+import glob
+import os
+import shutil
+import subprocess
+import sys
+
+from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+
+ROOT = os.path.dirname(os.path.abspath(__file__))
+
+
+class CMakeBuild(build_ext):
+    def build_extension(self, ext):
+        build = os.environ.get("TETSTREAM_BUILD_DIR") or os.path.join(ROOT, "build-python")
+        configure = ["cmake", "-S", ROOT, "-B", build, "-DTETSTREAM_PYTHON=ON", f"-DPython3_EXECUTABLE={sys.executable}"]
+        if not os.path.exists(os.path.join(build, "CMakeCache.txt")):
+            # a new build directory: Release, and no test suite (an existing one, e.g.
+            # TETSTREAM_BUILD_DIR=build, keeps its own settings)
+            configure += ["-DCMAKE_BUILD_TYPE=Release", "-DTETSTREAM_BUILD_TESTS=OFF"]
+            if shutil.which("ninja"):
+                configure += ["-G", "Ninja"]
+        subprocess.check_call(configure)
+        jobs = os.environ.get("CMAKE_BUILD_PARALLEL_LEVEL") or str(os.cpu_count() or 1)
+        subprocess.check_call(["cmake", "--build", build, "--target", "tetstream_python", "-j", jobs])
+        built = glob.glob(os.path.join(build, "python", "tetstream", "_core*.so"))
+        if not built:
+            sys.exit("tetstream: the extension was not built (is pybind11-dev installed? see the CMake output)")
+        dest = self.get_ext_fullpath(ext.name)
+        os.makedirs(os.path.dirname(dest), exist_ok=True)
+        shutil.copyfile(built[0], dest)
+
+
+setup(ext_modules=[Extension("tetstream._core", sources=[])], cmdclass={"build_ext": CMakeBuild},
+      # setuptools' own staging, kept out of the CMake build directory build/
+      options={"build": {"build_base": os.path.join("build-python", "setuptools")}})
