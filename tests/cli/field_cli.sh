@@ -23,6 +23,8 @@ expect_exit() {  # CODE CMD...: runs CMD, checks its exit status and a one-line 
 
 # All outputs, with --json: the files exist, the summary says what was done.
 j=$("$T" -q --json field c.tets -o f --density dtfe --voronoi-volume --neighbours --grid 16,8,4)
+# The job's work directory (and the grid's scratch file in it) is gone afterwards.
+ls -d tetstream-field-* 2>/dev/null && fail "field left its work directory: $(ls tetstream-field-*)"
 for f in f.density.npy f.voronoi.npy f.neighbours.offsets.npy f.neighbours.indices.npy f.grid.npy; do
   [ -s "$f" ] || fail "$f not written"
 done
