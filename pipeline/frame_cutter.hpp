@@ -1,6 +1,7 @@
 #pragma once
 // Frames of the output: where the tets of the zones become the container's frames.
 #include "pipeline/async_tet_writer.hpp"
+#include "pipeline/memory_budget.hpp"
 #include "pipeline/segment.hpp"
 
 #include <cstddef>
@@ -10,13 +11,7 @@
 
 namespace tetstream::pipeline {
 
-// Tets per frame, about: a frame is cut at the first change of minimum label after
-// this many tets. The segments emit their tets grouped by minimum label and the
-// zones follow each other in label order, so the job's whole stream is ordered by
-// minimum label, and the frames (each a set, stored canonically by the codec) are
-// the same for any segment plan or thread count: the same budget gives the same
-// bytes, and two budgets give the same frames but for the header's options.
-inline constexpr std::size_t kFrameTets = std::size_t(1) << 18;
+// kFrameTets (the frame size) is in pipeline/memory_budget.hpp, which sizes the writer's share from it.
 
 // The last stage before the writer: turns the zones' output, in minimum-label order,
 // into frames of about kFrameTets tets, cut where the minimum label changes.

@@ -26,8 +26,6 @@ constexpr double kFrameBytesPerTet = 32, kEncoderBytesPerTet = 40;
 constexpr std::size_t kMinHullPiece = 4096;
 // The smallest sorted run (the reader's chunk).
 constexpr std::size_t kMinRunPoints = std::size_t(1) << 16;
-// Frames cut by the run's FrameCutter: sized here too, for the writer's share.
-constexpr std::size_t kFrameTets = std::size_t(1) << 18;
 
 }  // namespace
 

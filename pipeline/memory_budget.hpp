@@ -28,6 +28,14 @@ namespace tetstream::pipeline {
 // before the sort, which must never refuse a job that would fit.
 inline constexpr double kIndexBytesLowerBound = 4;
 
+// Tets per frame, about: a frame is cut at the first change of minimum label after
+// this many tets (pipeline/frame_cutter.hpp). The segments emit their tets grouped by
+// minimum label and the zones follow each other in label order, so the job's whole
+// stream is ordered by minimum label, and the frames (each a set, stored canonically
+// by the codec) are the same for any segment plan or thread count. The ledger sizes
+// the writer's share from it.
+inline constexpr std::size_t kFrameTets = std::size_t(1) << 18;
+
 struct SortShares {
   std::size_t run_points = 0;         // points per sorted run
   std::size_t hull_piece_points = 0;  // points per hull-candidate piece (one kernel each)
