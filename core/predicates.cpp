@@ -21,6 +21,8 @@
 // cospherical inputs, where almost every insphere call lands here: ~130 ns vs ~1.7 us.)
 #include "core/predicates.hpp"
 
+#include "core/double_word.hpp"
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -429,6 +431,49 @@ bool circumcentre_offset_int(const double* const* p, int low, double x[3]) {
   return true;
 }
 
+// The centre offset X = N / D in double-word arithmetic (double_word.hpp), for
+// 2^-200 <= M <= 2^200 (M = the largest |difference|): the same expressions as the
+// fast path, with exact differences and every sum and product rounded with relative
+// error at most dw::kRelativeError = w instead of u. The forward bounds are the fast
+// path's with u replaced by w: |dD| <= 12 gamma_8(w) M^3 / (1-w)^3, |dN| <= 18
+// gamma_12(w) M^4 / (1-w)^4, plus 2^-1000 each for partial results that underflow
+// (each such rounding errs by at most 2^-1075 absolutely, and later factors are below
+// 2^402, a few dozen of them: far below 2^-1000; and the bounds themselves are at
+// least 2^-900 in this range). The quotient is N.hi / D.hi in double: |lo| <= u |hi|
+// on both, so it is within 3u (1 + O(u)) of N~ / D~, counted as 4u |x|. Returns false
+// when D rounds to 0 (a tetrahedron this flat goes to the exact path) or r > 1/2;
+// otherwise x and the per-component bound e.
+bool circumcentre_offset_double_word(const double* const* p, double m, double x[3], double e[3]) {
+  using dw::DoubleWord;
+  constexpr double u = 0x1p-53, w = dw::kRelativeError;
+  DoubleWord t[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) t[i][k] = dw::exact_difference(p[i + 1][k], p[0][k]);
+  const auto cross = [&](int i, int j, int k) {
+    const int a = (k + 1) % 3, b = (k + 2) % 3;
+    return t[i][a] * t[j][b] - t[i][b] * t[j][a];
+  };
+  DoubleWord vw[3], wu[3], uv[3], sq[3];
+  for (int k = 0; k < 3; ++k) vw[k] = cross(1, 2, k), wu[k] = cross(2, 0, k), uv[k] = cross(0, 1, k);
+  for (int i = 0; i < 3; ++i) sq[i] = t[i][0] * t[i][0] + t[i][1] * t[i][1] + t[i][2] * t[i][2];
+  const DoubleWord det = t[0][0] * vw[0] + t[0][1] * vw[1] + t[0][2] * vw[2];
+  const double det2 = 2.0 * det.hi;
+  const double gamma8 = 8 * w / (1 - 8 * w), gamma12 = 12 * w / (1 - 12 * w);
+  const double m3 = m * m * m;
+  const double err_d = 12 * gamma8 * m3 / ((1 - w) * (1 - w) * (1 - w)) + 0x1p-1000;
+  const double err_n = 18 * gamma12 * m3 * m / ((1 - w) * (1 - w) * (1 - w) * (1 - w)) + 0x1p-1000;
+  const double abs_d = std::fabs(det2) * (1 - u);  // <= |D~|
+  if (!(err_d <= 0.5 * abs_d)) return false;
+  const double ratio = err_d / abs_d;
+  for (int k = 0; k < 3; ++k) {
+    const DoubleWord n = sq[0] * vw[k] + sq[1] * wu[k] + sq[2] * uv[k];
+    x[k] = n.hi / det2;
+    const double ax = std::fabs(x[k]) * (1 + 4 * u);  // >= |N~_k / D~|
+    e[k] = (ax * ratio + err_n / abs_d) * (1 + 2 * ratio) + 4 * u * std::fabs(x[k]);
+  }
+  return true;
+}
+
 }  // namespace
 
 // Circumsphere with a rigorous error bound. With u_ = b-a, v_ = c-a, w_ = d-a, the
@@ -446,6 +491,11 @@ bool circumcentre_offset_int(const double* const* p, int low, double x[3]) {
 // |x*_k - X_k|. The bound itself is evaluated in floating point with a few dozen
 // roundings, covered by the final factor (1 + 2^-20), which also absorbs underflow
 // (M >= 2^-200 makes any underflow error at most 2^-600 of the bound).
+//
+// Double-word path, when the fast bound is loose: the same formulas in about 106-bit
+// arithmetic (circumcentre_offset_double_word), kept when its bound is as good as the
+// exact path's within a factor of two. Tetrahedra flat enough to defeat it as well
+// (|D| below about 2^-40 M^3) take the exact path.
 //
 // Exact path, when the fast bound is loose (over 2^-36 M: a flat tetrahedron, whose
 // centre lies far away and whose computed centre may be off by r |X|, a large
@@ -527,8 +577,25 @@ Circumsphere circumsphere(const double* a, const double* b, const double* c, con
     }
   }
 
-  // Exact path, in the narrowest integer width that holds the call.
   const double* p[4] = {a, b, c, d};
+  // Double-word path: kept when its bound is within twice the exact path's (4u |x_k|)
+  // or as tight as the fast path demands. Flat tets, whose centres lie hundreds of
+  // edge lengths away, land here (a terrain's roofs and ground: the exact path was a
+  // quarter of such a run's time); only the flattest go on to exact integers.
+  if (m >= 0x1p-200 && m <= 0x1p200) {
+    double x[3], e[3];
+    if (circumcentre_offset_double_word(p, m * (1 + 0x1p-50), x, e)) {  // m of the exact differences
+      bool tight = true;
+      for (int k = 0; k < 3; ++k)
+        tight &= e[k] <= std::max(8 * u * std::fabs(x[k]), 0x1p-36 * m + 4 * u * std::fabs(x[k]));
+      if (tight) {
+        finish(x, e);
+        return s;
+      }
+    }
+  }
+
+  // Exact path, in the narrowest integer width that holds the call.
   const Range r = scan(p, 4);
   if (!r.finite) return s;
   double x[3];

@@ -50,6 +50,7 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   axis_ = axis;
   block_points_ = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
   entries_.assign(count, 0);
+  fine_.assign(count, 0);
   const std::uint64_t block_count = (count + block_points_ - 1) / block_points_;
   // The blocks are independent: each is built into its own node list (ids local to
   // the block) on all threads, then the lists are laid end to end. On one thread it
@@ -100,8 +101,18 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
         std::sort(o + begin, o + end);  // a leaf reads its points in file order
         double box_lo[3], box_hi[3];  // as the queries decode it, so that they find the same cells
         decode<true>(node.box, scale, box_lo, box_hi);
-        const CellGrid grid(box_lo, box_hi);
-        for (std::uint32_t j = begin; j < end; ++j) o[j] |= grid.cell_of(points[base + o[j]].xyz) << kOffsetBits;
+        const CellGrid grid(box_lo, box_hi, kSlices * kSlices);
+        std::uint16_t* f = &fine_[base];
+        for (std::uint32_t j = begin; j < end; ++j) {
+          const std::uint32_t cell = grid.cell_of(points[base + o[j]].xyz);  // 8 bits an axis
+          std::uint32_t high = 0, low = 0;
+          for (int k = 0; k < 3; ++k) {
+            high |= (cell >> (2 * kSliceBits * k + kSliceBits) & (kSlices - 1)) << (kSliceBits * k);
+            low |= (cell >> (2 * kSliceBits * k) & (kSlices - 1)) << (kSliceBits * k);
+          }
+          o[j] |= high << kOffsetBits;
+          f[j] = std::uint16_t(low);
+        }
       }
       nodes[id].next = std::uint32_t(nodes.size());
     };

@@ -126,7 +126,8 @@ class SegmentWorker {
   bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
   // The emptiness query of a queued tet: true when no missing point conflicts with it,
   // else false with the repair point pushed.
-  bool query_tet(TetId t, std::vector<std::uint64_t>& repairs);
+  struct QueuedTet;
+  bool query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs);
   // The range of the sort axis a finite tet's query reads, clipped ball and all:
   // [lo, hi] (lo > hi: empty), and whether the missing points outside the window's
   // label range (outside_clear) or outside the strip's window inside it (strip_clear)
@@ -136,9 +137,18 @@ class SegmentWorker {
   // A round's tets that failed the range test, by the low end of their extent along
   // the sort axis: queried in that order, they read the file from one end to the
   // other (in the kernel's order they jumped all over the window's label range, and
-  // holding the pages they mapped within the budget meant faulting them in again
-  // and again).
-  std::vector<std::pair<double, TetId>> queued_;
+  // and again). Each keeps the ball and extent check_tet computed: on a terrain
+  // nearly every tet fails the range test, most of them flat, and computing their
+  // circumspheres again (exactly, for the flattest) was a tenth of the run.
+  struct QueuedTet {
+    double lo, hi;  // the extent along the sort axis (query_extent)
+    TetId tet;
+    bool bounded, outside_clear, strip_clear;  // query_extent's result and flags
+    ConflictBall ball;
+    bool operator<(const QueuedTet& o) const { return lo < o.lo || (lo == o.lo && tet < o.tet); }
+    bool operator==(const QueuedTet& o) const { return tet == o.tet; }
+  };
+  std::vector<QueuedTet> queued_;
   // The same for an infinite tet: its facet is a facet of the global hull when no
   // missing point conflicts with it (lies beyond its plane, or on it inside its
   // circumcircle under the perturbation).
@@ -394,31 +404,29 @@ bool SegmentWorker::query_extent(TetId t, ConflictBall& ball, double& lo, double
 
 bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   if (dt_.is_infinite(t)) return check_hull_facet(t, repairs);
-  ConflictBall ball;
-  double lo, hi;
-  bool outside_clear, strip_clear;
-  if (query_extent(t, ball, lo, hi, outside_clear, strip_clear) && (lo > hi || (outside_clear && strip_clear)))
-    return true;
+  QueuedTet q;
+  q.tet = t;
+  q.bounded = query_extent(t, q.ball, q.lo, q.hi, q.outside_clear, q.strip_clear);
+  if (q.bounded && (q.lo > q.hi || (q.outside_clear && q.strip_clear))) return true;
   ++stats_.range_failures;
-  queued_.emplace_back(lo, t);
+  if (!q.bounded) {
+    // No usable bound: the query examines every missing point exactly.
+    q.ball.radius = std::numeric_limits<double>::infinity();
+    q.ball.center[0] = q.ball.center[1] = q.ball.center[2] = 0;
+  }
+  queued_.push_back(q);
   return true;
 }
 
-bool SegmentWorker::query_tet(TetId t, std::vector<std::uint64_t>& repairs) {
+bool SegmentWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs) {
+  const TetId t = q.tet;
   // A tet proved empty stays empty for the rest of the segment: later repairs insert
   // only points that were missing, and none of those is in its ball.
   const auto [key_a, key_b] = tet_key(t);
   if (proved_empty_.contains(key_a, key_b)) return true;
-  // The extent again (check_tet computed it): cheaper than holding a ball for each
-  // queued tet, as about one tet in a hundred fails the range test.
-  ConflictBall query_ball;
-  double lo, hi;
-  bool outside_clear, strip_clear;
-  if (!query_extent(t, query_ball, lo, hi, outside_clear, strip_clear)) {
-    // No usable bound: the query examines every missing point exactly.
-    query_ball.radius = std::numeric_limits<double>::infinity();
-    query_ball.center[0] = query_ball.center[1] = query_ball.center[2] = 0;
-  }
+  const ConflictBall& query_ball = q.ball;
+  const double lo = q.lo, hi = q.hi;
+  const bool outside_clear = q.outside_clear, strip_clear = q.strip_clear;
   VertexId v[4];
   for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
   const double r2 = query_ball.radius * query_ball.radius;
@@ -548,8 +556,8 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
   // The queries, along the sort axis (a tet of several pending stars once).
   std::sort(queued_.begin(), queued_.end());
   queued_.erase(std::unique(queued_.begin(), queued_.end()), queued_.end());
-  for (const auto& [lo, t] : queued_)
-    if (!query_tet(t, repairs)) block_pending(t);
+  for (const QueuedTet& q : queued_)
+    if (!query_tet(q, repairs)) block_pending(q.tet);
   queued_.clear();
   pending_.clear();
   for (std::size_t z = 0; z < zone_state_.size(); ++z) {

@@ -714,11 +714,17 @@ TEST(Predicates, CircumsphereBoundIsSound) {
   SEEDED(seed, 808);
   tp::Rng rng(seed);
   int valid = 0, invalid = 0, huge = 0;
-  for (int it = 0; it < 3000; ++it) {
+  for (int it = 0; it < 3750; ++it) {
     std::array<P3, 4> p;
-    const int kind = it % 4;
+    const int kind = it % 5;
     for (auto& q : p) q = random_point(rng);
-    if (kind >= 1) {  // nearly flat: d close to plane abc
+    if (kind == 4) {  // LiDAR-like: a tilted plane quantised to 1 cm, UTM-sized offsets (the double-word path)
+      for (auto& q : p) {
+        const double gx = double(rng.below(2000)), gy = double(rng.below(2000));
+        const double gz = std::round(0.3 * gx + 0.1 * gy) + double(rng.below(3)) - 1.0;
+        q = {512345.0 + gx / 100, 4123456.0 + gy / 100, 100.0 + gz / 100};
+      }
+    } else if (kind >= 1) {  // nearly flat: d close to plane abc
       const double s = rng.uniform(-1, 2), t = rng.uniform(-1, 2);
       const double h = std::pow(10.0, -rng.uniform(0, 17));
       for (int k = 0; k < 3; ++k) p[3][k] = p[0][k] + s * (p[1][k] - p[0][k]) + t * (p[2][k] - p[0][k]);
@@ -787,7 +793,7 @@ TEST(Predicates, CircumsphereBoundIsSound) {
     EXPECT_LE(cs.radius_error, 4e-11 * extent + 2e-15 * cs.radius) << "iteration " << it;
     if (kind == 1 && cs.radius > 1e9 * std::max(1.0, std::fabs(p[0][0]))) ++huge;
   }
-  EXPECT_GT(valid, 2500);
+  EXPECT_GT(valid, 3200);
   EXPECT_EQ(invalid, 0);  // only an exactly flat tet (skipped above) has no sphere
   EXPECT_GT(huge, 20);    // the exact path was exercised
 }
