@@ -101,8 +101,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, kMaxThreads));
   app.add_option("--log-level", ctx.global.log_level, "trace, debug, info, warn, error, critical, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
-  app.add_flag("--json", ctx.global.json, "Print a machine-readable summary on stdout at the end");
-  app.add_option("--json-file", ctx.global.json_file, "Write the --json summary to FILE (implies --json)");
+  app.add_flag("--json", ctx.global.json, "Print a machine-readable summary at the end (on stdout; on stderr when stdout\ncarries data: cat, run -o -)");
+  app.add_option("--json-file", ctx.global.json_file, "Write the --json summary to FILE (implies --json)")->type_name("FILE");
   app.add_flag("-q,--quiet", ctx.global.quiet, "No progress line; warnings and errors only");
   app.add_flag("-v,--verbose", ctx.global.verbose, "Progress also from commands that are quiet by default (cat)");
   // Global options may be given before or after the subcommand.
