@@ -1,20 +1,29 @@
 #pragma once
 // Converters from a .tets container to the mesh formats downstream tools read:
 //
-//   .vtu   VTK XML UnstructuredGrid, binary appended raw data, header_type UInt64,
-//          Int64 connectivity and offsets, point data "original_id" (Int64)
+//   .vtu   VTK XML UnstructuredGrid, appended data, header_type UInt64, Int64
+//          connectivity and offsets, point data "original_id" (Int64); raw, or zlib
+//          compressed (compressor="vtkZLibDataCompressor") with `compress_level` > 0
+//   .vtk   legacy VTK (DataFile Version 5.1) UNSTRUCTURED_GRID, ASCII or BINARY
+//          (big-endian, `binary`): POINTS double, OFFSETS/CONNECTIVITY vtktypeint64,
+//          CELL_TYPES 10, point data SCALARS original_id vtktypeint64
 //   .mesh  Medit (MeshVersionFormatted 2, ASCII, 1-based)
-//   .msh   Gmsh 4.1 ASCII: one node block, one block of 4-node tetrahedra (type 4)
-//   .node  TetGen .node + .ele (ASCII, 1-based) beside it
+//   .msh   Gmsh 4.1, ASCII or binary (`binary`): one node block, one block of 4-node
+//          tetrahedra (type 4), and $NodeData "original_id" (in binary only while the
+//          point count fits the format's int node tags)
+//   .node  TetGen .node + .ele (ASCII, 1-based) beside it; the .node's one point
+//          attribute is the original id
+//   .xdmf  XDMF 3 with its heavy data in BASE.h5 beside it (HDF5: /points N x 3 float64,
+//          /tets T x 4 uint64, /original_id N int64); only in a build with HDF5
 //
 // Vertex i of the mesh is the point of label i (the container's sorted order); every
-// tet keeps its positive orientation (det[b-a, c-a, d-a] > 0), which is what all four
-// formats expect. Coordinates are written exactly: float64 values in text as the
-// shortest decimal that reads back to the same double (float32 values as the double
-// they equal).
+// tet keeps its positive orientation (det[b-a, c-a, d-a] > 0), which is what all the
+// formats expect. "original_id" is the point's index in the input of `run`.
+// Coordinates are written exactly: float64 values in text as the shortest decimal that
+// reads back to the same double (float32 values as the double they equal).
 //
 // Streaming in bounded memory: one pass over the points, then one over the frames (the
-// counts the .vtu header needs are in the container's header and footer), whatever the
+// counts the headers need are in the container's header and footer), whatever the
 // size of the output. Each file goes to NAME.partial and is renamed when complete.
 #include "io/tet_reader.hpp"
 
@@ -25,13 +34,18 @@
 
 namespace tetstream::io {
 
-enum class MeshFormat { kVtu, kMedit, kGmsh, kTetgen };
+enum class MeshFormat { kVtu, kMedit, kGmsh, kTetgen, kVtk, kXdmf };
 
-// From the extension (.vtu, .mesh, .msh, .node or .ele); throws UsageError otherwise.
+// From the extension (.vtu, .vtk, .mesh, .msh, .node or .ele, .xdmf); throws
+// UsageError otherwise.
 MeshFormat mesh_format_for(const std::string& path);
 const char* mesh_format_name(MeshFormat format);
 
 struct MeshExportOptions {
+  // .msh and .vtk: binary instead of ASCII.
+  bool binary = false;
+  // .vtu: 0 writes raw appended data, 1..9 zlib-compresses it at that level.
+  int compress_level = 0;
   // Progress: called with the number of points / tets just written.
   std::function<void(std::uint64_t)> on_points, on_tets;
 };
@@ -42,7 +56,8 @@ struct MeshExportResult {
 };
 
 // Writes the mesh; checks the points' checksum first. Throws InputError for a damaged
-// container, IoError when writing fails (no partial output is left behind).
+// container, UsageError for an option the format does not take (or .xdmf without HDF5),
+// IoError when writing fails (no partial output is left behind).
 MeshExportResult export_mesh(const TetReader& reader, const std::string& path, MeshFormat format,
                              const MeshExportOptions& options = {});
 

@@ -85,6 +85,9 @@ class OutputFile {
   std::uint64_t offset() const { return flushed_ + used_; }
   void flush();
   void sync();  // flush + fsync
+  // Overwrites `n` bytes already written at `offset` (offset + n <= offset()): headers
+  // whose values are known only at the end. Flushes first. Not on standard output.
+  void write_at(std::uint64_t offset, const void* data, std::size_t n);
   // Reads back `n` bytes at `offset` (< the flushed size), for a resumed writer's checks.
   void read_at(std::uint64_t offset, void* data, std::size_t n) const;
   // Flushes, syncs (if asked), closes and renames PATH.partial to PATH.

@@ -6,9 +6,8 @@
 // index is its row plus the rows of the datasets before it.
 //
 // Built only with TETSTREAM_HDF5 (io/CMakeLists.txt); point_hdf5_none.cpp otherwise.
+#include "io/hdf5_detail.hpp"
 #include "io/point_detail.hpp"
-
-#include <hdf5.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -18,25 +17,8 @@
 namespace tetstream::io {
 namespace {
 
-// HDF5 prints its error stack to stderr unless told not to; our errors are one line.
-void quiet() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
-
-class Handle {
- public:
-  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
-  ~Handle() {
-    if (id_ >= 0) close_(id_);
-  }
-  Handle(Handle&& o) noexcept : id_(o.id_), close_(o.close_) { o.id_ = -1; }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  hid_t get() const { return id_; }
-  bool ok() const { return id_ >= 0; }
-
- private:
-  hid_t id_;
-  herr_t (*close_)(hid_t);
-};
+using hdf5::Handle;
+using hdf5::quiet;
 
 Handle open_file(const std::string& path) {
   quiet();

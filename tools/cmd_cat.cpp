@@ -5,7 +5,11 @@
 //   --format u64    4 little-endian uint64 per tet
 //   --original-ids  indices in the user's input order instead of labels (sorted order)
 //   --frames A:B    frames A..B-1 only (Python slice: "A:", ":B", "K" for one frame)
-//   --points        the points instead: "x y z original_id\n" per label, in label order
+//   --points        the points instead: "x y z original_id\n" per label, in label order;
+//                   with --format f64, 3 little-endian float64 per point (a raw .f64 file)
+//
+// Quiet by default, as a filter should be: no progress and no log line unless -v.
+// The --json summary goes to stderr (or --json-file), never between the tets.
 //
 // Streams frame by frame in bounded memory. Tets come in stored order (docs/format.md
 // §4.1), each positively oriented. FILE "-" reads the container from standard input as
@@ -18,6 +22,7 @@
 #include "tools/command.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <charconv>
 #include <cstdio>
 #include <cstring>
@@ -59,6 +64,9 @@ std::pair<std::uint64_t, std::uint64_t> parse_frames(const std::string& spec, st
   }
   return {a, b};
 }
+
+// A filter reports progress only when asked (-v, and not -q).
+bool reports(const Context& ctx) { return ctx.global.verbose && !ctx.global.quiet; }
 
 // Buffered stdout; a write error (full disk, closed pipe) is an IoError.
 class Stdout {
@@ -133,6 +141,8 @@ void run_cat_stream(const CatArgs& args, Context& ctx) {
 }
 
 void run_cat(const CatArgs& args, Context& ctx) {
+  ctx.stdout_is_data = true;
+  if (args.format == "f64" && !args.points) throw UsageError("--format f64 is for --points; tets are text, u32 or u64");
   if (args.path == "-") return run_cat_stream(args, ctx);
   const io::TetReader r(args.path);
   // Points and original ids are trusted only after the points' CRC (frames are
@@ -143,15 +153,25 @@ void run_cat(const CatArgs& args, Context& ctx) {
   std::uint64_t written = 0;
 
   if (args.points) {
-    if (args.format != "text") throw UsageError("--points prints text; use `convert` for binary meshes");
+    if (args.format != "text" && args.format != "f64") {
+      throw UsageError("--points --format " + args.format + ": points are text or f64 (3 little-endian float64 each)");
+    }
     if (!args.frames.empty()) throw UsageError("--points and --frames do not go together");
-    pipeline::Progress progress("cat", "points", r.point_count(), !ctx.global.quiet);
+    const bool binary = args.format == "f64";
+    pipeline::Progress progress("cat", "points", r.point_count(), reports(ctx));
     constexpr std::size_t kChunk = 1 << 16;
     std::vector<double> xyz(3 * kChunk);
     std::vector<std::uint64_t> ids(kChunk);
     for (std::uint64_t p = 0; p < r.point_count(); p += kChunk) {
       const std::size_t n = std::size_t(std::min<std::uint64_t>(kChunk, r.point_count() - p));
       r.read_points(p, n, xyz.data(), ids.data());
+      if (binary) {
+        static_assert(std::endian::native == std::endian::little, "f64 output is little-endian");
+        out.write(xyz.data(), 24 * n);
+        progress.add(n);
+        written += n;
+        continue;
+      }
       for (std::size_t i = 0; i < n; ++i) {
         char* s = out.reserve(128);
         char* e = s;
@@ -167,8 +187,9 @@ void run_cat(const CatArgs& args, Context& ctx) {
       written += n;
     }
     out.flush();
+    if (std::fflush(stdout) != 0) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
     progress.finish();
-    ctx.summary = {{"command", "cat"}, {"file", args.path}, {"points", written}};
+    ctx.summary = {{"command", "cat"}, {"file", args.path}, {"format", args.format}, {"points", written}};
     return;
   }
 
@@ -186,7 +207,7 @@ void run_cat(const CatArgs& args, Context& ctx) {
 
   std::uint64_t total = 0;
   for (std::uint64_t k = first; k < last; ++k) total += r.frames()[k].tet_count;
-  pipeline::Progress progress("cat", "tets", total, !ctx.global.quiet);
+  pipeline::Progress progress("cat", "tets", total, reports(ctx));
   std::vector<std::uint64_t> labels;
   std::vector<std::uint32_t> narrow;
   for (std::uint64_t k = first; k < last; ++k) {
@@ -205,11 +226,14 @@ void run_cat(const CatArgs& args, Context& ctx) {
 
 void setup_cat(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<CatArgs>();
-  CLI::App* cmd = app.add_subcommand("cat", "Write a .tets container's tets (or points) to stdout, for pipes");
+  CLI::App* cmd = app.add_subcommand("cat", "Write a .tets container's tets (or points) to stdout, for pipes\n"
+                                             "(quiet unless -v; --json goes to stderr)");
   cmd->add_option("file", args->path, ".tets container, or - to read one from standard input as it is written")
       ->required();
-  cmd->add_option("--format", args->format, "text (\"a b c d\" per line), u32 or u64 (4 little-endian labels per tet)")
-      ->check(CLI::IsMember({"text", "u32", "u64"}))
+  cmd->add_option("--format", args->format,
+                  "text (\"a b c d\" per line), u32 or u64 (4 little-endian labels per tet);\n"
+                  "with --points: text or f64 (3 little-endian float64 per point)")
+      ->check(CLI::IsMember({"text", "u32", "u64", "f64"}))
       ->capture_default_str();
   cmd->add_flag("--original-ids", args->original_ids,
                 "Vertex indices in the original input order instead of labels (sorted order)");

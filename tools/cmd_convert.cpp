@@ -1,6 +1,8 @@
 // `tetstream convert OUT.tets MESH`: a container to a mesh file for downstream tools
-// (io/mesh_export.hpp): .vtu (VTK), .mesh (Medit), .msh (Gmsh 4.1), .node (TetGen, with
-// .ele beside it). Streams in bounded memory; nothing is left behind on failure.
+// (io/mesh_export.hpp): .vtu (VTK XML, raw or zlib-compressed), .vtk (legacy VTK, ASCII
+// or binary), .mesh (Medit), .msh (Gmsh 4.1, ASCII or binary), .node (TetGen, with .ele
+// beside it), .xdmf (with BASE.h5, in a build with HDF5). Streams in bounded memory;
+// nothing is left behind on failure.
 #include "io/mesh_export.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/progress.hpp"
@@ -15,6 +17,8 @@ namespace {
 
 struct ConvertArgs {
   std::string input, output;
+  bool binary = false;
+  int compress = 0;
 };
 
 void run_convert(const ConvertArgs& args, Context& ctx) {
@@ -23,6 +27,8 @@ void run_convert(const ConvertArgs& args, Context& ctx) {
   pipeline::Progress points("converting points", "points", reader.point_count(), !ctx.global.quiet);
   pipeline::Progress tets("converting tets", "tets", reader.tet_count(), !ctx.global.quiet);
   io::MeshExportOptions options;
+  options.binary = args.binary;
+  options.compress_level = args.compress;
   options.on_points = [&points](std::uint64_t n) { points.add(n); };
   options.on_tets = [&tets](std::uint64_t n) { tets.add(n); };
   const io::MeshExportResult result = io::export_mesh(reader, args.output, format, options);
@@ -33,6 +39,8 @@ void run_convert(const ConvertArgs& args, Context& ctx) {
                  {"file", args.input},
                  {"format", io::mesh_format_name(format)},
                  {"outputs", result.files},
+                 {"binary", args.binary},
+                 {"compress_level", args.compress},
                  {"points", reader.point_count()},
                  {"tets", reader.tet_count()},
                  {"bytes", result.bytes},
@@ -42,10 +50,14 @@ void run_convert(const ConvertArgs& args, Context& ctx) {
 void setup_convert(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<ConvertArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "convert", "Convert a .tets container to a mesh: .vtu (VTK XML), .mesh (Medit), .msh (Gmsh 4.1)\n"
-                 "or .node (TetGen .node + .ele); the format comes from the extension");
+      "convert", "Convert a .tets container to a mesh: .vtu (VTK XML), .vtk (legacy VTK), .mesh (Medit),\n"
+                 ".msh (Gmsh 4.1), .node (TetGen .node + .ele) or .xdmf (XDMF + HDF5 .h5 beside it);\n"
+                 "the format comes from the extension. Each point carries its input index as\n"
+                 "\"original_id\" where the format has point data (.vtu .vtk .msh .xdmf; .node: attribute 1)");
   cmd->add_option("input", args->input, ".tets container")->required();
-  cmd->add_option("output", args->output, "mesh.vtu, mesh.mesh, mesh.msh or mesh.node")->required();
+  cmd->add_option("output", args->output, "mesh.vtu, mesh.vtk, mesh.mesh, mesh.msh, mesh.node or mesh.xdmf")->required();
+  cmd->add_flag("--binary", args->binary, ".msh and .vtk: binary instead of ASCII");
+  cmd->add_flag("--compress{6}", args->compress, ".vtu: zlib-compress the data (vtkZLibDataCompressor); --compress=L for level 1-9");
   cmd->callback([args, &ctx] { run_convert(*args, ctx); });
 }
 

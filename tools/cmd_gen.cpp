@@ -5,6 +5,7 @@
 #include "pipeline/interrupt.hpp"
 #include "pipeline/progress.hpp"
 #include "tools/command.hpp"
+#include "tools/count_option.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -89,7 +90,9 @@ void setup_gen(CLI::App& app, Context& ctx) {
   cmd->footer(io::distribution_help());
   cmd->add_option("--dist", args->dist, "Distribution: uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain, two-plates")
       ->capture_default_str();
-  cmd->add_option("-n,--n", args->gen.n, "Number of points (grid: rounded to the nearest cube)")->required();
+  cmd->add_option("-n,--n", args->gen.n, "Number of points, e.g. 1000000 or 1e6 (grid: rounded to the nearest cube)")
+      ->transform(scientific_count())
+      ->required();
   cmd->add_option("--seed", args->gen.seed, "Random seed")->capture_default_str();
   cmd->add_option("-o,--output", args->output,
                   "Output file ('-' for stdout); format from the extension: .f64 .raw .bin (raw float64),\n"
@@ -111,6 +114,7 @@ void setup_gen(CLI::App& app, Context& ctx) {
   cmd->add_option("--clusters", args->gen.clusters, "clusters: number of Gaussian clusters")->capture_default_str();
   cmd->add_option("--radius", args->gen.radius, "sphere: radius")->capture_default_str();
   cmd->add_option("--chunk", args->chunk, "Points generated and written per chunk (the output does not depend on it)")
+      ->transform(scientific_count())
       ->capture_default_str();
   cmd->callback([args, &ctx] { run_gen(*args, ctx); });
 }

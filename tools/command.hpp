@@ -6,7 +6,8 @@
 // binds its options, and sets a callback that does the work. The callback may throw
 // tetstream::Error (core/error.hpp); main() maps it to the documented exit code and
 // prints the message as one line. A callback fills `ctx.summary`, which main() prints
-// as JSON on stdout when the global --json flag is given.
+// as JSON on stdout when the global --json flag is given (on stderr when stdout carries
+// the command's data, into FILE with --json-file FILE).
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
@@ -21,6 +22,8 @@ struct GlobalOptions {
   std::string log_level = "info";
   bool json = false;             // machine-readable summary on stdout at the end
   bool quiet = false;            // no progress line, warnings and errors only
+  bool verbose = false;          // progress also where a command is quiet by default (cat)
+  std::string json_file;         // the --json summary goes to this file instead
 };
 
 struct Context {

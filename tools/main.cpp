@@ -1,5 +1,6 @@
 // tetstream: exact 3D Delaunay triangulation of point sets larger than memory.
 #include "core/error.hpp"
+#include "io/output_file.hpp"
 #include "pipeline/interrupt.hpp"
 #include "tools/command.hpp"
 
@@ -100,8 +101,10 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, kMaxThreads));
   app.add_option("--log-level", ctx.global.log_level, "trace, debug, info, warn, error, critical, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
-  app.add_flag("--json", ctx.global.json, "Print a machine-readable summary on stdout at the end");
+  app.add_flag("--json", ctx.global.json, "Print a machine-readable summary at the end (on stdout; on stderr when stdout\ncarries data: cat, run -o -)");
+  app.add_option("--json-file", ctx.global.json_file, "Write the --json summary to FILE (implies --json)")->type_name("FILE");
   app.add_flag("-q,--quiet", ctx.global.quiet, "No progress line; warnings and errors only");
+  app.add_flag("-v,--verbose", ctx.global.verbose, "Progress also from commands that are quiet by default (cat)");
   // Global options may be given before or after the subcommand.
   app.fallthrough();
 
@@ -136,6 +139,17 @@ int main(int argc, char** argv) {
     std::cerr << "tetstream: error: " << e.what() << '\n';
     return static_cast<int>(ExitCode::kIoFailure);
   }
-  if (ctx.global.json) (ctx.stdout_is_data ? std::cerr : std::cout) << ctx.summary.dump(2) << std::endl;
+  try {
+    if (!ctx.global.json_file.empty()) {
+      io::OutputFile f(ctx.global.json_file, 1 << 16);
+      f.write(ctx.summary.dump(2) + "\n");
+      f.commit();
+    } else if (ctx.global.json) {
+      (ctx.stdout_is_data ? std::cerr : std::cout) << ctx.summary.dump(2) << std::endl;
+    }
+  } catch (const Error& e) {
+    std::cerr << "tetstream: error: --json-file: " << e.what() << '\n';
+    return static_cast<int>(e.code());
+  }
   return 0;
 }
