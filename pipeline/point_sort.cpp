@@ -226,10 +226,11 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
         ++result.count;
         if (block.size() == block.capacity()) {
           out.write(block.data(), sizeof(SortedPoint), block.size());
-          progress.add(block.size());
           block.clear();
         }
       }
+      // Counted as read from the runs, duplicates included: the total is the input count.
+      progress.add(batch.size());
     });
     out.write(block.data(), sizeof(SortedPoint), block.size());
     out.close(/*sync=*/resumable);

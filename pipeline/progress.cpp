@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <sys/ioctl.h>
 #include <unistd.h>
 
 namespace tetstream::pipeline {
@@ -12,6 +13,11 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr std::int64_t kTtyIntervalNs = 200'000'000;       // redraw 5 times a second
 constexpr std::int64_t kLogIntervalNs = 10'000'000'000LL;  // one log line every 10 s
+// Columns of the terminal on stderr; 0 when it says none.
+std::size_t terminal_columns() {
+  struct winsize w {};
+  return ::ioctl(STDERR_FILENO, TIOCGWINSZ, &w) == 0 ? w.ws_col : 0;
+}
 }  // namespace
 
 std::string human_count(double n) {
@@ -85,6 +91,10 @@ void Progress::report(bool final) {
     line += ", ETA " + human_duration((double(total_) - done) / rate);
   }
   if (tty_ && !final) {
+    // One row: a line as wide as the terminal would wrap, and \r\033[K clears only the
+    // last row, leaving a trail of the others.
+    const std::size_t columns = terminal_columns();
+    if (columns > 1 && line.size() > columns - 1) line.resize(columns - 1);
     std::fprintf(stderr, "\r\033[K%s", line.c_str());
     std::fflush(stderr);
   } else {

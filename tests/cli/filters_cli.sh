@@ -3,7 +3,8 @@
 # --json summary on stderr or in --json-file, no log line unless -v), `cat --points
 # --format f64` writes binary points, counts in scientific notation (`gen --n 1e6`), a
 # misspelt subcommand gets the nearest name, the help says `tetstream` whatever the
-# binary's path and ends its exit-code list with a newline.
+# binary's path and ends its exit-code list with a newline; progress on a terminal
+# fits its width and the merge reaches 100%.
 # Usage: bash filters_cli.sh /path/to/tetstream
 set -euo pipefail
 T=$(realpath "${1:?usage: filters_cli.sh /path/to/tetstream}")
@@ -90,4 +91,25 @@ for t in "$T" ./other-name; do
 done
 [ "$(tail -c 1 help.txt | od -An -c | tr -d ' ')" = '\n' ] || fail "help does not end with a newline"
 tail -2 help.txt | head -1 | grep -q '130  interrupted' || fail "exit codes last in --help"
+
+# Progress on a terminal: each redraw fits the terminal's width (no trail of wrapped
+# lines), and the merge's last line says 100%. `script` gives the job a terminal 50
+# columns wide.
+if command -v script >/dev/null; then
+  "$T" -q gen --n 1e6 --seed 3 -o prog.f64
+  script -qec "stty cols 50; '$T' run prog.f64 -o prog.tets --memory 256M --threads 1" pty.log >/dev/null
+  [ -s prog.tets ] || fail "run on a terminal wrote no output"
+  /usr/bin/env python3 - pty.log <<'PY' || fail "progress on a terminal"
+import re, sys
+s = open(sys.argv[1], 'rb').read().decode()
+# Redraws: after "\r ESC[K", up to the next carriage return; the final lines are log
+# lines (a timestamp in brackets), printed whole.
+redraws = [r for r in re.findall(r'\r\x1b\[K([^\r\n]*)\r', s) if not r.startswith('[')]
+assert redraws, "no progress redraws"
+widest = max(len(r) for r in redraws)
+assert widest <= 49, f"a redraw of {widest} columns on a 50-column terminal"
+merged = [l for l in re.split(r'[\r\n]', s) if 'merging:' in l]
+assert merged and '(100.0%)' in merged[-1], f"merge ended at {merged[-1:]}"
+PY
+fi
 echo "filters_cli: ok"
