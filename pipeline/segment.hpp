@@ -132,9 +132,10 @@ std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zon
 // The axis zones are cut along: the longer of the two other than the sort axis.
 int strip_axis(const SortedView& view);
 
-// Cuts the segment into `zones` strips along strip_axis, at quantiles of (a sample of)
-// its zone points, so that each holds about the same number; fewer when the segment
-// has too few points (at least 256 a zone) or too few distinct coordinates.
+// Cuts the segment into `zones` strips along strip_axis, near quantiles of (a sample
+// of) its zone points, so that each holds about the same number (within a tenth of a
+// zone's share: each cut at the emptiest place near its quantile); fewer when the
+// segment has too few points (at least 256 a zone) or too few distinct coordinates.
 void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones);
 
 struct SegmentStats {
