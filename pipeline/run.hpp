@@ -1,12 +1,18 @@
 #pragma once
 // `tetstream run`: the whole out-of-core job, from a point file to a .tets container.
 //
-//   sort_points        (point_sort.hpp)  external sort along the long axis, duplicates
-//                                        merged, global hull vertices found
-//   plan_segments      (segment.hpp)     zones sized from the memory budget
-//   triangulate_segment                  window, kernel, exactness check, repair,
-//                                        minimum vertex filter
-//   io::TetWriter                        the compressed container
+// run_job checks the user's files, opens or refuses the checkpoint, and runs the job's
+// stages, each an object with a lifecycle (prepare from the checkpoint, run, commit
+// its record; pipeline/stage.hpp):
+//   SortStage         (stage_sort.hpp)         external sort along the long axis,
+//                                              duplicates merged, hull candidates
+//   IndexStage        (stage_index.hpp)        the sorted file mapped, its spatial
+//                                              index, the global hull's points
+//   TriangulateStage  (stage_triangulate.hpp)  segments cut into zones, each a window,
+//                                              kernel, exactness check, repair and
+//                                              minimum vertex filter
+//   WriteStage        (stage_write.hpp)        frames by minimum label, the compressed
+//                                              container on its own thread
 #include "io/point_reader.hpp"
 #include "pipeline/memory_budget.hpp"
 
