@@ -36,7 +36,7 @@ struct RunOptions {
   double buffer_spacings = 1.5;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
-  // Zones per segment (strips across the sort axis, run.cpp plan_for_budget): 0 picks
+  // Zones per segment (strips across the sort axis, zone_plan.hpp plan_for_budget): 0 picks
   // the number that wastes the least on buffers for the budget. The zones of all
   // segments are triangulated `threads` at a time. The output's bytes depend on
   // neither this nor the thread count.
