@@ -1,12 +1,18 @@
 #pragma once
 // `tetstream run`: the whole out-of-core job, from a point file to a .tets container.
 //
-//   sort_points        (point_sort.hpp)  external sort along the long axis, duplicates
-//                                        merged, global hull vertices found
-//   plan_segments      (segment.hpp)     zones sized from the memory budget
-//   triangulate_segment                  window, kernel, exactness check, repair,
-//                                        minimum vertex filter
-//   io::TetWriter                        the compressed container
+// run_job checks the user's files, opens or refuses the checkpoint, and runs the job's
+// stages, each an object with a lifecycle (prepare from the checkpoint, run, commit
+// its record; pipeline/stage.hpp):
+//   SortStage         (stage_sort.hpp)         external sort along the long axis,
+//                                              duplicates merged, hull candidates
+//   IndexStage        (stage_index.hpp)        the sorted file mapped, its spatial
+//                                              index, the global hull's points
+//   TriangulateStage  (stage_triangulate.hpp)  segments cut into zones, each a window,
+//                                              kernel, exactness check, repair and
+//                                              minimum vertex filter
+//   WriteStage        (stage_write.hpp)        frames by minimum label, the compressed
+//                                              container on its own thread
 #include "io/point_reader.hpp"
 #include "pipeline/memory_budget.hpp"
 
@@ -30,7 +36,7 @@ struct RunOptions {
   double buffer_spacings = 1.5;
   std::uint64_t zone_points = 0;  // 0: from the memory budget (tests force small zones)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
-  // Zones per segment (strips across the sort axis, run.cpp plan_for_budget): 0 picks
+  // Zones per segment (strips across the sort axis, zone_plan.hpp plan_for_budget): 0 picks
   // the number that wastes the least on buffers for the budget. The zones of all
   // segments are triangulated `threads` at a time. The output's bytes depend on
   // neither this nor the thread count.

@@ -1,0 +1,147 @@
+#include "pipeline/stage_sort.hpp"
+
+#include "io/tet_container.hpp"
+#include "pipeline/zone_plan.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <filesystem>
+
+namespace tetstream::pipeline {
+
+using nlohmann::json;
+
+namespace {
+
+constexpr const char* kHullFile = "hull.labels";
+
+json bbox_json(const double* v) { return json::array({v[0], v[1], v[2]}); }
+void bbox_from(const json& j, double* v) {
+  for (int k = 0; k < 3; ++k) v[k] = j.at(k).get<double>();
+}
+std::string base_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
+
+json to_json(const SortProgress& p) {
+  json runs = json::array();
+  for (const SortRunFile& r : p.runs)
+    runs.push_back({{"file", base_name(r.path)}, {"records", r.records}, {"crc32c", r.crc32c},
+                    {"hull_file", base_name(r.hull_path)}, {"hull_count", r.hull_count}, {"hull_crc32c", r.hull_crc32c}});
+  return {{"scanned", p.scanned}, {"input_count", p.input_count}, {"bbox_min", bbox_json(p.bbox_min)},
+          {"bbox_max", bbox_json(p.bbox_max)}, {"axis", p.axis}, {"runs", runs}};
+}
+// The sort's progress as the checkpoint recorded it, less the runs from the first one
+// whose files are missing or fail their checksums: the sort redoes those from the
+// input (a damaged piece is recomputed, not trusted).
+SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
+  SortProgress p;
+  p.scanned = j.at("scanned").get<bool>();
+  p.input_count = j.at("input_count").get<std::uint64_t>();
+  bbox_from(j.at("bbox_min"), p.bbox_min);
+  bbox_from(j.at("bbox_max"), p.bbox_max);
+  p.axis = j.at("axis").get<int>();
+  for (const json& r : j.at("runs")) {
+    SortRunFile run{ckpt.path(r.at("file").get<std::string>()), r.at("records").get<std::uint64_t>(),
+                    ckpt.path(r.at("hull_file").get<std::string>()), r.at("hull_count").get<std::uint64_t>(),
+                    r.at("crc32c").get<std::uint32_t>(), r.at("hull_crc32c").get<std::uint32_t>()};
+    if (!file_matches(run.path, run.records * sizeof(SortedPoint), run.crc32c) ||
+        !file_matches(run.hull_path, run.hull_count * sizeof(std::uint64_t), run.hull_crc32c)) {
+      spdlog::warn("{}: damaged or missing (size or checksum): sorting again from run {}", run.path, p.runs.size());
+      break;
+    }
+    p.runs.push_back(run);
+  }
+  return p;
+}
+
+json to_json(const SortedPoints& s) {
+  return {{"file", base_name(s.path)}, {"count", s.count},       {"input_count", s.input_count},
+          {"duplicates", s.duplicates}, {"axis", s.axis},        {"bbox_min", bbox_json(s.bbox_min)},
+          {"bbox_max", bbox_json(s.bbox_max)}, {"runs", s.runs}, {"hull_count", s.hull_labels.size()},
+          {"crc32c", s.crc32c}, {"hull_crc32c", io::crc32c(s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t))}};
+}
+// The sorted file and the hull's labels as the checkpoint recorded them; nullopt when
+// either is missing or fails its checksum (the job sorts again, and must then come to
+// the same bytes: see SortStage::run).
+std::optional<SortedPoints> sorted_from(const json& j, const Checkpoint& ckpt) {
+  SortedPoints s;
+  s.path = ckpt.path(j.at("file").get<std::string>());
+  s.count = j.at("count").get<std::uint64_t>();
+  s.input_count = j.at("input_count").get<std::uint64_t>();
+  s.duplicates = j.at("duplicates").get<std::uint64_t>();
+  s.axis = j.at("axis").get<int>();
+  bbox_from(j.at("bbox_min"), s.bbox_min);
+  bbox_from(j.at("bbox_max"), s.bbox_max);
+  s.runs = j.at("runs").get<std::size_t>();
+  s.crc32c = j.at("crc32c").get<std::uint32_t>();
+  s.hull_labels.resize(j.at("hull_count").get<std::size_t>());
+  try {
+    read_file_exactly(ckpt.path(kHullFile), s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t),
+                      j.at("hull_crc32c").get<std::uint32_t>());
+  } catch (const DamagedCheckpoint& e) {
+    spdlog::warn("{}: sorting again", e.what());
+    return std::nullopt;
+  }
+  if (!file_matches(s.path, s.count * sizeof(SortedPoint), s.crc32c)) {
+    spdlog::warn("{}: damaged or missing (size or checksum): sorting again", s.path);
+    return std::nullopt;
+  }
+  return s;
+}
+
+}  // namespace
+
+void SortStage::prepare() {
+  json& state = context_.state;
+  if (state.contains("sorted")) {
+    if (std::optional<SortedPoints> kept = sorted_from(state["sorted"], *context_.checkpoint)) {
+      sorted_ = std::move(*kept);
+      done_ = true;
+      return;
+    }
+    // "sorted" stays in the state until the new file replaces it: a crash while
+    // sorting again still finds the checksum to come to.
+    expected_crc_ = state["sorted"].at("crc32c").get<std::uint32_t>();
+  }
+  if (context_.checkpoint && state.contains("sort")) progress_ = sort_progress_from(state["sort"], *context_.checkpoint);
+}
+
+const SortedPoints& SortStage::run() {
+  if (done_) return sorted_;
+  const RunOptions& options = context_.options;
+  PointSortOptions sort_options;
+  sort_options.memory_bytes = std::size_t(options.memory_bytes);
+  sort_options.budget = &budget_;
+  sort_options.run_points = std::size_t(options.sort_run_points);
+  // Before any run is written: a budget that cannot hold even the thinnest windows
+  // of this many points is refused now, not after the sort.
+  sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, context_.options, threads_); };
+  sort_options.progress = options.progress;
+  if (context_.checkpoint) {
+    sort_options.resume = &progress_;
+    sort_options.on_step = [this](const SortProgress& p) {
+      context_.state["sort"] = to_json(p);
+      context_.save();
+    };
+  }
+  {
+    const ScopedThreads threads(threads_);
+    sorted_ = sort_points(options.input, options.read, sort_options, context_.dir);
+  }
+  if (expected_crc_ && sorted_.crc32c != *expected_crc_)
+    throw DamagedCheckpoint(sorted_.path + ": sorted again after a checksum failure, the points differ from the "
+                            "checkpoint's (damaged checkpoint, or the input changed)");
+  return sorted_;
+}
+
+void SortStage::commit() {
+  if (done_ || !context_.checkpoint) return;
+  write_file_atomically(context_.dir, kHullFile, sorted_.hull_labels.data(), sorted_.hull_labels.size() * sizeof(std::uint64_t));
+  context_.state["sorted"] = to_json(sorted_);
+  context_.state.erase("sort");
+  context_.save();
+  // The runs are merged into the sorted file, and the state no longer names them.
+  for (const SortRunFile& r : progress_.runs) remove_file(r.path), remove_file(r.hull_path);
+  done_ = true;
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,178 @@
+#include "pipeline/stage_triangulate.hpp"
+
+#include "core/error.hpp"
+#include "pipeline/checkpoint.hpp"
+#include "pipeline/fault.hpp"
+#include "pipeline/interrupt.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/stage.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <omp.h>
+#include <malloc.h>
+
+#include <algorithm>
+#include <atomic>
+#include <exception>
+#include <memory>
+
+namespace tetstream::pipeline {
+
+TriangulatePlan plan_triangulation(const IndexStage& indexed, const RunOptions& options, MemoryBudget& budget,
+                                   int threads) {
+  TriangulatePlan plan;
+  const PlanInputs inputs = plan_inputs(indexed.view(), indexed.index());
+  plan.zones = plan_for_budget(inputs, options, threads);
+  budget.set_points(indexed.view().count);
+  plan.shares = budget.plan_triangulate(inputs.index_bytes, plan.zones.window_bytes);
+  for (const MemoryBudget::Share& share : budget.shares())
+    spdlog::debug("memory: {} {} {}", share.phase, share.name, human_bytes(double(share.bytes)));
+  return plan;
+}
+
+// The queries' pages are counted in the 2 MiB regions that a read may map
+// (MappedRegions), within an eighth of the budget (MemoryBudget::plan_triangulate).
+// The queries of a zone read the file along the sort axis, and a share that holds
+// their sweep saves faulting regions in again. Measured before scattered reads
+// bypassed the mapping, on 10^7 points: uniform at 256M took 77 s with a twentieth of
+// the budget, 61 s with a tenth, 56 s with an eighth (53 s before the regions were
+// counted, peaking over the budget); mixed at 512M 60 s with a tenth, 50 s with an
+// eighth, 41 s with a fifth (49 s before, over the budget).
+TriangulateStage::TriangulateStage(const RunOptions& options, IndexStage& indexed, const ZonePlan& plan,
+                                   std::uint64_t query_page_bytes, int threads)
+    : options_(options),
+      indexed_(indexed),
+      plan_(plan),
+      threads_(threads),
+      query_regions_(indexed.mapped_data(), indexed.mapped_bytes(),
+                     std::max<std::size_t>(1, std::size_t(query_page_bytes / MappedRegions::kRegionBytes)),
+                     indexed.path()) {
+  indexed_.view().query_regions = &query_regions_;
+}
+
+TriangulateStage::~TriangulateStage() { indexed_.view().query_regions = nullptr; }
+
+void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_segment) {
+  const SortedView& view = indexed_.view();
+  first_label_ = first_label;
+  first_segment_ = first_segment;
+  plans_ = plan_segments(view, plan_.segment_points, plan_.buffer_width, first_label);
+  for (std::size_t s = 0; s < plans_.size(); ++s) {
+    split_into_zones(view, plans_[s], plan_.zones);
+    for (std::size_t z = 0; z < plans_[s].zones.size(); ++z) units_.push_back({s, z});
+    // The samples touch about every page of the segment's labels: hand them back
+    // now, or the whole mapped file would be resident before the first zone starts.
+    release_mapped_pages(view.points + plans_[s].zone_begin,
+                         (plans_[s].zone_end - plans_[s].zone_begin) * sizeof(SortedPoint));
+  }
+  spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
+               plans_.size(), plans_.empty() ? 0 : plans_[0].zone_end - plans_[0].zone_begin, units_.size(),
+               plans_.empty() ? 0 : (plans_[0].zone_end - plans_[0].zone_begin) / plans_[0].zones.size(),
+               plan_.buffer_width, options_.buffer_spacings, view.hull_points.size());
+}
+
+// Each thread triangulates whole zones (they are independent given the sorted file).
+// The ordered region collects a segment's zones in plan order; after its last one the
+// write stage merges them by minimum label into its frames, so the bytes depend
+// neither on the thread count nor on the plan. A finished zone waits there for its
+// predecessors: at most `threads` zones are in flight, and the outputs of at most one
+// segment plus `threads` - 1 zones are held, which is what the plan was sized for.
+// After each segment the checkpoint records the output so far: a crash loses the
+// zones finished or started since.
+void TriangulateStage::run(SegmentSink& out) {
+  const SortedView& view = indexed_.view();
+  Progress progress("triangulating", "points", view.count, options_.progress);
+  progress.add(first_label_);
+  std::exception_ptr failure;
+  std::atomic<bool> cancelled{false};
+  const auto stage_start = StageClock::now();
+  const std::int64_t unit_count = std::int64_t(units_.size());
+  // Per thread, a triangulator whose buffers live from zone to zone; and the zones'
+  // output vectors, recycled once merged. Fresh memory for each zone cost the OS's
+  // page zeroing, 10.5% of a one-thread profile.
+  std::vector<std::unique_ptr<ZoneTriangulator>> triangulators(static_cast<std::size_t>(threads_));
+#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads_)
+  for (std::int64_t i = 0; i < unit_count; ++i) {
+    const Unit unit = units_[std::size_t(i)];
+    const SegmentPlan& plan = plans_[unit.segment];
+    ZoneTets tets;
+    SegmentStats s;
+    if (!cancelled.load()) {
+      try {
+        check_interrupted();
+        maybe_inject_fault("segment", first_segment_ + unit.segment);
+        auto& triangulator = triangulators[std::size_t(omp_get_thread_num())];
+        if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool_);
+        s = triangulator->run(plan, plan.zones[unit.zone], tets);
+      } catch (...) {
+        // A worker never throws out of the parallel region (that would terminate the
+        // process): the first failure is kept, the others stop, and it is rethrown
+        // after the join.
+#pragma omp critical(tetstream_run_failure)
+        if (!failure) failure = std::current_exception();
+        cancelled = true;
+      }
+    }
+#pragma omp ordered
+    {
+      if (!cancelled.load()) {
+        const std::uint64_t points = plan.zone_end - plan.zone_begin, k = plan.zones.size();
+        progress.add(points * (unit.zone + 1) / k - points * unit.zone / k);
+        try {
+          collect(unit, std::move(tets), s, out);
+        } catch (...) {
+#pragma omp critical(tetstream_run_failure)
+          if (!failure) failure = std::current_exception();
+          cancelled = true;
+        }
+      }
+      tets = ZoneTets{};
+      release_mapped_pages(indexed_.mapped_data(), indexed_.mapped_bytes());
+      malloc_trim(0);  // hand any freed heap back, so resident memory tracks the windows
+    }
+  }
+  if (failure) {
+    try {
+      std::rethrow_exception(failure);
+    } catch (const DamagedCheckpoint&) {
+      throw;
+    } catch (const InputError& e) {
+      // The kernel's word on the points (too few affinely independent ones) names no
+      // file: the input is the job's.
+      throw InputError(options_.input + ": " + e.what());
+    }
+  }
+  seconds_ = seconds_since(stage_start) - sink_seconds_;
+  progress.finish();
+}
+
+// In the ordered region: a zone's tets and work, in plan order. After a segment's
+// last zone, its tets go to the write stage and its buffers back to the pool (also
+// when the write stage fails: the zones' outputs are never held past their segment).
+void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentStats& stats, SegmentSink& out) {
+  const SegmentPlan& plan = plans_[unit.segment];
+  parts_.push_back(std::move(tets));
+  segment_work_ += stats;
+  if (unit.zone + 1 < plan.zones.size()) return;
+  std::exception_ptr failure;
+  try {
+    const auto t0 = StageClock::now();
+    out.add_segment(parts_, segment_work_, plan.zone_end - plan.zone_begin, plan.zone_end);
+    sink_seconds_ += seconds_since(t0);
+  } catch (...) {
+    failure = std::current_exception();
+  }
+  spdlog::debug("segment [{}, {}) in {} zones: windows {} (+{} repairs), {} range failures, {} queries, "
+                "{} rounds, {} tets, build {:.2f}s check {:.2f}s (summed), kernels {}",
+                plan.zone_begin, plan.zone_end, plan.zones.size(), segment_work_.window_points,
+                segment_work_.repair_points, segment_work_.range_failures, segment_work_.queries, segment_work_.rounds,
+                segment_work_.tets, segment_work_.seconds_build, segment_work_.seconds_check,
+                human_bytes(double(segment_work_.kernel_bytes)));
+  for (auto& part : parts_) output_pool_.give(std::move(part));
+  parts_.clear();
+  segment_work_ = SegmentStats{};
+  if (failure) std::rethrow_exception(failure);
+}
+
+}  // namespace tetstream::pipeline

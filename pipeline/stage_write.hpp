@@ -1,0 +1,107 @@
+#pragma once
+// The write stage of `run`: the output container. The tets of each finished segment, merged
+// by minimum label into frames (pipeline/frame_cutter.hpp), go to the writer on its
+// own thread (pipeline/async_tet_writer.hpp) behind a bounded queue of frames, so
+// compression and I/O overlap the triangulation.
+//
+// Its records in the checkpoint state: "header_memory", the budget the output's
+// header names (the first process's: a resumed job may run with another, and the
+// frames do not depend on it); and "output", replaced after each segment: the partial
+// file's committed bytes, the label below which every tet is written (`next_label`),
+// the tets of the frame being filled (a file `pending-K.tets` of its own), the
+// segments written and their counters. The triangulation's progress is this record:
+// the labels below next_label are done exactly when their tets are committed, so the
+// two are recorded as one.
+#include "io/output_file.hpp"
+#include "io/tet_writer.hpp"
+#include "pipeline/async_tet_writer.hpp"
+#include "pipeline/frame_cutter.hpp"
+#include "pipeline/point_sort.hpp"
+#include "pipeline/segment.hpp"
+#include "pipeline/stage.hpp"
+#include "pipeline/stage_triangulate.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// The work of the segments written so far, this process's and earlier ones': the
+// record's "counters", so that a resumed job's summary describes the whole job.
+struct WrittenWork {
+  SegmentStats stats;
+  std::uint64_t zone_points = 0;  // labels of the segments written
+};
+nlohmann::json counters_json(const WrittenWork& w);
+WrittenWork counters_from(const nlohmann::json& j);
+// The summary's counters of the segments' work.
+void record_work(const WrittenWork& w, RunSummary& s);
+
+class WriteStage final : public SegmentSink {
+ public:
+  // `encoders`: the writer's compression threads, its memory share with the frames
+  // in flight (MemoryBudget::plan_triangulate). `claim`: the output, locked for this
+  // job since it began (null for standard output).
+  WriteStage(const StageContext& context, const SortedPoints& sorted, const SortedView& view, int encoders,
+             const io::OutputClaim* claim)
+      : context_(context), sorted_(sorted), view_(view), encoders_(encoders), claim_(claim) {}
+
+  // Opens the output: a new container, or the checkpoint's partial output reopened at
+  // its last commit with the frame that was being filled and the counters
+  // (DamagedCheckpoint when the partial file or the pending tets disagree with it).
+  void prepare();
+  // Starts the writer's thread: the points section of a new output (a pass over the
+  // sorted file, overlapped with the first zones), and the first record.
+  void run();
+  // One more segment, its zones' tets in plan order: merged by minimum label into the
+  // frames, its counters added, and the record says the labels below `next_label` are
+  // written. The record is saved by the writer's thread once the frames before it are
+  // on disk, so the triangulation never waits for the writer.
+  void add_segment(const std::vector<ZoneTets>& parts, const SegmentStats& work, std::uint64_t points,
+                   std::uint64_t next_label) override;
+  // Every tet is in: the last frame, the last record (waiting for the writer), and the
+  // mark that only the container's index, footer and rename are left.
+  void commit();
+  // The index, footer and rename. Nothing may follow it.
+  void finish();
+
+  // From the record prepare read: the label the triangulation goes on from, and the
+  // segments an earlier process wrote.
+  std::uint64_t first_label() const { return first_label_; }
+  std::uint64_t segments_resumed() const { return segments_resumed_; }
+  std::uint64_t segments_done() const { return segments_done_; }
+  const WrittenWork& work() const { return work_; }
+  // The triangulation waiting on this stage (merges, records, a full queue) and the
+  // commit and finish: the summary's seconds_write.
+  double seconds() const { return seconds_; }
+  double busy_seconds() const { return async_->busy_seconds(); }
+  double producer_wait_seconds() const { return async_->producer_wait_seconds(); }
+  std::uint64_t bytes_written() const { return writer_->bytes_written(); }
+  std::uint64_t tet_bytes() const { return writer_->tet_bytes(); }
+
+ private:
+  void record(std::uint64_t next_label, bool wait);
+
+  StageContext context_;
+  const SortedPoints& sorted_;
+  const SortedView& view_;
+  const int encoders_;
+  const io::OutputClaim* claim_;
+  bool resumed_ = false;  // the state held an "output" record
+  std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
+  WrittenWork work_;
+  std::vector<std::uint64_t> pending_;  // the resumed frame, until the cutter takes it
+  double seconds_ = 0;
+  // In this order: the cutter feeds the queue, which feeds the writer, so on the way
+  // out of a failure the queue is cancelled and its thread joined before the writer
+  // goes.
+  std::unique_ptr<io::TetWriter> writer_;
+  std::optional<AsyncTetWriter> async_;
+  std::optional<FrameCutter> cutter_;
+};
+
+}  // namespace tetstream::pipeline
