@@ -67,9 +67,10 @@ double parse_double(const std::string& s, const std::string& what) {
 // and the external sorts of the outputs their share. The ring is a power of two.
 constexpr std::uint64_t kReserve = std::uint64_t(40) << 20;  // code, decoders, I/O buffers
 std::uint64_t label_bytes(const FieldOptions&) { return 64; }
-// With neighbours: 6 packed edges and their radix buffer (96), and the directed
-// entries, about 3 a tet after the batch's de-duplication, 16 bytes, twice (96).
-std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 192 : 0); }
+// With neighbours: 6 packed edges and their radix buffer (96), the directed entries,
+// about 3 a tet after the batch's de-duplication, 16 bytes, twice (96), and the rows
+// cut from them, 8 bytes an entry plus their starts and lengths (32).
+std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 224 : 0); }
 
 std::string default_tmpdir(const FieldOptions& o) {
   if (!o.tmpdir.empty()) return o.tmpdir;
@@ -134,7 +135,10 @@ FieldSummary compute_fields(const FieldOptions& options) {
   summary.ring_labels = plan.ring_labels;
   // The output sorts take what the window and the batches leave (at least 20%): the
   // window is usually far below its cap, and a sort that fits in memory never spills.
-  const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options);
+  // With neighbours, the entries of the window's unretired labels stay pending from
+  // batch to batch: about 16 of 16 bytes a label, and their radix buffer.
+  const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options) +
+                             (options.neighbours ? plan.window_labels * 512 : 0);
   const std::uint64_t sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
   summary.memory_planned = kReserve + held + sort_bytes;
   spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}",

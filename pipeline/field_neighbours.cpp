@@ -115,19 +115,25 @@ void write_rows(const std::vector<std::uint64_t>& data, std::uint64_t lo, std::u
 NeighbourRows::NeighbourRows(std::uint64_t original_end, std::uint64_t point_count, std::uint64_t entries_bound,
                              std::uint64_t memory_bytes, std::string scratch)
     : original_end_(std::max<std::uint64_t>(original_end, 1)), point_count_(point_count), scratch_(std::move(scratch)) {
-  // One bucket when the rows (2 header words a row) and the placement array (a word an
-  // original index) fit the share; else buckets of about half the share each, so that
-  // one bucket and its placement array fit when it is written, skew included.
+  // Pass 1 buffers at most half the share: the window and the batch are live beside
+  // it (their own accounting misses the entries pending for unretired labels). One
+  // bucket when the rows (2 header words a row) fit that half and, with the placement
+  // array (a word an original index), the whole share once pass 1 has freed its
+  // structures; else buckets of about half the share each, so that one bucket and its
+  // placement array fit when it is written, skew included.
   const std::uint64_t budget_words = std::max<std::uint64_t>(memory_bytes / 8, 1 << 16);
+  const std::uint64_t pass1_words = budget_words / 2;
   const std::uint64_t words = 2 * point_count + entries_bound;
   std::uint64_t b = 1;
-  if (words + original_end_ > budget_words) b = (words + original_end_ + budget_words / 2 - 1) / (budget_words / 2);
+  if (words > pass1_words || words + original_end_ > budget_words)
+    b = (words + original_end_ + pass1_words - 1) / pass1_words;
   b = std::min(b, original_end_);
   width_ = (original_end_ + b - 1) / b;
   b = (original_end_ + width_ - 1) / width_;
-  // Pass 1 buffers at most the whole share, split evenly (rows land in buckets at
-  // random: input order is not spatial order).
-  words_per_bucket_ = std::max<std::uint64_t>((b == 1 ? budget_words - std::min(budget_words / 2, original_end_) : budget_words) / b, 1 << 12);
+  // Rows land in buckets at random (input order is not spatial order): the buffers
+  // split the half evenly.
+  words_per_bucket_ = std::max<std::uint64_t>(pass1_words / b, 1 << 12);
+  half_words_ = pass1_words;
   buffers_.resize(std::size_t(b));
   chunks_.resize(std::size_t(b));
   bucket_words_.assign(std::size_t(b), 0);
@@ -209,7 +215,7 @@ void NeighbourRows::write(const std::string& offsets_path, const std::string& in
       std::vector<std::uint64_t>().swap(buffers_[b]);
     }
     file_->close();
-    const std::uint64_t half = std::max<std::uint64_t>(words_per_bucket_ * buffers_.size() / 2, 1);
+    const std::uint64_t half = std::max<std::uint64_t>(half_words_, 1);
     for (std::size_t b = 0; b < buffers_.size(); ++b) {
       const std::uint64_t lo = b * width_, hi = std::min(original_end_, lo + width_);
       const std::uint64_t parts = std::max<std::uint64_t>(1, (bucket_words_[b] + (hi - lo) + half - 1) / half);

@@ -60,7 +60,7 @@ class NeighbourRows {
   // Rows with original in [lo, hi) of bucket b, as [original, degree, neighbours...].
   void load(std::size_t b, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint64_t>& out);
 
-  std::uint64_t original_end_, point_count_, width_, words_per_bucket_;
+  std::uint64_t original_end_, point_count_, width_, words_per_bucket_, half_words_;
   std::string scratch_;
   std::vector<std::vector<std::uint64_t>> buffers_;  // a bucket's rows not spilled yet
   std::vector<std::vector<NeighbourRowsChunk>> chunks_;           // a bucket's spilled rows
