@@ -6,6 +6,7 @@
 #include "pipeline/external_sort.hpp"
 #include "pipeline/field_accumulate.hpp"
 #include "pipeline/field_grid.hpp"
+#include "pipeline/field_neighbours.hpp"
 #include "pipeline/field_output.hpp"
 #include "pipeline/field_window.hpp"
 #include "pipeline/progress.hpp"
@@ -61,12 +62,15 @@ double parse_double(const std::string& s, const std::string& what) {
 // Memory plan (bytes per item, measured on the structures the passes hold):
 //   per window label: coordinates 24, original index 8, sums 24 (+ density 8 in the
 //     grid pass);
-//   per batch tet: labels 32, contributions 72, with neighbours 6 packed edges of 8
-//     and the radix sort's other buffer;
+//   per batch tet: labels 32, contributions 72, with neighbours 6 packed edges of 8,
+//     the directed entries, and the radix sorts' other buffers;
 // and the external sorts of the outputs their share. The ring is a power of two.
 constexpr std::uint64_t kReserve = std::uint64_t(40) << 20;  // code, decoders, I/O buffers
 std::uint64_t label_bytes(const FieldOptions&) { return 64; }
-std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 96 : 0); }
+// With neighbours: 6 packed edges and their radix buffer (96), the directed entries,
+// about 3 a tet after the batch's de-duplication, 16 bytes, twice (96), and the rows
+// cut from them, 8 bytes an entry plus their starts and lengths (32).
+std::uint64_t tet_bytes(const FieldOptions& o) { return 104 + (o.neighbours ? 224 : 0); }
 
 std::string default_tmpdir(const FieldOptions& o) {
   if (!o.tmpdir.empty()) return o.tmpdir;
@@ -131,7 +135,10 @@ FieldSummary compute_fields(const FieldOptions& options) {
   summary.ring_labels = plan.ring_labels;
   // The output sorts take what the window and the batches leave (at least 20%): the
   // window is usually far below its cap, and a sort that fits in memory never spills.
-  const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options);
+  // With neighbours, the entries of the window's unretired labels stay pending from
+  // batch to batch: about 16 of 16 bytes a label, and their radix buffer.
+  const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options) +
+                             (options.neighbours ? plan.window_labels * 512 : 0);
   const std::uint64_t sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
   summary.memory_planned = kReserve + held + sort_bytes;
   spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}",
@@ -153,24 +160,15 @@ FieldSummary compute_fields(const FieldOptions& options) {
     return so;
   };
   std::unique_ptr<ExternalSorter<PointRecord, ByOriginal>> points;
-  std::unique_ptr<ExternalSorter<NeighbourRecord, ByPair>> neighbours;
+  std::unique_ptr<NeighbourRows> neighbours;
   if (need_points) points = std::make_unique<ExternalSorter<PointRecord, ByOriginal>>(sort_options("points"));
   if (options.neighbours) {
-    ExternalSortOptions so = sort_options("neighbours");
-    so.memory_bytes /= 2;  // the radix sort's second buffer takes the other half
-    neighbours = std::make_unique<ExternalSorter<NeighbourRecord, ByPair>>(so);
-    // Original indices are below 2^id_bits and the row marker is all ones: an LSD radix
-    // sort on id_bits + 1 bits of each word (marker folded to the top value) orders
-    // them as ByPair does, several times faster than a comparison sort of 16-byte records.
-    const int bits = std::bit_width(std::max(h.input_count, n)) + 1;
-    auto radix_tmp = std::make_shared<std::vector<NeighbourRecord>>();
-    neighbours->set_run_sort([bits, radix_tmp](NeighbourRecord* d, std::size_t k) {
-      const std::uint64_t top = (std::uint64_t(1) << bits) - 1;
-      radix_sort(d, k, *radix_tmp, bits, [top](const NeighbourRecord& r) { return std::min(r.other, top); });
-      radix_sort(d, k, *radix_tmp, bits, [](const NeighbourRecord& r) { return r.original; });
-      radix_tmp->clear();
-      radix_tmp->shrink_to_fit();
-    });
+    // Entries = twice the edges; a triangulated ball has V + T + F_hull / 2 - 1 edges
+    // and F_hull <= 2 V, so 2 (2 N + T) bounds them (it only plans the buckets).
+    const std::uint64_t bound = 2 * (2 * n + summary.tets);
+    const std::uint64_t share = options.neighbour_memory ? options.neighbour_memory : sort_options("neighbours").memory_bytes;
+    neighbours = std::make_unique<NeighbourRows>(std::max(h.input_count, n), n, bound, share,
+                                                 tmp.path("neighbour-rows.u64"));
   }
   const std::string rho_path = tmp.path("rho-by-label.f64");
   std::unique_ptr<BinaryFile> rho_file;
@@ -191,18 +189,8 @@ FieldSummary compute_fields(const FieldOptions& options) {
       rho_file->write(&rho, sizeof rho, 1);
     }
   };
-  if (neighbours) {
-    sinks.edge = [&](std::uint64_t a, std::uint64_t b) {
-      neighbours->push({a, b});
-      neighbours->push({b, a});
-    };
-    // Every point gets a row, even one in no edge (not in a valid container).
-    const auto point = sinks.point;
-    sinks.point = [&, point](const FinalPoint& p) {
-      point(p);
-      neighbours->push({p.original, kRowMarker});
-    };
-  }
+  if (neighbours)  // every point gets a row, even one in no edge (not in a valid container)
+    sinks.row = [&](std::uint64_t original, std::span<const std::uint64_t> row) { neighbours->add(original, row); };
   const AccumulateStats acc = accumulate_fields(reader, plan, sinks, &progress);
   summary.tet_volume = volume4 / 4.0;
   summary.far_labels_peak = acc.peak_far;
@@ -227,7 +215,12 @@ FieldSummary compute_fields(const FieldOptions& options) {
     summary.total_mass = double(n);
   }
   if (neighbours) {
-    write_neighbours(*neighbours, options, n, tmp, summary);
+    neighbours->write(field_path(options, "neighbours.offsets"), field_path(options, "neighbours.indices"));
+    summary.neighbour_entries = neighbours->entries();
+    spdlog::info("field: {} neighbour entries in {} bucket(s){}", neighbours->entries(), neighbours->buckets(),
+                 neighbours->spilled() ? ", spilled to disk" : "");
+    summary.files.push_back({"neighbours.offsets", field_path(options, "neighbours.offsets")});
+    summary.files.push_back({"neighbours.indices", field_path(options, "neighbours.indices")});
     neighbours.reset();
   }
   if (grid) {

@@ -12,6 +12,7 @@
 //   field_geometry    what one tet adds to its vertices; exact point location
 //   field_accumulate  pass 1: per-point sums, retired in label order
 //   field_output      the retire-to-input-order step (external sort by original index)
+//   field_neighbours  the neighbour rows back in input order (buckets by original index)
 //   field_grid        pass 2 (with --grid): the density on a grid, slab by slab
 // Outputs are in the input's order: entry i belongs to the container point with the
 // i-th smallest original index (the input's order, less the exact duplicates `run`
@@ -43,6 +44,7 @@ struct FieldOptions {
   bool progress = true;
   std::uint64_t batch_tets = 0;  // 0: from the budget (tests force small batches)
   std::uint64_t ring_labels = 0; // a power of two; 0: from the budget (tests force far labels)
+  std::uint64_t neighbour_memory = 0;  // bytes for the neighbour rows; 0: from the budget (tests force spills)
 
   bool grid_wanted() const { return grid[0] > 0; }
   void validate() const;  // throws UsageError

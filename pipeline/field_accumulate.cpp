@@ -42,7 +42,7 @@ class Accumulator {
       stats_.peak_far = std::max<std::uint64_t>(stats_.peak_far, points_.far_count());
       contributions();
       combine();
-      if (sinks_.edge) gather_edges(b);
+      if (sinks_.row) gather_rows(b);
       retire(b.retire_below);
       for (std::size_t k = b.first_frame; k < b.end_frame; ++k) reader_.release_frame_pages(k);
       stats_.tets += b.tets;
@@ -83,17 +83,26 @@ class Accumulator {
     }
   }
 
-  // The batch's edges as (smaller - lo) << 32 | (larger - lo), radix-sorted and made
-  // unique, handed out both ways as original indices. An edge whose tets lie in several
-  // batches comes out once per batch: the caller's sort by original index drops the
-  // copies, so no per-point neighbour set is held here.
-  void gather_edges(const FrameBatch& b) {
+  // The batch's edges, radix-sorted and made unique, then both directions as (label,
+  // neighbour's original) entries, behind the entries of the labels not retired yet.
+  // Sorted by label, a retiring label's entries are contiguous: sorted by original and
+  // made unique (an edge whose tets lie in several batches came once per batch) they
+  // are its row. Rows are whole and sorted here, so the output only has to place them
+  // (field_neighbours.hpp).
+  //
+  // An edge is keyed (a - lo) << dbits | (c - a) (a < c its labels): the labels of a
+  // tet are a few slabs apart, so c - a is small and the key fits in about 33 bits,
+  // three radix passes instead of five or six for (a - lo) << 32 | (c - lo), whose low
+  // word is as wide as the hull tets' reach. The rare edges that span more (under the
+  // hull) skip the batch's de-duplication: the row's does it.
+  void gather_rows(const FrameBatch& b) {
     const std::size_t n = batch_.tets();
-    edges_.resize(6 * n);
+    // edges_ only grows: resizing it down and up again each batch re-zeroed 48 bytes a tet.
+    if (edges_.size() < 6 * n) edges_.resize(6 * n);
     const std::int64_t nn = std::int64_t(n);
     const std::uint64_t lo = b.lo;  // every label of the batch is >= lo, and < lo + 2^32 (checked by the caller)
-    std::uint64_t top = 0;
-#pragma omp parallel for schedule(static, 4096) reduction(max : top)
+    std::uint64_t top = 0, amax = 0;
+#pragma omp parallel for schedule(static, 4096) reduction(max : top, amax)
     for (std::int64_t t = 0; t < nn; ++t) {
       const std::uint64_t* q = batch_.tet(std::size_t(t));
       std::uint64_t* e = &edges_[6 * std::size_t(t)];
@@ -103,16 +112,71 @@ class Accumulator {
           const std::uint64_t a = std::min(q[i], q[j]) - lo, c = std::max(q[i], q[j]) - lo;
           e[k++] = a << 32 | c;
           top = std::max(top, c);
+          amax = std::max(amax, a);
         }
     }
-    const int bits = 32 + std::bit_width(top);
-    radix_sort(edges_.data(), edges_.size(), radix_tmp_, bits, [](std::uint64_t x) { return x; });
-    edges_.erase(std::unique(edges_.begin(), edges_.end()), edges_.end());
-    for (const std::uint64_t e : edges_) {
-      const std::uint64_t a = lo + (e >> 32), c = lo + (e & 0xffffffffu);
-      sinks_.edge(points_.original(a), points_.original(c));
+    // a beyond twice the batch's retired range is a hull edge too.
+    const int abits = std::min(std::bit_width(amax), std::bit_width(b.retire_below - lo) + 1);
+    const int dbits = std::clamp(33 - abits, 12, 32);
+    const std::uint64_t span = std::uint64_t(1) << dbits, alimit = std::uint64_t(1) << abits;
+    long_.clear();
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < 6 * n; ++i) {
+      const std::uint64_t e = edges_[i], a = e >> 32, c = e & 0xffffffffu;
+      if (a < alimit && c - a < span) edges_[kept++] = a << dbits | (c - a);
+      else long_.push_back(e);
     }
-    stats_.batch_edges += edges_.size();
+    radix_sort(edges_.data(), kept, radix_tmp_, abits + dbits, [](std::uint64_t x) { return x; });
+    const std::size_t short_edges = std::size_t(std::unique(edges_.data(), edges_.data() + kept) - edges_.data());
+    stats_.batch_edges += short_edges + long_.size();
+
+    // Pending entries (labels >= retired_ == lo) stay in front; the new ones follow.
+    const std::size_t pending = directed_.size();
+    std::uint64_t reach = top;
+    for (std::size_t i = 0; i < pending; ++i) reach = std::max(reach, directed_[i].label - lo);
+    directed_.resize(pending + 2 * (short_edges + long_.size()));
+    const std::int64_t ne = std::int64_t(short_edges + long_.size());
+#pragma omp parallel for schedule(static, 4096)
+    for (std::int64_t i = 0; i < ne; ++i) {
+      std::uint64_t a, c;
+      if (std::size_t(i) < short_edges) {
+        const std::uint64_t e = edges_[std::size_t(i)];
+        a = lo + (e >> dbits), c = a + (e & (span - 1));
+      } else {
+        const std::uint64_t e = long_[std::size_t(i) - short_edges];
+        a = lo + (e >> 32), c = lo + (e & 0xffffffffu);
+      }
+      directed_[pending + 2 * std::size_t(i)] = {a, points_.original(c)};
+      directed_[pending + 2 * std::size_t(i) + 1] = {c, points_.original(a)};
+    }
+    radix_sort(directed_.data(), directed_.size(), directed_tmp_, std::bit_width(reach),
+               [lo](const Directed& d) { return d.label - lo; });
+
+    // The rows of the labels retired after this batch: [retired_, below).
+    const std::uint64_t below = b.retire_below;
+    const std::size_t labels = std::size_t(below - retired_);
+    row_start_.assign(labels + 1, 0);
+    std::size_t cut = 0;
+    for (std::size_t l = 0; l < labels; ++l) {
+      row_start_[l] = cut;
+      while (cut < directed_.size() && directed_[cut].label == retired_ + l) ++cut;
+    }
+    row_start_[labels] = cut;
+    row_others_.resize(cut);
+    row_length_.resize(labels);
+    const std::int64_t nl = std::int64_t(labels);
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (std::int64_t l = 0; l < nl; ++l) {
+      const std::size_t s = row_start_[std::size_t(l)], e = row_start_[std::size_t(l) + 1];
+      std::uint64_t* o = row_others_.data() + s;
+      for (std::size_t i = s; i < e; ++i) o[i - s] = directed_[i].other;
+      std::sort(o, o + (e - s));
+      row_length_[std::size_t(l)] = std::size_t(std::unique(o, o + (e - s)) - o);
+    }
+    for (std::size_t l = 0; l < labels; ++l)
+      sinks_.row(points_.original(retired_ + l),
+                 std::span<const std::uint64_t>(row_others_.data() + row_start_[l], row_length_[l]));
+    directed_.erase(directed_.begin(), directed_.begin() + std::ptrdiff_t(cut));
   }
 
   void retire(std::uint64_t below) {
@@ -142,7 +206,13 @@ class Accumulator {
   std::unordered_map<std::uint64_t, Accum> far_acc_;  // sums of the far labels
   DecodedBatch batch_;
   std::vector<TetContribution> contrib_;
-  std::vector<std::uint64_t> edges_, radix_tmp_;
+  std::vector<std::uint64_t> edges_, radix_tmp_, long_;
+  struct Directed {
+    std::uint64_t label, other;  // other: the neighbour's original index
+  };
+  std::vector<Directed> directed_, directed_tmp_;  // entries of labels not retired yet, then the batch's
+  std::vector<std::size_t> row_start_, row_length_;
+  std::vector<std::uint64_t> row_others_;
   std::uint64_t retired_ = 0;
   AccumulateStats stats_;
 };

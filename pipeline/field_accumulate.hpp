@@ -9,8 +9,10 @@
 // stored order, then vertex), so every point's sums are the same bits whatever the
 // thread count and whatever the batching (the memory budget).
 //
-// Neighbours: each batch's edges are packed, radix-sorted and made unique, and handed
-// out at once; the caller's external sort by original index makes them unique overall.
+// Neighbours: each batch's edges are packed, radix-sorted and made unique, and kept as
+// directed (label, neighbour's original index) entries until their label retires; a
+// retiring point's entries (from every batch that touched it) are sorted and made
+// unique into its row, handed out once.
 #include "io/tet_reader.hpp"
 #include "pipeline/field_window.hpp"
 
@@ -34,14 +36,15 @@ struct FinalPoint {
 struct AccumulateSinks {
   bool voronoi = true;  // compute the Voronoi sums (FinalPoint::voronoi is 0 otherwise)
   std::function<void(const FinalPoint&)> point;
-  // Set to collect neighbours: each Delaunay edge as the original indices of its
-  // endpoints, at least once (once per batch whose tets hold it).
-  std::function<void(std::uint64_t, std::uint64_t)> edge;
+  // Set to collect neighbours: called once per point, in label order, when it retires,
+  // with its original index and its Delaunay neighbours' original indices (increasing,
+  // no repeats; the span is valid during the call only).
+  std::function<void(std::uint64_t, std::span<const std::uint64_t>)> row;
 };
 
 struct AccumulateStats {
   std::uint64_t tets = 0, batches = 0;
-  std::uint64_t batch_edges = 0;        // edges handed out (copies across batches included)
+  std::uint64_t batch_edges = 0;        // unique edges per batch, summed (copies across batches included)
   std::uint64_t peak_far = 0;           // most far labels held (field_points.hpp)
 };
 

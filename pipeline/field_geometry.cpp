@@ -50,7 +50,7 @@ namespace {
 // The faces through each edge: for vertex i and its edge to j, the two other vertices.
 // Even permutations of (0,1,2,3) keep the positive orientation: sigma of (i, j, k, l)
 // is its parity, +1 for even.
-int parity(int i, int j, int k, int l) {
+constexpr int parity(int i, int j, int k, int l) {
   const int p[4] = {i, j, k, l};
   int inv = 0;
   for (int x = 0; x < 4; ++x)
@@ -59,7 +59,7 @@ int parity(int i, int j, int k, int l) {
 }
 
 // Face index by the vertex it omits: face f holds the three vertices other than f.
-int face_without(int i, int j, int k) { return 6 - i - j - k; }
+constexpr int face_without(int i, int j, int k) { return 6 - i - j - k; }
 
 }  // namespace
 
@@ -102,18 +102,20 @@ TetContribution tet_contribution(const double* const p[4], bool voronoi) {
     const int a = f == 0 ? 1 : 0, b = f <= 1 ? 2 : 1, c = f <= 2 ? 3 : 2;
     fc[f] = add(v[a], face_circumcentre(e[a][b], e[a][c]));
   }
+  // For vertex i and edge ij the two faces ijk, ijl (k < l) have opposite signs
+  // (sigma(i,j,l,k) = -sigma(i,j,k,l)), so their pieces combine into one determinant:
+  //   sigma (det[M-p, F_ijk-p, C-p] - det[M-p, F_ijl-p, C-p]) = sigma (F_ijk - F_ijl) . ((C-p) x (M-p))
+  // (p cancels in the difference): 12 cross products and dots a tet instead of 24
+  // determinants, the Voronoi volume's cost halved.
   for (int i = 0; i < 4; ++i) {
     double vor = 0.0;
     const V3 c_rel = sub(cc, v[i]);
     for (int j = 0; j < 4; ++j) {
       if (j == i) continue;
-      const V3 m_rel = scale(e[i][j], 0.5);
-      for (int k = 0; k < 4; ++k) {
-        if (k == i || k == j) continue;
-        const int l = 6 - i - j - k;
-        const V3 f_rel = sub(fc[face_without(i, j, k)], v[i]);
-        vor += parity(i, j, k, l) * det3(m_rel, f_rel, c_rel);
-      }
+      const int k = (i != 0 && j != 0) ? 0 : (i != 1 && j != 1) ? 1 : 2;  // the smaller other vertex
+      const int l = 6 - i - j - k;
+      const V3 g = cross(c_rel, scale(e[i][j], 0.5));
+      vor += parity(i, j, k, l) * dot(sub(fc[face_without(i, j, k)], fc[face_without(i, j, l)]), g);
     }
     out.voronoi[i] = vor / 6.0;
   }

@@ -12,6 +12,7 @@
 #include "pipeline/temp_files.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <deque>
 #include <fcntl.h>
@@ -44,6 +45,10 @@ class GridSampler {
     plane_size_ = g_.n[std::size_t(u_)] * g_.n[std::size_t(w_)];
     max_planes_ = std::max<std::uint64_t>(1, budget / (plane_size_ * sizeof(double)));
     points_.check_sorted_along(axis);
+    // The centres' coordinates once (the same expression as GridSpec::centre, so the
+    // same bits): computing them per candidate cost a division each.
+    for (int k = 0; k < 3; ++k)
+      for (std::uint64_t i = 0; i < g_.n[std::size_t(k)]; ++i) centres_[std::size_t(k)].push_back(g_.centre(k, i));
     if (axis_ != 0) {
       ExternalSortOptions so;
       so.memory_bytes = std::max<std::uint64_t>(budget / 2, 16 << 20);
@@ -138,21 +143,26 @@ class GridSampler {
     for (std::int64_t t = 0; t < n; ++t) {
       const std::uint64_t* q = batch_.tet(std::size_t(t));
       const double* p[4] = {points_.xyz(q[0]), points_.xyz(q[1]), points_.xyz(q[2]), points_.xyz(q[3])};
-      const double f[4] = {rho(q[0]), rho(q[1]), rho(q[2]), rho(q[3])};
-      const TetLocator locate(p[0], p[1], p[2], p[3]);
       std::int64_t r0[3], r1[3];
+      bool empty = false;
       for (int k = 0; k < 3; ++k) {
         double a = p[0][k], b = p[0][k];
         for (int v = 1; v < 4; ++v) a = std::min(a, p[v][k]), b = std::max(b, p[v][k]);
         range(k, a, b, r0[k], r1[k]);
+        empty = empty || r0[k] > r1[k];
       }
+      // No centre in the bounding box (a small tet between grid lines, or one below
+      // the planes held): neither the locator's planes nor the densities are needed.
+      if (empty) continue;
+      const double f[4] = {rho(q[0]), rho(q[1]), rho(q[2]), rho(q[3])};
+      const TetLocator locate(p[0], p[1], p[2], p[3]);
       for (std::int64_t i = r0[axis_]; i <= r1[axis_]; ++i)
         for (std::int64_t j = r0[u_]; j <= r1[u_]; ++j)
           for (std::int64_t k = r0[w_]; k <= r1[w_]; ++k) {
             double g[3];
-            g[axis_] = g_.centre(axis_, std::uint64_t(i));
-            g[u_] = g_.centre(u_, std::uint64_t(j));
-            g[w_] = g_.centre(w_, std::uint64_t(k));
+            g[axis_] = centres_[std::size_t(axis_)][std::size_t(i)];
+            g[u_] = centres_[std::size_t(u_)][std::size_t(j)];
+            g[w_] = centres_[std::size_t(w_)][std::size_t(k)];
             if (!locate.contains(g)) continue;
             const double v = tet_interpolate(p, f, g);
             const std::size_t at = std::size_t(j) * g_.n[std::size_t(w_)] + std::size_t(k);
@@ -256,6 +266,7 @@ class GridSampler {
   std::deque<std::vector<double>> planes_;  // planes first_plane_ .. first_plane_ + size - 1
   std::uint64_t first_plane_ = 0, emitted_ = 0;
   std::uint64_t plane_size_ = 0, max_planes_ = 0;
+  std::array<std::vector<double>, 3> centres_;  // centre coordinates along each axis
   std::unique_ptr<ExternalSorter<GridRecord, ByIndex>> sorter_;
   std::vector<float> buf32_;
   std::vector<double> buf64_;

@@ -4,9 +4,7 @@
 // final point becomes a fixed-size record pushed to an external sort by original index
 // (pipeline/external_sort.hpp: in memory when it fits its share of --memory, sorted runs
 // on disk otherwise), and the merged stream is written to the .npy files front to back.
-// Neighbours go the same way as (original, neighbour's original) pairs, with one marker
-// per point so a point without neighbours still gets its (empty) row; an edge handed
-// out by several batches sorts into adjacent copies, written once.
+// (Neighbours take another way: field_neighbours.hpp.)
 #include "io/npy.hpp"
 #include "pipeline/external_sort.hpp"
 #include "pipeline/field.hpp"
@@ -29,16 +27,6 @@ struct ByOriginal {
   bool operator()(const PointRecord& a, const PointRecord& b) const { return a.original < b.original; }
 };
 
-struct NeighbourRecord {
-  std::uint64_t original, other;  // other == kRowMarker: the point's own row marker
-};
-inline constexpr std::uint64_t kRowMarker = ~std::uint64_t(0);
-struct ByPair {
-  bool operator()(const NeighbourRecord& a, const NeighbourRecord& b) const {
-    return a.original != b.original ? a.original < b.original : a.other < b.other;
-  }
-};
-
 // DTFE density under the hull convention: 4 m / V, NaN on the hull unless kOpen.
 inline double dtfe_density(double mass, double volume, bool hull, HullMode mode) {
   if (hull && mode == HullMode::kNan) return std::numeric_limits<double>::quiet_NaN();
@@ -52,13 +40,6 @@ inline double dtfe_density(double mass, double volume, bool hull, HullMode mode)
 void write_point_fields(ExternalSorter<PointRecord, ByOriginal>& records, const FieldOptions& options,
                         std::uint64_t point_count, io::ScalarFileReader* masses,
                         const std::function<void(std::uint64_t, double)>& by_label, FieldSummary& summary);
-
-// Writes OUTPUT.neighbours.offsets.npy (int64, N + 1) and OUTPUT.neighbours.indices.npy
-// (int64, entries): row i of the CSR lists the neighbours of the i-th point in input order,
-// as original indices, increasing.
-// Copies of an edge (from several batches) are dropped here. Scratch goes to tmp.
-void write_neighbours(ExternalSorter<NeighbourRecord, ByPair>& records, const FieldOptions& options,
-                      std::uint64_t point_count, const TempDir& tmp, FieldSummary& summary);
 
 std::string field_path(const FieldOptions& options, const std::string& what);  // OUTPUT.what.npy
 

@@ -10,6 +10,7 @@
 #include "io/tet_writer.hpp"
 #include "pipeline/field.hpp"
 #include "pipeline/field_geometry.hpp"
+#include "pipeline/field_neighbours.hpp"
 #include "pipeline/run.hpp"
 
 #include "scratch_dir.hpp"
@@ -398,6 +399,79 @@ TEST_F(FieldTest, SameBytesForThreadsAndMemory) {
     EXPECT_EQ(a, file_bytes(path(std::string("b.") + what + ".npy"))) << what << ": threads";
     EXPECT_EQ(a, file_bytes(path(std::string("c.") + what + ".npy"))) << what << ": memory";
   }
+}
+
+// Neighbour rows that outgrow their share spill to the scratch file in buckets by
+// original index; the CSR files are the same bytes as when they stay in memory.
+TEST_F(FieldTest, NeighbourRowsSpillSameBytes) {
+  const std::string tets = container(io::Distribution::kUniform, 10000, 23, 1500);
+  for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {  // 0: from the budget; 1: the least
+    pipeline::FieldOptions o;
+    o.input = tets;
+    o.output = path(share ? "small" : "big");
+    o.neighbours = true;
+    o.memory_bytes = std::uint64_t(256) << 20;
+    o.batch_tets = 5000;
+    o.neighbour_memory = share;
+    o.progress = false;
+    o.tmpdir = dir_.string();
+    pipeline::compute_fields(o);
+  }
+  for (const char* what : {"neighbours.offsets", "neighbours.indices"}) {
+    const auto big = file_bytes(path(std::string("big.") + what + ".npy"));
+    EXPECT_GT(big.size(), 128u) << what;
+    EXPECT_EQ(big, file_bytes(path(std::string("small.") + what + ".npy"))) << what;
+  }
+}
+
+// The writer on its own: rows in any order, originals with gaps (merged duplicates),
+// a skewed degree distribution whose heavy rows overflow their bucket (written in
+// parts), against a bound that underestimates them; same bytes as in memory.
+TEST_F(FieldTest, NeighbourRowsBucketsAndParts) {
+  const std::uint64_t end = 7500;
+  std::vector<std::uint64_t> originals;
+  for (std::uint64_t o = 0; o < end; ++o)
+    if (o % 3 != 1) originals.push_back(o);
+  std::vector<std::uint64_t> shuffled = originals;
+  for (std::size_t i = 0; i < shuffled.size(); ++i) std::swap(shuffled[i], shuffled[(i * 7919) % shuffled.size()]);
+  auto row = [](std::uint64_t o) {
+    std::vector<std::uint64_t> r;
+    const std::uint64_t degree = o < 600 ? 200 : o % 5;
+    for (std::uint64_t k = 0; k < degree; ++k) r.push_back(o * 3 + k * 11);
+    return r;
+  };
+  std::uint64_t entries = 0;
+  for (const std::uint64_t o : originals) entries += row(o).size();
+  struct Case {
+    const char* name;
+    std::uint64_t bound, memory;
+  };
+  for (const Case c : {Case{"mem", entries, std::uint64_t(1) << 30}, Case{"low", 5 * originals.size(), 0},
+                       Case{"buckets", entries, 0}}) {
+    pipeline::NeighbourRows rows(end, originals.size(), c.bound, c.memory, path(std::string(c.name) + ".rows"));
+    for (const std::uint64_t o : shuffled) {
+      const auto r = row(o);
+      rows.add(o, r);
+    }
+    EXPECT_EQ(rows.spilled(), std::string(c.name) != "mem") << c.name;
+    if (std::string(c.name) == "buckets") {
+      EXPECT_GT(rows.buckets(), 1u);
+    }
+    rows.write(path(std::string(c.name) + ".off.npy"), path(std::string(c.name) + ".idx.npy"));
+    EXPECT_EQ(rows.entries(), entries);
+  }
+  const auto off = load_npy<std::int64_t>(path("mem.off.npy"));
+  const auto idx = load_npy<std::int64_t>(path("mem.idx.npy"));
+  ASSERT_EQ(off.size(), originals.size() + 1);
+  for (std::size_t i = 0; i < originals.size(); ++i) {
+    const auto want = row(originals[i]);
+    ASSERT_EQ(std::vector<std::int64_t>(idx.begin() + off[i], idx.begin() + off[i + 1]),
+              std::vector<std::int64_t>(want.begin(), want.end()))
+        << "row " << i;
+  }
+  for (const char* name : {"low", "buckets"})
+    for (const char* what : {".off.npy", ".idx.npy"})
+      EXPECT_EQ(file_bytes(path(std::string("mem") + what)), file_bytes(path(std::string(name) + what))) << name << what;
 }
 
 TEST_F(FieldTest, PerturbedLocationIsExclusive) {
