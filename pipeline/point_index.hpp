@@ -256,8 +256,8 @@ class PointIndex {
   }
   struct CellGrid {
     // `slices` a power of two up to 256: cell numbers hold log2(slices) bits an axis.
-    CellGrid(const double* box_lo, const double* box_hi, std::uint32_t slices) : slices(slices) {
-      bits = std::countr_zero(slices), mask = slices - 1;
+    CellGrid(const double* box_lo, const double* box_hi, std::uint32_t slices)
+        : bits(std::countr_zero(slices)), mask(slices - 1) {
       for (int k = 0; k < 3; ++k) {
         lo[k] = box_lo[k];
         step[k] = (box_hi[k] - lo[k]) / slices;
@@ -272,7 +272,7 @@ class PointIndex {
     std::uint32_t cell_of(const double* p) const {
       std::uint32_t c = 0;
       for (int k = 0; k < 3; ++k) {
-        const double slice = step[k] > 0 ? std::clamp((p[k] - lo[k]) / step[k], 0.0, double(slices - 1)) : 0.0;
+        const double slice = step[k] > 0 ? std::clamp((p[k] - lo[k]) / step[k], 0.0, double(mask)) : 0.0;
         c |= std::uint32_t(slice) << (bits * k);
       }
       return c;
@@ -284,9 +284,8 @@ class PointIndex {
         cell_hi[k] = first_hi[k] + slice * step[k] + pad[k];
       }
     }
-    std::uint32_t slices;
-    int bits;
-    std::uint32_t mask;
+    int bits;           // of a slice number
+    std::uint32_t mask;  // slices - 1
     double lo[3], step[3], first_hi[3], pad[3];
   };
   const SortedPoint* points_ = nullptr;

@@ -95,11 +95,11 @@ tail -2 help.txt | head -1 | grep -q '130  interrupted' || fail "exit codes last
 # Progress on a terminal: each redraw fits the terminal's width (no trail of wrapped
 # lines), and the merge's last line says 100%. `script` gives the job a terminal 50
 # columns wide.
-if command -v script >/dev/null; then
-  "$T" -q gen --n 1e6 --seed 3 -o prog.f64
-  script -qec "stty cols 50; '$T' run prog.f64 -o prog.tets --memory 256M --threads 1" pty.log >/dev/null
-  [ -s prog.tets ] || fail "run on a terminal wrote no output"
-  /usr/bin/env python3 - pty.log <<'PY' || fail "progress on a terminal"
+command -v script >/dev/null || fail "script(1) (bsdutils) is needed for the terminal check"
+"$T" -q gen --n 1e6 --seed 3 -o prog.f64
+script -qec "stty cols 50; '$T' run prog.f64 -o prog.tets --memory 256M --threads 1" pty.log >/dev/null
+[ -s prog.tets ] || fail "run on a terminal wrote no output"
+/usr/bin/env python3 - pty.log <<'PY' || fail "progress on a terminal"
 import re, sys
 s = open(sys.argv[1], 'rb').read().decode()
 # Redraws: after "\r ESC[K", up to the next carriage return; the final lines are log
@@ -111,5 +111,4 @@ assert widest <= 49, f"a redraw of {widest} columns on a 50-column terminal"
 merged = [l for l in re.split(r'[\r\n]', s) if 'merging:' in l]
 assert merged and '(100.0%)' in merged[-1], f"merge ended at {merged[-1:]}"
 PY
-fi
 echo "filters_cli: ok"
