@@ -71,7 +71,8 @@ void Delaunay::reserve(std::size_t points) {
   assert(double(points) * kTetsPerPointEstimate < double(1u << 30));
   const std::size_t tets = std::size_t(double(points) * kTetsPerPointEstimate) + 64;
   tets_.reserve(tets);
-  advise_huge_pages(tets_.data(), tets_.capacity() * sizeof(Tet));
+  // A kernel reused for a smaller window keeps only what this one needs resident.
+  tets_.release_beyond(tets);
   marks_.grow(tets);
   pts_.reserve(3 * points);
   advise_huge_pages(pts_.data(), pts_.capacity() * sizeof(double));
@@ -406,7 +407,6 @@ void Delaunay::link_new_tets(std::size_t count) {
   // so V = count / 2 + 2 bounds the local ids (plus 0 for the infinite vertex).
   const std::size_t max_local = count / 2 + 2;
   const std::size_t side = max_local + 1;
-  if (edge_table_.size() < side * side) edge_table_.resize(side * side);
   if (local_tet_.size() < side + 1) {
     local_tet_.resize(side + 1);
     local_vertex_.resize(side + 1);
@@ -429,26 +429,54 @@ void Delaunay::link_new_tets(std::size_t count) {
     num_local += fresh;
     return fresh ? next : (slot & ~kLocalTag);
   };
-  FacetHandle* table = edge_table_.data();
-  for (std::size_t k = 0; k < count; ++k) {
-    const TetId t = new_slots_[k];
-    const int* fv = kFacetVertex[new_tets_[k].facet];
-    const VertexId* tv = tets_[t].v;
-    const std::uint32_t a = local_id(tv[fv[0]]), b = local_id(tv[fv[1]]), c = local_id(tv[fv[2]]);
-    // Edge (a, b) lies in the new facet opposite c's position, and so on around.
-    table[a * side + b] = 4 * t + std::uint32_t(fv[2]);
-    table[b * side + c] = 4 * t + std::uint32_t(fv[0]);
-    table[c * side + a] = 4 * t + std::uint32_t(fv[1]);
-    local_tet_[a] = t, local_tet_[b] = t, local_tet_[c] = t;
-    local_ids_[k] = {a, b, c};
-  }
-  for (std::size_t k = 0; k < count; ++k) {
-    Tet& tet = tets_[new_slots_[k]];
-    const int* fv = kFacetVertex[new_tets_[k].facet];
-    const auto [a, b, c] = local_ids_[k];
-    tet.n[fv[2]] = table[b * side + a];
-    tet.n[fv[0]] = table[c * side + b];
-    tet.n[fv[1]] = table[a * side + c];
+  // The new facets meet along the boundary's edges: the directed edge (a, b) of one
+  // new facet is (b, a) of its neighbour. edge(a, b) is the slot of (a, b).
+  auto link = [&](auto&& edge) {
+    for (std::size_t k = 0; k < count; ++k) {
+      const TetId t = new_slots_[k];
+      const int* fv = kFacetVertex[new_tets_[k].facet];
+      const VertexId* tv = tets_[t].v;
+      const std::uint32_t a = local_id(tv[fv[0]]), b = local_id(tv[fv[1]]), c = local_id(tv[fv[2]]);
+      // Edge (a, b) lies in the new facet opposite c's position, and so on around.
+      edge(a, b) = 4 * t + std::uint32_t(fv[2]);
+      edge(b, c) = 4 * t + std::uint32_t(fv[0]);
+      edge(c, a) = 4 * t + std::uint32_t(fv[1]);
+      local_tet_[a] = t, local_tet_[b] = t, local_tet_[c] = t;
+      local_ids_[k] = {a, b, c};
+    }
+    for (std::size_t k = 0; k < count; ++k) {
+      Tet& tet = tets_[new_slots_[k]];
+      const int* fv = kFacetVertex[new_tets_[k].facet];
+      const auto [a, b, c] = local_ids_[k];
+      tet.n[fv[2]] = edge(b, a);
+      tet.n[fv[0]] = edge(c, b);
+      tet.n[fv[1]] = edge(a, c);
+    }
+  };
+  if (side <= kDenseEdgeSide) {
+    // The common case: a dense table indexed by both local ids.
+    if (edge_table_.size() < side * side) edge_table_.resize(side * side);
+    FacetHandle* table = edge_table_.data();
+    link([table, side](std::uint32_t a, std::uint32_t b) -> FacetHandle& { return table[a * side + b]; });
+  } else {
+    // A large cavity (flat regions make them: thousands of tets): a hash table of its
+    // 3 count edges, at most half full. A dense table is quadratic in the cavity: a
+    // terrain's 3,336-vertex cavity took 44 MB, and the kernel kept it for good.
+    const std::size_t slots = std::bit_ceil(6 * count);
+    if (edge_hash_.size() < slots) edge_hash_.resize(slots);
+    std::fill_n(edge_hash_.begin(), slots, EdgeSlot{});
+    EdgeSlot* table = edge_hash_.data();
+    const std::size_t mask = slots - 1;
+    link([table, mask](std::uint32_t a, std::uint32_t b) -> FacetHandle& {
+      const std::uint64_t key = std::uint64_t(a) << 32 | b;
+      for (std::size_t i = std::size_t((key * 0x9E3779B97F4A7C15ULL) >> 32) & mask;; i = (i + 1) & mask) {
+        if (table[i].key == key) return table[i].facet;
+        if (table[i].key == EdgeSlot::kEmpty) {
+          table[i].key = key;
+          return table[i].facet;
+        }
+      }
+    });
   }
   // Restore order_, and give each boundary vertex one incident tet.
   for (std::uint32_t i = 1; i <= num_local; ++i) {
@@ -513,14 +541,15 @@ Circumsphere Delaunay::tet_circumsphere(TetId t) const {
 }
 
 std::size_t Delaunay::memory_bytes() const {
-  return tets_.capacity() * sizeof(Tet) + marks_.bits.capacity() * 8 +
+  return tets_.size() * sizeof(Tet) + marks_.bits.capacity() * 8 +
          pts_.capacity() * sizeof(double) + order_.capacity() * sizeof(VertexId) +
          local_internal_.capacity() * sizeof(VertexId) + vertex_tet_.capacity() * sizeof(TetId) +
          duplicate_of_.size() * (2 * sizeof(VertexId) + 2 * sizeof(void*)) +
          duplicate_of_.bucket_count() * sizeof(void*) + cavity_.capacity() * sizeof(TetId) +
          rejected_.capacity() * sizeof(TetId) + new_tets_.capacity() * sizeof(NewTet) +
          new_slots_.capacity() * sizeof(TetId) + local_ids_.capacity() * sizeof(local_ids_[0]) +
-         local_vertex_.capacity() * sizeof(VertexId) + local_tet_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(FacetHandle);
+         local_vertex_.capacity() * sizeof(VertexId) + local_tet_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(FacetHandle) +
+         edge_hash_.capacity() * sizeof(EdgeSlot);
 }
 
 }  // namespace tetstream::core

@@ -46,6 +46,7 @@
 //   Predicates see the same doubles and the same labels (labels_[order_[x]]) as a
 //   kernel working on caller ids would, so every answer, hence the triangulation, is
 //   identical.
+#include "core/page_array.hpp"
 #include "core/predicates.hpp"
 
 #include <algorithm>
@@ -215,7 +216,7 @@ class Delaunay {
   const std::uint64_t* labels_ = nullptr;
   std::size_t num_points_ = 0;
 
-  std::vector<Tet> tets_;
+  PageArray<Tet> tets_;  // grows without copies; pages past a window's need handed back
   TetId free_head_ = kNoTet;
   std::size_t num_alive_ = 0;
   std::size_t num_infinite_ = 0;
@@ -240,7 +241,16 @@ class Delaunay {
   std::vector<VertexId> local_vertex_;   // local id -> caller id (saved from order_)
   std::vector<VertexId> local_internal_;  // local id -> internal id
   std::vector<TetId> local_tet_;         // local id -> a new tet holding it
-  std::vector<FacetHandle> edge_table_;  // directed boundary edge (local ids) -> new facet
+  // Directed boundary edge (local ids) -> new facet: a dense table for cavities of
+  // up to kDenseEdgeSide local ids (at most 256 KiB), a hash table beyond.
+  static constexpr std::size_t kDenseEdgeSide = 256;
+  struct EdgeSlot {
+    static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);
+    std::uint64_t key = kEmpty;  // a << 32 | b
+    FacetHandle facet = 0;
+  };
+  std::vector<FacetHandle> edge_table_;
+  std::vector<EdgeSlot> edge_hash_;
 
   DelaunayStats stats_;
 };

@@ -11,23 +11,25 @@
 
 namespace tetstream::pipeline {
 
-// kFrameTets (the frame size) is in pipeline/memory_budget.hpp, which sizes the writer's share from it.
+// The frame size (kFrameTets, MemoryBudget::frame_tets_for) is in
+// pipeline/memory_budget.hpp, which sizes the writer's share from it.
 
 // The last stage before the writer: turns the zones' output, in minimum-label order,
-// into frames of about kFrameTets tets, cut where the minimum label changes.
+// into frames of about `frame_tets` tets, cut where the minimum label changes.
 class FrameCutter {
  public:
-  explicit FrameCutter(AsyncTetWriter& writer) : writer_(writer), frame_(next_frame()) {}
+  FrameCutter(AsyncTetWriter& writer, std::size_t frame_tets)
+      : writer_(writer), frame_tets_(frame_tets), frame_(next_frame()) {}
 
   // Appends the tets [begin, end) of a zone's output, translated to labels straight
   // into the frame being filled (they come in increasing minimum-label order; a group
   // may go on in the next call). A frame is handed to the writer, not copied, at the
-  // first change of minimum label after kFrameTets tets.
+  // first change of minimum label after frame_tets tets.
   void add(const ZoneTets& part, std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       const std::uint64_t q[4] = {part.label(i, 0), part.label(i, 1), part.label(i, 2), part.label(i, 3)};
       const std::uint64_t m = tet_min_label(q);
-      if (frame_.size() >= 4 * kFrameTets && m != last_min_) write();
+      if (frame_.size() >= 4 * frame_tets_ && m != last_min_) write();
       frame_.insert(frame_.end(), q, q + 4);
       last_min_ = m;
     }
@@ -48,15 +50,16 @@ class FrameCutter {
     writer_.add_tets(std::move(frame_));
     frame_ = next_frame();
   }
-  // An empty frame with room for kFrameTets tets and a group's overrun (a recycled
+  // An empty frame with room for frame_tets tets and a group's overrun (a recycled
   // buffer keeps its capacity).
   std::vector<std::uint64_t> next_frame() {
     std::vector<std::uint64_t> f = writer_.take_buffer();
-    f.reserve(4 * kFrameTets + 4096);
+    f.reserve(4 * frame_tets_ + 4096);
     return f;
   }
 
   AsyncTetWriter& writer_;
+  const std::size_t frame_tets_;
   std::vector<std::uint64_t> frame_;
   std::uint64_t last_min_ = ~std::uint64_t(0);
 };

@@ -30,7 +30,11 @@ constexpr std::size_t kMinRunPoints = std::size_t(1) << 16;
 }  // namespace
 
 MemoryBudget::MemoryBudget(std::uint64_t ceiling, std::uint64_t points, int threads, int cores)
-    : ceiling_(ceiling), points_(points), threads_(std::max(1, threads)), cores_(std::max(1, cores)) {
+    : ceiling_(ceiling),
+      points_(points),
+      threads_(std::max(1, threads)),
+      cores_(std::max(1, cores)),
+      frame_tets_(frame_tets_for(ceiling)) {
   // The process itself is ~10 MiB; the rest of the reserve is the allocator's slack,
   // and the folios that sequential scans map before they hand them back
   // (ReleaseBehind: two 4 MiB chunks a thread loading a window). A quarter of a small
@@ -93,6 +97,12 @@ int MemoryBudget::encoders_for(std::uint64_t ceiling, int cores) {
   return std::clamp(std::min<int>(cores, int(std::min<std::uint64_t>(ceiling >> 29, 1 << 20))), 1, 4);
 }
 
+std::size_t MemoryBudget::frame_tets_for(std::uint64_t ceiling) {
+  std::size_t tets = kSmallestFrameTets;
+  while (tets < kFrameTets && 2 * tets <= ceiling / 2048) tets *= 2;
+  return tets;
+}
+
 std::uint64_t MemoryBudget::writer_bytes_for(int encoders, std::uint64_t tets, std::size_t frame_tets) {
   // Frames alive: the one being filled, `encoders` queued and `encoders` being
   // compressed; no more than the output has, and none larger than the output.
@@ -104,7 +114,13 @@ std::uint64_t MemoryBudget::writer_bytes_for(int encoders, std::uint64_t tets, s
 TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, double windows_planned) {
   TriangulateShares t;
   t.encoders = encoders_for(ceiling_, cores_);
-  t.writer_bytes = writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), kFrameTets);
+  // The output's write buffer: a 64th of the budget and no more than the output's
+  // size (~50 bytes a point), from 64 KiB to 8 MiB (past which larger writes gained
+  // nothing).
+  t.file_buffer_bytes =
+      std::size_t(std::clamp<std::uint64_t>(std::min(ceiling_ / 64, 64 * points_), 64 << 10, 8 * kMiB));
+  t.writer_bytes = writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), frame_tets_) +
+                   t.file_buffer_bytes;
   t.index_bytes = index_bytes;
   // What the reserve and the writer leave: 75% for the windows (less the indexes),
   // 25% for the sorted file's pages that the queries map and the allocator's slack.

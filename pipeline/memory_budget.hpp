@@ -32,9 +32,11 @@ inline constexpr double kIndexBytesLowerBound = 4;
 // this many tets (pipeline/frame_cutter.hpp). The segments emit their tets grouped by
 // minimum label and the zones follow each other in label order, so the job's whole
 // stream is ordered by minimum label, and the frames (each a set, stored canonically
-// by the codec) are the same for any segment plan or thread count. The ledger sizes
-// the writer's share from it.
+// by the codec) are the same for any segment plan or thread count. The size is the
+// largest below, and smaller for small budgets (MemoryBudget::frame_tets_for): it
+// depends on the budget the output's header names, which a resumed job keeps.
 inline constexpr std::size_t kFrameTets = std::size_t(1) << 18;
+inline constexpr std::size_t kSmallestFrameTets = std::size_t(1) << 12;
 
 struct SortShares {
   std::size_t run_points = 0;         // points per sorted run
@@ -45,7 +47,8 @@ struct SortShares {
 
 struct TriangulateShares {
   int encoders = 1;                 // the writer stage's compression threads
-  std::uint64_t writer_bytes = 0;   // frames in flight and the encoders' scratch
+  std::uint64_t writer_bytes = 0;   // frames in flight, the encoders' scratch, the file buffer
+  std::size_t file_buffer_bytes = 0;  // the output file's write buffer (part of writer_bytes)
   std::uint64_t query_page_bytes = 0;  // mapped pages of the sorted file the queries read
   std::uint64_t index_bytes = 0;    // the point index and the hull's (as measured)
   double window_bytes = 0;          // the windows: kernels, coordinates, held output (the plan's "available")
@@ -81,6 +84,14 @@ class MemoryBudget {
   // The writer's encoders and its frames' bytes for a budget and an output of about
   // `tets` tets (frames of frame_tets: fewer frames in flight when the output is small).
   static int encoders_for(std::uint64_t ceiling, int cores);
+  // The frame size for a budget: a power of two, a 2048th of the budget in tets (the
+  // writer's frames in flight then take ~7% of it), between kSmallestFrameTets and
+  // kFrameTets. Measured: frames of 2^14 tets instead of 2^18 cost ~1% of the bytes.
+  static std::size_t frame_tets_for(std::uint64_t ceiling);
+  // The frames of this job: frame_tets_for(ceiling) unless the output was started
+  // with another budget (a resumed job), whose frames it goes on with.
+  std::size_t frame_tets() const { return frame_tets_; }
+  void set_frame_tets(std::size_t tets) { frame_tets_ = tets; }
   static std::uint64_t writer_bytes_for(int encoders, std::uint64_t tets, std::size_t frame_tets);
 
   const std::vector<Share>& shares() const { return shares_; }
@@ -93,6 +104,7 @@ class MemoryBudget {
   std::uint64_t ceiling_, points_;
   int threads_, cores_;
   std::uint64_t runtime_;
+  std::size_t frame_tets_;
   std::vector<Share> shares_;
 };
 

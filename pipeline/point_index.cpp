@@ -137,9 +137,13 @@ void PointIndex::build(const SortedPoint* points, std::uint64_t count, int axis,
   }
 }
 
-double PointIndex::leaf_spacing_quantile(double q) const {
+double PointIndex::leaf_spacing_quantile(double q, std::uint64_t first, std::uint64_t last) const {
   std::vector<double> spacing;
-  for (const Block& block : blocks_) {
+  if (blocks_.empty() || first >= last) return 0;
+  const std::size_t b0 = std::size_t(std::min<std::uint64_t>(first / block_points_, blocks_.size() - 1));
+  const std::size_t b1 = std::size_t(std::min<std::uint64_t>((last - 1) / block_points_, blocks_.size() - 1));
+  for (std::size_t b = b0; b <= b1; ++b) {
+    const Block& block = blocks_[b];
     for (std::uint32_t i = block.first_node; i < block.first_node + block.nodes; ++i) {
       const Node& node = nodes_[i];
       if (!node.leaf || node.end - node.begin < 8) continue;

@@ -123,8 +123,9 @@ class PointIndex {
   // with a solid box, and the q-quantile of those (0 when no leaf has volume: flat
   // inputs). On uniform points it is about the mean spacing cbrt(volume / n); on a
   // thin shell or in clusters it is the spacing where the points are, which the
-  // bounding box's mean overestimates many times.
-  double leaf_spacing_quantile(double q) const;
+  // bounding box's mean overestimates many times. [first, last): only the leaves of
+  // the blocks holding those labels (the spacing of a segment's own points).
+  double leaf_spacing_quantile(double q, std::uint64_t first = 0, std::uint64_t last = ~std::uint64_t(0)) const;
 
   std::size_t memory_bytes() const {
     return entries_.capacity() * sizeof(std::uint32_t) + fine_.capacity() * sizeof(std::uint16_t) +

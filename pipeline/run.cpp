@@ -93,8 +93,8 @@ std::string identity_difference(const json& saved, const json& now) {
     return "the input was " + saved.at("input").get<std::string>() + ", now " + now.at("input").get<std::string>();
   if (saved.at("input_fingerprint") != now.at("input_fingerprint"))
     return "the input " + now.at("input").get<std::string>() + " changed (size, time or contents) since the checkpoint";
-  // Not "memory": a resumed job may take another budget (the frames do not depend on
-  // it, and the header keeps the budget it was written with; see WriteStage::prepare).
+  // Not "memory": a resumed job may take another budget (the header keeps the budget
+  // it was written with, and so do the frames; see WriteStage::prepare).
   for (const char* key : {"output", "buffer_spacings", "sort_run_points", "read"})
     if (saved.at(key) != now.at(key)) return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
   return "";
@@ -152,18 +152,21 @@ RunSummary Job::run() {
   index.run();
   summary.hull_vertices = index.view().hull_points.size();
 
-  // The triangulation's shares of the ledger, from the indexes as built.
+  // The triangulation's shares of the ledger, from the indexes as built, with the
+  // frames of the budget the output was started with.
+  budget_.set_frame_tets(MemoryBudget::frame_tets_for(WriteStage::header_memory(context)));
   const TriangulatePlan plan = plan_triangulation(index, options_, budget_, threads_);
 
   // ---- write, started before the triangulation feeds it: the output, new or resumed ----
   // Declared before the triangulation that feeds it, so destroyed after it on a failure.
-  WriteStage write(context, sorted, index.view(), plan.shares.encoders, claim_);
+  WriteStage write(context, sorted, index.view(), plan.shares, claim_);
   write.prepare();
   write.run();
 
   // ---- triangulate: the segments' zones, `threads` at a time, written in order ----
   TriangulateStage triangulate(options_, index, plan.zones, plan.shares.query_page_bytes, threads_);
   triangulate.prepare(write.first_label(), write.segments_done());
+  budget_.plan_triangulate(plan.shares.index_bytes, triangulate.window_bytes());  // the windows as measured
   triangulate.run(write);
   write.commit();
   write.finish();

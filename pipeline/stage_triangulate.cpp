@@ -57,15 +57,13 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
   const SortedView& view = indexed_.view();
   first_label_ = first_label;
   first_segment_ = first_segment;
-  plans_ = plan_segments(view, plan_.segment_points, plan_.buffer_width, first_label);
-  for (std::size_t s = 0; s < plans_.size(); ++s) {
-    split_into_zones(view, plans_[s], plan_.zones);
+  SegmentCut cut = cut_segments(view, plan_, first_label, threads_);
+  plans_ = std::move(cut.plans);
+  window_bytes_ = cut.window_bytes;
+  for (std::size_t s = 0; s < plans_.size(); ++s)
     for (std::size_t z = 0; z < plans_[s].zones.size(); ++z) units_.push_back({s, z});
-    // The samples touch about every page of the segment's labels: hand them back
-    // now, or the whole mapped file would be resident before the first zone starts.
-    release_mapped_pages(view.points + plans_[s].zone_begin,
-                         (plans_[s].zone_end - plans_[s].zone_begin) * sizeof(SortedPoint));
-  }
+  spdlog::debug("windows measured: largest ~{} points, {} (the plan's share {})", cut.largest_window,
+                human_bytes(window_bytes_), human_bytes(plan_.available));
   spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
                plans_.size(), plans_.empty() ? 0 : plans_[0].zone_end - plans_[0].zone_begin, units_.size(),
                plans_.empty() ? 0 : (plans_[0].zone_end - plans_[0].zone_begin) / plans_[0].zones.size(),

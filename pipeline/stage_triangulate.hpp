@@ -68,6 +68,8 @@ class TriangulateStage {
   // The triangulation's wall time, less what it spent waiting on the write stage.
   double seconds() const { return seconds_; }
   std::uint64_t query_region_releases() const { return query_regions_.releases(); }
+  // What the windows of the plan prepare made take, from their measured sizes.
+  double window_bytes() const { return window_bytes_; }
 
  private:
   struct Unit {
@@ -89,6 +91,7 @@ class TriangulateStage {
   SegmentStats segment_work_;
   OutputPool output_pool_;
   double seconds_ = 0;
+  double window_bytes_ = 0;
   double sink_seconds_ = 0;  // in the sink's add_segment (the write stage's share of the wall time)
 };
 

@@ -67,13 +67,15 @@ void record_work(const WrittenWork& work, RunSummary& s) {
   s.seconds_segments = work.stats.seconds_build + work.stats.seconds_check;
 }
 
+std::uint64_t WriteStage::header_memory(const StageContext& context) {
+  return context.state.value("header_memory", context.options.memory_bytes);
+}
+
 void WriteStage::prepare() {
   const RunOptions& options = context_.options;
   json& state = context_.state;
-  // The budget the output's header names: the one its first process wrote it with (a
-  // resumed job may run with another; the frames do not depend on it).
-  if (!state.contains("header_memory")) state["header_memory"] = options.memory_bytes;
-  const std::uint64_t header_memory = state["header_memory"].get<std::uint64_t>();
+  const std::uint64_t header_memory = WriteStage::header_memory(context_);
+  state["header_memory"] = header_memory;
   if (header_memory != options.memory_bytes)
     spdlog::info("resumed with --memory {}: the output keeps the budget it was started with, {}",
                  human_bytes(double(options.memory_bytes)), human_bytes(double(header_memory)));
@@ -93,7 +95,8 @@ void WriteStage::prepare() {
   io::TetWriterOptions writer_options;
   writer_options.threads = encoders_;  // the writer stage's own team
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
-  writer_options.frame_tets = 2 * kFrameTets;
+  writer_options.frame_tets = std::uint32_t(2 * kFrameTets);
+  writer_options.buffer_bytes = file_buffer_bytes_;
   writer_options.keep_partial = context_.checkpoint != nullptr;
   writer_options.claim = claim_;
   resumed_ = state.contains("output");
@@ -149,7 +152,7 @@ void WriteStage::run() {
       }
     });
   }
-  cutter_.emplace(*async_);
+  cutter_.emplace(*async_, MemoryBudget::frame_tets_for(header_memory(context_)));
   cutter_->restore(std::move(pending_));
   if (!resumed_) record(0, false);
 }

@@ -6,7 +6,7 @@
 //
 // Its records in the checkpoint state: "header_memory", the budget the output's
 // header names (the first process's: a resumed job may run with another, and the
-// frames do not depend on it); and "output", replaced after each segment: the partial
+// frames' size depends on this one only, MemoryBudget::frame_tets_for); and "output", replaced after each segment: the partial
 // file's committed bytes, the label below which every tet is written (`next_label`),
 // the tets of the frame being filled (a file `pending-K.tets` of its own), the
 // segments written and their counters. The triangulation's progress is this record:
@@ -43,12 +43,21 @@ void record_work(const WrittenWork& w, RunSummary& s);
 
 class WriteStage final : public SegmentSink {
  public:
-  // `encoders`: the writer's compression threads, its memory share with the frames
-  // in flight (MemoryBudget::plan_triangulate). `claim`: the output, locked for this
+  // `shares`: the writer's compression threads and its file buffer, its memory share
+  // with the frames in flight (MemoryBudget::plan_triangulate). `claim`: the output, locked for this
   // job since it began (null for standard output).
-  WriteStage(const StageContext& context, const SortedPoints& sorted, const SortedView& view, int encoders,
-             const io::OutputClaim* claim)
-      : context_(context), sorted_(sorted), view_(view), encoders_(encoders), claim_(claim) {}
+  WriteStage(const StageContext& context, const SortedPoints& sorted, const SortedView& view,
+             const TriangulateShares& shares, const io::OutputClaim* claim)
+      : context_(context),
+        sorted_(sorted),
+        view_(view),
+        encoders_(shares.encoders),
+        file_buffer_bytes_(shares.file_buffer_bytes),
+        claim_(claim) {}
+
+  // The budget the output's header names: the one its first process wrote it with (a
+  // resumed job may run with another, and the frames depend on this one only).
+  static std::uint64_t header_memory(const StageContext& context);
 
   // Opens the output: a new container, or the checkpoint's partial output reopened at
   // its last commit with the frame that was being filled and the counters
@@ -90,6 +99,7 @@ class WriteStage final : public SegmentSink {
   const SortedPoints& sorted_;
   const SortedView& view_;
   const int encoders_;
+  const std::size_t file_buffer_bytes_;
   const io::OutputClaim* claim_;
   bool resumed_ = false;  // the state held an "output" record
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;

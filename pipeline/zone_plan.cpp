@@ -80,6 +80,9 @@ std::optional<ZonePlan> try_plan(const PlanInputs& in, const RunOptions& o, int 
       best = r, plan.zones = k, plan.segment_points = std::uint64_t(s), plan.window_bytes = evaluate(k, s).second;
   }
   if (plan.segment_points == 0) return std::nullopt;
+  plan.available = available;
+  plan.buffer_spacings = o.buffer_spacings;
+  plan.fixed = o.zones > 0 || o.zone_points > 0;
   return plan;
 }
 
@@ -117,6 +120,62 @@ ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads)
   const std::uint64_t need_mib = (hi + (std::uint64_t(1) << 20) - 1) >> 20;
   throw UsageError("--memory " + human_bytes(double(o.memory_bytes)) + " is too small for this input (" +
                    std::to_string(in.points) + " points): use --memory " + std::to_string(need_mib) + "M or more");
+}
+
+namespace {
+
+// Points in zone `z`'s window (its strip's window within the segment's window
+// labels), estimated from every stride-th label of the segment's window.
+std::uint64_t estimate_window(const SortedView& view, const SegmentPlan& p, const ZoneStrip& st) {
+  const std::uint64_t n = p.window_end - p.window_begin;
+  if (st.axis < 0 || n == 0) return n;
+  const std::uint64_t stride = std::max<std::uint64_t>(1, n / 16384);
+  std::uint64_t in = 0, seen = 0;
+  for (std::uint64_t l = p.window_begin; l < p.window_end; l += stride, ++seen) {
+    const double c = view.points[l].xyz[st.axis];
+    in += c >= st.window_lo && c <= st.window_hi;
+  }
+  return std::uint64_t(double(n) * double(in) / double(seen));
+}
+
+}  // namespace
+
+SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads) {
+  std::uint64_t segment_points = plan.segment_points;
+  const double t = double(std::max(threads, 1));
+  SegmentCut best;
+  for (int attempt = 0;; ++attempt) {
+    SegmentCut cut;
+    cut.plans = plan_segments(view, segment_points, plan.buffer_width, first_label);
+    std::uint64_t largest_zone = 0, zones = 1;
+    for (SegmentPlan& p : cut.plans) {
+      const double local =
+          view.index ? plan.buffer_spacings * view.index->leaf_spacing_quantile(0.5, p.zone_begin, p.zone_end) : 0;
+      if (local > 0 && local < p.buffer_width) {
+        p.buffer_width = local;
+        p.window_begin = view.lower_bound(view.key(p.zone_begin) - local);
+        p.window_end = view.upper_bound(view.key(p.zone_end - 1) + local);
+      }
+      split_into_zones(view, p, plan.zones);
+      for (const ZoneStrip& st : p.zones) cut.largest_window = std::max(cut.largest_window, estimate_window(view, p, st));
+      largest_zone = std::max<std::uint64_t>(largest_zone, (p.zone_end - p.zone_begin + p.zones.size() - 1) / p.zones.size());
+      zones = std::max<std::uint64_t>(zones, p.zones.size());
+      // The samples touch about every page of the segment's window: hand them back
+      // now, or the whole mapped file would be resident before the first zone starts.
+      release_mapped_pages(view.points + p.window_begin, (p.window_end - p.window_begin) * sizeof(SortedPoint));
+    }
+    cut.window_bytes = t * double(cut.largest_window) * kWindowBytesPerPoint +
+                       (double(zones) + t - 1) * double(largest_zone) * kOutputBytesPerPoint;
+    // A smaller segment that saved less than a tenth is not worth its extra buffers:
+    // the windows are then mostly buffers, which smaller segments do not cut.
+    if (attempt > 0 && cut.window_bytes > 0.9 * best.window_bytes) return best;
+    best = std::move(cut);
+    if (plan.fixed || plan.available <= 0 || best.window_bytes <= plan.available || attempt == 8 ||
+        segment_points <= 1000)
+      return best;
+    const double shrink = std::clamp(plan.available / best.window_bytes, 0.5, 0.8);
+    segment_points = std::max<std::uint64_t>(1000, std::uint64_t(double(segment_points) * shrink));
+  }
 }
 
 // After the first pass (count and bounding box, nothing written): refuses a budget

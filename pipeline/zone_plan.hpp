@@ -37,6 +37,9 @@ struct ZonePlan {
   int zones = 1;
   double buffer_width = 0;
   double window_bytes = 0;  // the model's memory for this plan (at most the windows' share)
+  double available = 0;     // the windows' share of the ledger the plan was made for
+  double buffer_spacings = 0;  // buffer_width in spacings (--buffer)
+  bool fixed = false;       // the segment size or the zones came from the options
 };
 
 // What the plan is made from: the sorted view and its index once they exist, or,
@@ -56,6 +59,24 @@ PlanInputs plan_inputs(const SortedView& view, const PointIndex& index);
 // The plan for o.memory_bytes; when it cannot hold a window, a UsageError that names
 // the smallest budget that can (to a mebibyte, found by bisection: the plan is cheap).
 ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads);
+
+// The segments of the labels from `first_label` on, cut into their zones, with
+// their windows measured rather than modelled: the model assumes points spread
+// evenly, and in clusters a window's buffers hold several times the points it
+// expects (clustered 10^6 points at --memory 64M peaked at 90.7 MB). So a segment's
+// buffers are as many spacings as the plan's but of its own points' spacing when
+// that is smaller (a slab through a dense cluster); and each zone's window is
+// counted from a sample of its segment's window labels: while the largest windows
+// (`threads` of them at once) and a segment's output take more than the plan's
+// share, the segments shrink, as long as that helps (a plan fixed by
+// --segment-points or --zones is kept). `window_bytes` is the measured need of the
+// plan returned.
+struct SegmentCut {
+  std::vector<SegmentPlan> plans;
+  double window_bytes = 0;
+  std::uint64_t largest_window = 0;  // points, estimated
+};
+SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads);
 
 // A budget refused before the sort: nothing worth keeping was done.
 class BudgetTooSmall : public UsageError {

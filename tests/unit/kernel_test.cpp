@@ -351,6 +351,20 @@ TEST(Kernel, InsertMorePointsLater) {
   }
 }
 
+// A cavity with thousands of boundary vertices: the centre of a sphere inserted
+// after 4,000 points of its surface conflicts with every tet, so the new tets are
+// linked through the edge hash table rather than the dense one (kDenseEdgeSide),
+// as flat regions (terrains) make them. The result must equal a build that inserts
+// the centre among the others, and be valid.
+TEST(Kernel, HugeCavityIsLinkedLikeASmallOne) {
+  tp::Points p = tp::sphere_surface(4000, 21);
+  tp::push(p, 0.0, 0.0, 0.0);
+  expect_grow_equals_build(p, 4000, 22);
+  // And a second huge cavity in the same kernel (the table is reused, not stale).
+  tp::push(p, 1e-3, 2e-3, -1e-3);
+  expect_grow_equals_build(p, 4000, 23);
+}
+
 TEST(Kernel, OrderInvariantOnDegenerateInputs) {
   expect_order_invariant(tp::grid(7), 1);
   expect_order_invariant(tp::integer_sphere(50), 2);

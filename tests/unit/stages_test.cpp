@@ -219,7 +219,10 @@ TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
   for (const auto& t : tets)
     for (std::uint64_t v : t) parts[min_label(t) < split ? 0 : 1].tets.push_back(std::uint32_t(v));
   {
-    WriteStage stage(context(), sorted, index.view(), 1, nullptr);
+    TriangulateShares shares;
+    shares.encoders = 1;
+    shares.file_buffer_bytes = std::size_t(1) << 16;
+    WriteStage stage(context(), sorted, index.view(), shares, nullptr);
     stage.prepare();
     EXPECT_EQ(stage.first_label(), 0u);
     stage.run();
