@@ -35,15 +35,17 @@ MemoryBudget::MemoryBudget(std::uint64_t ceiling, std::uint64_t points, int thre
       threads_(std::max(1, threads)),
       cores_(std::max(1, cores)),
       frame_tets_(frame_tets_for(ceiling)) {
-  // The process itself is ~10 MiB; the rest of the reserve is the allocator's slack,
-  // and the folios that sequential scans map before they hand them back
-  // (ReleaseBehind: two 4 MiB chunks a thread loading a window). A quarter of a small
-  // budget, 64 MiB of a large one (the figure the 10^8-point runs were measured with),
-  // and the threads' chunks; never more than half the budget. (Measured: 10^6 uniform
-  // points at 96M, 2 threads, peaked at 101.9 MiB with 24 MiB and no chunks reserved.)
-  runtime_ = std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 16 * kMiB, 64 * kMiB) +
+  // The process itself is 13 MiB resident (`tetstream --version`: the shared
+  // libraries' pages); the rest of the reserve is the allocator's slack and the folios
+  // that sequential scans map before they hand them back (ReleaseBehind: two 4 MiB
+  // chunks a thread loading a window). A quarter of the budget between 20 and 64 MiB
+  // (the figure the 10^8-point runs were measured with), and the threads' chunks; at
+  // most 5/8 of the budget. (Measured: 10^6 uniform points at 96M, 2 threads, peaked
+  // at 101.9 MiB with 24 MiB and no chunks reserved; 10^5 points at 32M peaked 1-4 MiB
+  // over with a 16 MiB floor and a cap of half the budget.)
+  runtime_ = std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) +
                                          8 * kMiB * std::uint64_t(threads_),
-                                     ceiling / 2);
+                                     ceiling / 8 * 5);
 }
 
 void MemoryBudget::record(const std::string& phase, const std::string& name, std::uint64_t bytes) {
@@ -99,7 +101,7 @@ int MemoryBudget::encoders_for(std::uint64_t ceiling, int cores) {
 
 std::size_t MemoryBudget::frame_tets_for(std::uint64_t ceiling) {
   std::size_t tets = kSmallestFrameTets;
-  while (tets < kFrameTets && 2 * tets <= ceiling / 2048) tets *= 2;
+  while (tets < kFrameTets && 2 * tets <= ceiling / 1024) tets *= 2;
   return tets;
 }
 
