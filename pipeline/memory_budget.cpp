@@ -43,8 +43,10 @@ MemoryBudget::MemoryBudget(std::uint64_t ceiling, std::uint64_t points, int thre
   // most 5/8 of the budget. (Measured: 10^6 uniform points at 96M, 2 threads, peaked
   // at 101.9 MiB with 24 MiB and no chunks reserved; 10^5 points at 32M peaked 1-4 MiB
   // over with a 16 MiB floor and a cap of half the budget.)
-  runtime_ = std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) +
-                                         8 * kMiB * std::uint64_t(threads_),
+  // The chunks: 8 MiB a thread, less at small budgets, whose windows' label ranges
+  // are a few MiB of records at most (a 32nd of the budget a thread).
+  const std::uint64_t chunks = std::min<std::uint64_t>(8 * kMiB, ceiling / 32) * std::uint64_t(threads_);
+  runtime_ = std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) + chunks,
                                      ceiling / 8 * 5);
 }
 

@@ -143,14 +143,18 @@ std::uint64_t estimate_window(const SortedView& view, const SegmentPlan& p, cons
 SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads) {
   std::uint64_t segment_points = plan.segment_points;
   const double t = double(std::max(threads, 1));
+  bool local_buffers = false;  // each segment's buffers at its own points' spacing
   SegmentCut best;
   for (int attempt = 0;; ++attempt) {
     SegmentCut cut;
     cut.plans = plan_segments(view, segment_points, plan.buffer_width, first_label);
     std::uint64_t largest_zone = 0, zones = 1;
     for (SegmentPlan& p : cut.plans) {
-      const double local =
-          view.index ? plan.buffer_spacings * view.index->leaf_spacing_quantile(0.5, p.zone_begin, p.zone_end) : 0;
+      // The median leaf spacing of the segment's own labels: a slab through a dense
+      // cluster then has buffers as many of its spacings thick as the plan's.
+      const double local = local_buffers && view.index
+                               ? plan.buffer_spacings * view.index->leaf_spacing_quantile(0.5, p.zone_begin, p.zone_end)
+                               : 0;
       if (local > 0 && local < p.buffer_width) {
         p.buffer_width = local;
         p.window_begin = view.lower_bound(view.key(p.zone_begin) - local);
@@ -168,11 +172,18 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
                        (double(zones) + t - 1) * double(largest_zone) * kOutputBytesPerPoint;
     // A smaller segment that saved less than a tenth is not worth its extra buffers:
     // the windows are then mostly buffers, which smaller segments do not cut.
-    if (attempt > 0 && cut.window_bytes > 0.9 * best.window_bytes) return best;
-    best = std::move(cut);
+    if (attempt > 1 && cut.window_bytes > 0.9 * best.window_bytes) return best;
+    if (attempt == 0 || cut.window_bytes < best.window_bytes) best = std::move(cut);
     if (plan.fixed || plan.available <= 0 || best.window_bytes <= plan.available || attempt == 8 ||
         segment_points <= 1000)
       return best;
+    // Over the share: first the local buffers (thinner buffers cost queries on flat
+    // data, where the global spacing is what the stars need, so only when needed),
+    // then smaller segments.
+    if (!local_buffers) {
+      local_buffers = true;
+      continue;
+    }
     const double shrink = std::clamp(plan.available / best.window_bytes, 0.5, 0.8);
     segment_points = std::max<std::uint64_t>(1000, std::uint64_t(double(segment_points) * shrink));
   }

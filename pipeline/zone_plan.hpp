@@ -63,14 +63,14 @@ ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads)
 // The segments of the labels from `first_label` on, cut into their zones, with
 // their windows measured rather than modelled: the model assumes points spread
 // evenly, and in clusters a window's buffers hold several times the points it
-// expects (clustered 10^6 points at --memory 64M peaked at 90.7 MB). So a segment's
-// buffers are as many spacings as the plan's but of its own points' spacing when
-// that is smaller (a slab through a dense cluster); and each zone's window is
-// counted from a sample of its segment's window labels: while the largest windows
-// (`threads` of them at once) and a segment's output take more than the plan's
-// share, the segments shrink, as long as that helps (a plan fixed by
-// --segment-points or --zones is kept). `window_bytes` is the measured need of the
-// plan returned.
+// expects (clustered 10^6 points at --memory 64M peaked at 90.7 MB). So each zone's
+// window is counted from a sample of its segment's window labels, and while the
+// largest windows (`threads` of them at once) and a segment's output take more than
+// the plan's share: first each segment's buffers become as many spacings as the
+// plan's but of its own points' (median) spacing when that is smaller (a slab
+// through a dense cluster); then the segments shrink, as long as that helps (a plan
+// fixed by --segment-points or --zones is kept). `window_bytes` is the measured need
+// of the plan returned.
 struct SegmentCut {
   std::vector<SegmentPlan> plans;
   double window_bytes = 0;
