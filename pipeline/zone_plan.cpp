@@ -149,6 +149,7 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
     SegmentCut cut;
     cut.plans = plan_segments(view, segment_points, plan.buffer_width, first_label);
     std::uint64_t largest_zone = 0, zones = 1;
+    std::vector<std::uint64_t> windows;  // each zone's, in the order the zones run
     for (SegmentPlan& p : cut.plans) {
       // The median leaf spacing of the segment's own labels: a slab through a dense
       // cluster then has buffers as many of its spacings thick as the plan's.
@@ -161,14 +162,25 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
         p.window_end = view.upper_bound(view.key(p.zone_end - 1) + local);
       }
       split_into_zones(view, p, plan.zones);
-      for (const ZoneStrip& st : p.zones) cut.largest_window = std::max(cut.largest_window, estimate_window(view, p, st));
+      for (const ZoneStrip& st : p.zones) {
+        windows.push_back(estimate_window(view, p, st));
+        cut.largest_window = std::max(cut.largest_window, windows.back());
+      }
       largest_zone = std::max<std::uint64_t>(largest_zone, (p.zone_end - p.zone_begin + p.zones.size() - 1) / p.zones.size());
       zones = std::max<std::uint64_t>(zones, p.zones.size());
       // The samples touch about every page of the segment's window: hand them back
       // now, or the whole mapped file would be resident before the first zone starts.
       release_mapped_pages(view.points + p.window_begin, (p.window_end - p.window_begin) * sizeof(SortedPoint));
     }
-    cut.window_bytes = t * double(cut.largest_window) * kWindowBytesPerPoint +
+    // The zones run in order, `threads` at a time: the windows in flight are about
+    // `threads` consecutive ones, and the largest such run is what the kernels hold.
+    const std::size_t run = std::min<std::size_t>(std::size_t(t), windows.size());
+    std::uint64_t in_flight = 0, sum = 0;
+    for (std::size_t i = 0; i < windows.size(); ++i) {
+      sum += windows[i] - (i >= run ? windows[i - run] : 0);
+      if (i + 1 >= run) in_flight = std::max(in_flight, sum);
+    }
+    cut.window_bytes = double(in_flight) * kWindowBytesPerPoint +
                        (double(zones) + t - 1) * double(largest_zone) * kOutputBytesPerPoint;
     // A smaller segment that saved less than a tenth is not worth its extra buffers:
     // the windows are then mostly buffers, which smaller segments do not cut.

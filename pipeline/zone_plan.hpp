@@ -65,8 +65,8 @@ ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads)
 // evenly, and in clusters a window's buffers hold several times the points it
 // expects (clustered 10^6 points at --memory 64M peaked at 90.7 MB). So each zone's
 // window is counted from a sample of its segment's window labels, and while the
-// largest windows (`threads` of them at once) and a segment's output take more than
-// the plan's share: first each segment's buffers become as many spacings as the
+// largest run of `threads` consecutive windows (the zones run in order, `threads` at
+// once) and a segment's output take more than the plan's share: first each segment's buffers become as many spacings as the
 // plan's but of its own points' (median) spacing when that is smaller (a slab
 // through a dense cluster); then the segments shrink, as long as that helps (a plan
 // fixed by --segment-points or --zones is kept). `window_bytes` is the measured need
