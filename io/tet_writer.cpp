@@ -23,7 +23,8 @@ std::array<std::uint8_t, kPreambleSize> preamble() {
   return b;
 }
 
-// The bytes every writer of `header` starts with: preamble, HEAD, PNTS's section header.
+}  // namespace
+
 std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
   const auto pre = preamble();
   const std::vector<std::uint8_t> head = serialize_head(h);
@@ -38,6 +39,8 @@ std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
   std::copy(ph.begin(), ph.end(), p + kSectionTrailerSize);
   return b;
 }
+
+namespace {
 
 void validate_options(const TetWriterOptions& o) {
   if (o.frame_tets == 0 || o.frame_tets > kMaxFrameTets) {

@@ -53,6 +53,11 @@ struct TetWriterOptions {
   const OutputClaim* claim = nullptr;
 };
 
+// The bytes a container of `header` (resolved: TetFileHeader::resolve_and_validate)
+// starts with: the preamble, HEAD, and the PNTS section's header; the points' payload
+// follows them.
+std::vector<std::uint8_t> leading_bytes(const TetFileHeader& header);
+
 class TetWriter {
  public:
   // Creates PATH.partial and writes the preamble and HEAD. The header's widths are
