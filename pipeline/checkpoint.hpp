@@ -83,5 +83,8 @@ void read_file_exactly(const std::string& path, void* data, std::size_t bytes, s
 // Whether PATH holds exactly `bytes` bytes with the CRC32C `crc` (read in full): how a
 // resumed job decides to trust a file that its checkpoint names.
 bool file_matches(const std::string& path, std::uint64_t bytes, std::uint32_t crc);
+// Whether bytes [offset, offset + bytes) of PATH are all there with the CRC32C `crc`
+// (the points section inside a partial output).
+bool region_matches(const std::string& path, std::uint64_t offset, std::uint64_t bytes, std::uint32_t crc);
 
 }  // namespace tetstream::pipeline

@@ -63,8 +63,8 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
     for (std::size_t z = 0; z < plans_[s].zones.size(); ++z) units_.push_back({s, z});
     // The samples touch about every page of the segment's labels: hand them back
     // now, or the whole mapped file would be resident before the first zone starts.
-    release_mapped_pages(view.points + plans_[s].zone_begin,
-                         (plans_[s].zone_end - plans_[s].zone_begin) * sizeof(SortedPoint));
+    release_mapped_pages(view.points.record(plans_[s].zone_begin),
+                         (plans_[s].zone_end - plans_[s].zone_begin) * view.points.record_bytes());
   }
   spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
                plans_.size(), plans_.empty() ? 0 : plans_[0].zone_end - plans_[0].zone_begin, units_.size(),

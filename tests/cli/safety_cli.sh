@@ -130,15 +130,23 @@ fresh_checkpoint sort-run:3
 flip "$ck/points-1.run.hull" 3
 resumes_to_reference "a flipped byte in a run's hull candidates"
 fresh_checkpoint write:4
-flip "$ck/sorted.points" 4242
-resumes_to_reference "a flipped byte in the sorted points"
+# The sorted points are the output's points section (no file of their own): damaged,
+# they are sorted again from the input, into the same place, to the same bytes.
+flip out4.tets.partial 5000
+resumes_to_reference "a flipped byte in the sorted points (the partial output's points section)"
 fresh_checkpoint write:4
 pending=$(ls "$ck"/pending-*.tets | head -1)
 flip "$pending" 100
 expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
 [ -e "$ck/state.json" ] || fail "a damaged checkpoint was removed"
 fresh_checkpoint write:4
-flip out4.tets.partial 5000  # inside the committed points
+committed=$(python3 -c "import json; print(json.load(open('$ck/state.json'))['output']['committed'])")
+# The last committed byte: the last frame's checksum, or the points' when no frame is
+# committed yet (20000 points make less than a frame).
+python3 -c "f = open('out4.tets.partial', 'r+b'); f.seek($committed - 1); b = f.read(1)[0]; f.seek(-1, 1); f.write(bytes([b ^ 0xff]))"
+expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
+fresh_checkpoint write:4
+flip out4.tets.partial 20  # in the header
 expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
 "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --force
 cmp -s out4.tets reference.tets || fail "--force after damage"

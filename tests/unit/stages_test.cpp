@@ -36,7 +36,11 @@ constexpr std::uint64_t kMiB = std::uint64_t(1) << 20;
 // array (4 labels a tet, positively oriented).
 std::vector<std::array<std::uint64_t, 4>> incore_tets(const SortedView& view) {
   std::vector<double> xyz;
-  for (std::uint64_t i = 0; i < view.count; ++i) xyz.insert(xyz.end(), view.points[i].xyz, view.points[i].xyz + 3);
+  for (std::uint64_t i = 0; i < view.count; ++i) {
+    double p[3];
+    view.points.xyz(i, p);
+    xyz.insert(xyz.end(), p, p + 3);
+  }
   core::Delaunay dt;
   std::vector<std::array<std::uint64_t, 4>> out;
   EXPECT_EQ(dt.build(xyz.data(), nullptr, std::size_t(view.count)), core::BuildStatus::kOk);
@@ -55,7 +59,11 @@ std::vector<Quad> sorted_quads(const std::vector<std::array<std::uint64_t, 4>>& 
 // vertices of its infinite tets.
 std::set<std::uint64_t> incore_hull_labels(const SortedView& view) {
   std::vector<double> xyz;
-  for (std::uint64_t i = 0; i < view.count; ++i) xyz.insert(xyz.end(), view.points[i].xyz, view.points[i].xyz + 3);
+  for (std::uint64_t i = 0; i < view.count; ++i) {
+    double p[3];
+    view.points.xyz(i, p);
+    xyz.insert(xyz.end(), p, p + 3);
+  }
   core::Delaunay dt;
   EXPECT_EQ(dt.build(xyz.data(), nullptr, std::size_t(view.count)), core::BuildStatus::kOk);
   std::set<std::uint64_t> hull;
@@ -127,19 +135,22 @@ TEST_F(StagesTest, SortStageWritesEveryPointInOrder) {
   EXPECT_EQ(sorted.count, kPoints);
   EXPECT_EQ(sorted.input_count, kPoints);
   EXPECT_GE(sorted.runs, 4u);
-  ASSERT_EQ(std::filesystem::file_size(sorted.path), kPoints * sizeof(SortedPoint));
-  std::vector<SortedPoint> records(kPoints);
-  std::ifstream(sorted.path, std::ios::binary).read(reinterpret_cast<char*>(records.data()), std::streamsize(kPoints * sizeof(SortedPoint)));
+  // float64 input below 2^32 points: the container's 28-byte record (format.md 3.4).
+  using Record = PointRecord<double, std::uint32_t>;
+  ASSERT_EQ(sorted.layout, (RecordLayout{false, false}));
+  ASSERT_EQ(std::filesystem::file_size(sorted.path), kPoints * sizeof(Record));
+  std::vector<Record> records(kPoints);
+  std::ifstream(sorted.path, std::ios::binary).read(reinterpret_cast<char*>(records.data()), std::streamsize(kPoints * sizeof(Record)));
   std::vector<bool> seen(kPoints, false);
   for (std::size_t i = 0; i < records.size(); ++i) {
     if (i > 0) {
-      EXPECT_TRUE(sorted_before(records[i - 1], records[i], sorted.axis)) << "label " << i;
+      EXPECT_TRUE(record_before(records[i - 1], records[i], sorted.axis)) << "label " << i;
     }
-    const std::uint64_t o = records[i].original;
+    const std::uint64_t o = records[i].original();
     ASSERT_LT(o, kPoints);
     EXPECT_FALSE(seen[o]) << "input point " << o << " twice";
     seen[o] = true;
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(records[i].xyz[k], xyz_[3 * o + std::size_t(k)]);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(records[i].coord(k), xyz_[3 * o + std::size_t(k)]);
   }
   EXPECT_TRUE(std::is_sorted(sorted.hull_labels.begin(), sorted.hull_labels.end()));
   EXPECT_TRUE(state_.empty()) << "a job without a checkpoint records nothing";
@@ -172,7 +183,7 @@ TEST_F(StagesTest, IndexStageFindsTheInCoreHull) {
   std::set<std::uint64_t> hull;
   for (const SortedPoint& p : view.hull_points) {
     hull.insert(p.original);  // the label, for the hull's points
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(p.xyz[k], view.points[p.original].xyz[k]);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(p.xyz[k], view.points.coord(p.original, k));
   }
   EXPECT_EQ(hull.size(), view.hull_points.size()) << "a hull point twice";
   EXPECT_EQ(hull, incore_hull_labels(view));

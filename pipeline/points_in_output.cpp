@@ -1,0 +1,84 @@
+#include "pipeline/points_in_output.hpp"
+
+#include "core/error.hpp"
+#include "io/output_file.hpp"
+#include "io/tet_writer.hpp"
+
+#include <cerrno>
+#include <cstring>
+#include <stdexcept>
+#include <unistd.h>
+
+namespace tetstream::pipeline {
+
+namespace {
+constexpr std::size_t kBufferBytes = std::size_t(8) << 20;
+
+std::vector<std::uint8_t> lead_for(const std::function<io::TetFileHeader(const SortedPoints&)>& header,
+                                   const SortedPoints& points) {
+  io::TetFileHeader h = header(points);
+  h.resolve_and_validate();
+  return io::leading_bytes(h);
+}
+}  // namespace
+
+OutputPointsSink::OutputPointsSink(int fd, std::string partial_path,
+                                   std::function<io::TetFileHeader(const SortedPoints&)> header,
+                                   const SortedPoints& before)
+    : fd_(fd), path_(std::move(partial_path)), header_(std::move(header)) {
+  SortedPoints guess = before;
+  guess.count = 1;  // a placeholder: N is a fixed-width field, the layout does not depend on it
+  guess.duplicates = 0;
+  offset_ = lead_for(header_, guess).size();
+  buffer_.reserve(kBufferBytes);
+}
+
+void OutputPointsSink::fail(const char* what) const { throw IoError(path_ + ": " + what + ": " + std::strerror(errno)); }
+
+void OutputPointsSink::write(const void* data, std::size_t bytes) {
+  crc_ = io::crc32c(data, bytes, crc_);
+  const char* p = static_cast<const char*>(data);
+  while (bytes > 0) {
+    const std::size_t n = std::min(bytes, kBufferBytes - buffer_.size());
+    buffer_.insert(buffer_.end(), p, p + n);
+    p += n, bytes -= n;
+    if (buffer_.size() == kBufferBytes) flush();
+  }
+}
+
+void OutputPointsSink::flush() {
+  const std::uint64_t at = offset_ + written_;
+  if (!io::pwrite_exactly(fd_, buffer_.data(), buffer_.size(), at)) fail("write failed");
+  written_ += buffer_.size();
+  buffer_.clear();
+}
+
+void OutputPointsSink::move_records(std::uint64_t from, std::uint64_t to) {
+  // From the end, so that no byte is overwritten before it is read (to > from).
+  std::vector<char> chunk(kBufferBytes);
+  for (std::uint64_t left = written_; left > 0;) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(chunk.size(), left));
+    left -= n;
+    if (!io::pread_exactly(fd_, chunk.data(), n, from + left)) fail("read back failed");
+    if (!io::pwrite_exactly(fd_, chunk.data(), n, to + left)) fail("write failed");
+  }
+}
+
+void OutputPointsSink::finish(SortedPoints& result, bool sync) {
+  flush();
+  const std::vector<std::uint8_t> lead = lead_for(header_, result);
+  // The header was laid out with no duplicates: the real count has at least as many digits.
+  if (lead.size() < offset_) throw std::logic_error("OutputPointsSink: the header shrank");
+  if (lead.size() > offset_) move_records(offset_, lead.size());
+  offset_ = lead.size();
+  std::uint8_t crc[4];
+  io::put_u32(crc, crc_);
+  if (!io::pwrite_exactly(fd_, lead.data(), lead.size(), 0) || !io::pwrite_exactly(fd_, crc, 4, offset_ + written_))
+    fail("write failed");
+  if (sync && ::fsync(fd_) != 0) fail("write failed");
+  result.path = path_;
+  result.offset = offset_;
+  result.crc32c = crc_;
+}
+
+}  // namespace tetstream::pipeline
