@@ -257,7 +257,6 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
 SortedPoints sort_points(const std::string& input, const io::PointReadOptions& read_options,
                          const PointSortOptions& options, const std::string& dir) {
   SortedPoints result;
-  std::vector<double> chunk(3 * kReadChunk);
   SortProgress fresh;
   SortProgress& done = options.resume ? *options.resume : fresh;
   const bool resumable = options.resume != nullptr;
@@ -274,6 +273,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
     source_options.type = io::ScalarType::kFloat64;
   }
   if (!done.scanned) {
+    std::vector<double> chunk(3 * kReadChunk);
     auto reader = io::open_points(input, read_options);
     std::unique_ptr<BinaryFile> spool_file;
     if (source != input) spool_file = std::make_unique<BinaryFile>(source, "wb");

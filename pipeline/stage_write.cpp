@@ -128,6 +128,8 @@ void WriteStage::prepare() {
   writer_options.claim = claim_;
   resumed_ = state.contains("output");
   points_in_output_ = sorted_.offset != 0;
+  // The sort checked (resumed) or wrote (new) the points section's bytes: their CRC.
+  if (points_in_output_) writer_options.points_crc = sorted_.crc32c;
   if (!resumed_ && !points_in_output_) {
     writer_ = std::make_unique<io::TetWriter>(options.output, header, writer_options);
     return;
