@@ -42,7 +42,9 @@ nlohmann::json fingerprint_file(const std::string& path);
 class Checkpoint {
  public:
   // 2: every file the state names carries its CRC32C; the directory has a marker.
-  static constexpr int kVersion = 2;
+  // 3: runs in the container's point records (28 or 16 bytes, not 32), the sorted
+  //    points in the partial output's points section, runs consumed by the merge.
+  static constexpr int kVersion = 3;
 
   explicit Checkpoint(std::string dir) : dir_(std::move(dir)) {}
   Checkpoint(const Checkpoint&) = delete;

@@ -12,7 +12,8 @@
 namespace tetstream::pipeline {
 
 namespace {
-constexpr std::size_t kBufferBytes = std::size_t(8) << 20;
+// As BinaryFile's stdio buffer, which the sort's memory share was measured with.
+constexpr std::size_t kBufferBytes = std::size_t(1) << 20;
 
 std::vector<std::uint8_t> lead_for(const std::function<io::TetFileHeader(const SortedPoints&)>& header,
                                    const SortedPoints& points) {
