@@ -97,6 +97,7 @@ struct PointSortOptions {
 struct SortedPoints {
   std::string path;  // the sorted file: `count` records of `layout` from byte `offset` on
   std::uint64_t offset = 0;  // 0 for a file of its own; the points section's payload in a container
+  std::uint64_t header_memory = 0;  // in a container: the budget its header names (pipeline/stage_sort.hpp)
   RecordLayout layout;
   std::uint64_t count = 0;        // distinct points
   std::uint64_t input_count = 0;  // points read

@@ -15,6 +15,25 @@ namespace {
 // As BinaryFile's stdio buffer, which the sort's memory share was measured with.
 constexpr std::size_t kBufferBytes = std::size_t(1) << 20;
 
+[[noreturn]] void fail(const std::string& path, const char* what) {
+  throw IoError(path + ": " + what + ": " + std::strerror(errno));
+}
+
+// Moves n bytes of the file from offset `from` to `to`, in place: from the end when
+// moving down the file, from the front when moving up, so no byte is overwritten
+// before it is read.
+void move_bytes(int fd, const std::string& path, std::uint64_t from, std::uint64_t to, std::uint64_t n) {
+  if (from == to) return;
+  std::vector<char> chunk(kBufferBytes);
+  for (std::uint64_t done = 0; done < n;) {
+    const std::size_t k = std::size_t(std::min<std::uint64_t>(chunk.size(), n - done));
+    const std::uint64_t at = to > from ? n - done - k : done;  // offset within the n bytes
+    if (!io::pread_exactly(fd, chunk.data(), k, from + at)) fail(path, "read back failed");
+    if (!io::pwrite_exactly(fd, chunk.data(), k, to + at)) fail(path, "write failed");
+    done += k;
+  }
+}
+
 std::vector<std::uint8_t> lead_for(const std::function<io::TetFileHeader(const SortedPoints&)>& header,
                                    const SortedPoints& points) {
   io::TetFileHeader h = header(points);
@@ -34,7 +53,6 @@ OutputPointsSink::OutputPointsSink(int fd, std::string partial_path,
   buffer_.reserve(kBufferBytes);
 }
 
-void OutputPointsSink::fail(const char* what) const { throw IoError(path_ + ": " + what + ": " + std::strerror(errno)); }
 
 void OutputPointsSink::write(const void* data, std::size_t bytes) {
   crc_ = io::crc32c(data, bytes, crc_);
@@ -49,20 +67,9 @@ void OutputPointsSink::write(const void* data, std::size_t bytes) {
 
 void OutputPointsSink::flush() {
   const std::uint64_t at = offset_ + written_;
-  if (!io::pwrite_exactly(fd_, buffer_.data(), buffer_.size(), at)) fail("write failed");
+  if (!io::pwrite_exactly(fd_, buffer_.data(), buffer_.size(), at)) fail(path_, "write failed");
   written_ += buffer_.size();
   buffer_.clear();
-}
-
-void OutputPointsSink::move_records(std::uint64_t from, std::uint64_t to) {
-  // From the end, so that no byte is overwritten before it is read (to > from).
-  std::vector<char> chunk(kBufferBytes);
-  for (std::uint64_t left = written_; left > 0;) {
-    const std::size_t n = std::size_t(std::min<std::uint64_t>(chunk.size(), left));
-    left -= n;
-    if (!io::pread_exactly(fd_, chunk.data(), n, from + left)) fail("read back failed");
-    if (!io::pwrite_exactly(fd_, chunk.data(), n, to + left)) fail("write failed");
-  }
 }
 
 void OutputPointsSink::finish(SortedPoints& result, bool sync) {
@@ -70,16 +77,27 @@ void OutputPointsSink::finish(SortedPoints& result, bool sync) {
   const std::vector<std::uint8_t> lead = lead_for(header_, result);
   // The header was laid out with no duplicates: the real count has at least as many digits.
   if (lead.size() < offset_) throw std::logic_error("OutputPointsSink: the header shrank");
-  if (lead.size() > offset_) move_records(offset_, lead.size());
+  move_bytes(fd_, path_, offset_, lead.size(), written_);
   offset_ = lead.size();
   std::uint8_t crc[4];
   io::put_u32(crc, crc_);
   if (!io::pwrite_exactly(fd_, lead.data(), lead.size(), 0) || !io::pwrite_exactly(fd_, crc, 4, offset_ + written_))
-    fail("write failed");
-  if (sync && ::fsync(fd_) != 0) fail("write failed");
+    fail(path_, "write failed");
+  if (sync && ::fsync(fd_) != 0) fail(path_, "write failed");
   result.path = path_;
   result.offset = offset_;
   result.crc32c = crc_;
+}
+
+void rewrite_points_header(int fd, SortedPoints& points, const io::TetFileHeader& header, bool sync) {
+  io::TetFileHeader h = header;
+  h.resolve_and_validate();
+  const std::vector<std::uint8_t> lead = io::leading_bytes(h);
+  // The records and the CRC after them.
+  move_bytes(fd, points.path, points.offset, lead.size(), points.count * points.layout.bytes() + io::kSectionTrailerSize);
+  if (!io::pwrite_exactly(fd, lead.data(), lead.size(), 0)) fail(points.path, "write failed");
+  if (sync && ::fsync(fd) != 0) fail(points.path, "write failed");
+  points.offset = lead.size();
 }
 
 }  // namespace tetstream::pipeline

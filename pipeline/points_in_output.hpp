@@ -26,6 +26,13 @@
 
 namespace tetstream::pipeline {
 
+// Rewrites the header of a points section already in the partial output (fd, path)
+// for `header` (same points: only its options text may differ, e.g. the budget a
+// resumed job writes the frames with), moving the records and their CRC when the
+// header's length changes, and sets points.offset. Before anything maps the points;
+// a crash midway leaves bytes that fail the recorded CRC, and the job sorts again.
+void rewrite_points_header(int fd, SortedPoints& points, const io::TetFileHeader& header, bool sync);
+
 class OutputPointsSink final : public SortedSink {
  public:
   // `header(points)`: the container's header for the sorted points as the merge
@@ -38,8 +45,6 @@ class OutputPointsSink final : public SortedSink {
 
  private:
   void flush();
-  void move_records(std::uint64_t from, std::uint64_t to);  // the payload, from offset `from` to `to` > from
-  [[noreturn]] void fail(const char* what) const;
 
   int fd_;
   std::string path_;

@@ -63,7 +63,7 @@ SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
 // `in_output`: the records are the points section of the partial output (the file
 // named by the job's output, not one in the checkpoint's directory).
 json to_json(const SortedPoints& s, bool in_output) {
-  return {{"file", in_output ? std::string() : base_name(s.path)}, {"in_output", in_output}, {"offset", s.offset},
+  return {{"file", in_output ? std::string() : base_name(s.path)}, {"in_output", in_output}, {"offset", s.offset}, {"header_memory", s.header_memory},
           {"count", s.count},       {"input_count", s.input_count},
           {"duplicates", s.duplicates}, {"axis", s.axis}, {"float32", s.layout.float32}, {"id64", s.layout.id64},        {"bbox_min", bbox_json(s.bbox_min)},
           {"bbox_max", bbox_json(s.bbox_max)}, {"runs", s.runs}, {"hull_count", s.hull_labels.size()},
@@ -77,6 +77,7 @@ std::optional<SortedPoints> sorted_from(const json& j, const Checkpoint& ckpt, c
   const bool in_output = j.at("in_output").get<bool>();
   s.path = in_output ? options.output + ".partial" : ckpt.path(j.at("file").get<std::string>());
   s.offset = j.at("offset").get<std::uint64_t>();
+  s.header_memory = j.at("header_memory").get<std::uint64_t>();
   s.count = j.at("count").get<std::uint64_t>();
   s.input_count = j.at("input_count").get<std::uint64_t>();
   s.duplicates = j.at("duplicates").get<std::uint64_t>();
@@ -110,6 +111,7 @@ void SortStage::prepare() {
     if (std::optional<SortedPoints> kept = sorted_from(state["sorted"], *context_.checkpoint, context_.options)) {
       sorted_ = std::move(*kept);
       done_ = true;
+      renew_header_budget();
       return;
     }
     // "sorted" stays in the state until the new file replaces it: a crash while
@@ -117,6 +119,24 @@ void SortStage::prepare() {
     expected_crc_ = state["sorted"].at("crc32c").get<std::uint32_t>();
   }
   if (context_.checkpoint && state.contains("sort")) progress_ = sort_progress_from(state["sort"], *context_.checkpoint);
+}
+
+// The output's header names the budget of the process that starts writing its frames
+// (WriteStage records it): the bytes of an uninterrupted run at that budget. The
+// points section, written by the sort, names the sorting process's; when a resumed
+// process with another --memory finds no frame started yet (a budget refused after
+// the sort, a kill before the first segment), the header is rewritten for its budget
+// before anything maps the points (the records move when its length changes).
+void SortStage::renew_header_budget() {
+  const RunOptions& options = context_.options;
+  json& state = context_.state;
+  if (sorted_.offset == 0 || !claim_ || state.contains("header_memory") || state.contains("output") ||
+      sorted_.header_memory == options.memory_bytes)
+    return;
+  sorted_.header_memory = options.memory_bytes;
+  rewrite_points_header(claim_->fd(), sorted_, container_header(options, options.memory_bytes, sorted_), true);
+  state["sorted"] = to_json(sorted_, true);
+  context_.save();
 }
 
 const SortedPoints& SortStage::run() {
@@ -130,10 +150,12 @@ const SortedPoints& SortStage::run() {
   // of this many points is refused now, not after the sort.
   sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, context_.options, threads_); };
   sort_options.progress = options.progress;
+  // The budget the header names: the writer's record when it started (a sort done
+  // again under committed frames), else this process's (see prepare).
+  const std::uint64_t memory = context_.state.value("header_memory", options.memory_bytes);
   if (claim_) {
     // The merge writes straight into the output's points section (no second copy).
-    sort_options.open_sink = [this](const SortedPoints& before) -> std::unique_ptr<SortedSink> {
-      const std::uint64_t memory = header_memory(context_.state, context_.options);
+    sort_options.open_sink = [this, memory](const SortedPoints& before) -> std::unique_ptr<SortedSink> {
       auto header = [&options = context_.options, memory](const SortedPoints& s) {
         return container_header(options, memory, s);
       };
@@ -151,6 +173,7 @@ const SortedPoints& SortStage::run() {
     const ScopedThreads threads(threads_);
     sorted_ = sort_points(options.input, options.read, sort_options, context_.dir);
   }
+  if (sorted_.offset != 0) sorted_.header_memory = memory;
   if (expected_crc_ && sorted_.crc32c != *expected_crc_)
     throw DamagedCheckpoint(sorted_.path + ": sorted again after a checksum failure, the points differ from the "
                             "checkpoint's (damaged checkpoint, or the input changed)");

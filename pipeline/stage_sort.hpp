@@ -44,6 +44,7 @@ class SortStage {
   const SortedPoints& result() const { return sorted_; }
 
  private:
+  void renew_header_budget();
   StageContext context_;
   MemoryBudget& budget_;
   const int threads_;
