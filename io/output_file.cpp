@@ -216,19 +216,25 @@ bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset) {
   return true;
 }
 
+bool pwrite_exactly(int fd, const void* data, std::size_t n, std::uint64_t offset) {
+  const char* p = static_cast<const char*>(data);
+  while (n > 0) {
+    const ssize_t w = ::pwrite(fd, p, n, off_t(offset));
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) {
+      if (w == 0) errno = EIO;
+      return false;
+    }
+    p += w, n -= std::size_t(w), offset += std::uint64_t(w);
+  }
+  return true;
+}
+
 void OutputFile::write_at(std::uint64_t offset, const void* data, std::size_t n) {
   if (stream_) throw std::logic_error("OutputFile: standard output cannot be rewritten");
   if (offset + n > this->offset()) throw std::logic_error("OutputFile::write_at past the end");
   flush();
-  const char* p = static_cast<const char*>(data);
-  while (n > 0) {
-    const ssize_t w = ::pwrite(fd_, p, n, off_t(offset));
-    if (w < 0) {
-      if (errno == EINTR) continue;
-      fail("write failed", partial_);
-    }
-    p += w, n -= std::size_t(w), offset += std::uint64_t(w);
-  }
+  if (!pwrite_exactly(fd_, data, n, offset)) fail("write failed", partial_);
 }
 
 void OutputFile::read_at(std::uint64_t offset, void* data, std::size_t n) const {

@@ -53,6 +53,9 @@ class OutputClaim {
 // Reads exactly n bytes at `offset` of fd (retrying short reads and EINTR). False,
 // with errno set (EIO at the end of the file), when it cannot.
 bool pread_exactly(int fd, void* data, std::size_t n, std::uint64_t offset);
+// Writes exactly n bytes at `offset` of fd (retrying short writes and EINTR). False,
+// with errno set, when it cannot.
+bool pwrite_exactly(int fd, const void* data, std::size_t n, std::uint64_t offset);
 
 class OutputFile {
  public:

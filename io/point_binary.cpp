@@ -112,6 +112,7 @@ class BinaryPointReader final : public PointReader {
     const Scalar t = layout_.type[0];
     same_type_ = layout_.type[1] == t && layout_.type[2] == t;
     if (same_type_) decode_ = swap_ ? pick_same<true>(t) : pick_same<false>(t);
+    float32_ = same_type_ && t == Scalar::kF32;
     // Packed native float64 xyz: read(2) straight into the caller's chunk.
     direct_ = same_type_ && t == Scalar::kF64 && !swap_ && layout_.stride == 24 &&
               layout_.offset[0] == 0 && layout_.offset[1] == 8 && layout_.offset[2] == 16;

@@ -19,8 +19,10 @@ class ConcatPointReader final : public PointReader {
     std::uint64_t total = 0;
     bool known = true;
     std::string formats;
+    float32_ = true;
     for (const auto& p : paths_) {
       const auto r = open_one_(p);  // checks the header; closed again at once
+      float32_ = float32_ && r->float32_input();
       if (!r->count()) known = false;
       else if (!checked_add(total, *r->count(), total)) throw InputError(p + ": the files hold more than 2^64 points");
       if (formats.find(r->format_name()) == std::string::npos) formats += (formats.empty() ? "" : "; ") + r->format_name();

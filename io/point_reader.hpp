@@ -63,6 +63,10 @@ class PointReader {
   std::optional<std::uint64_t> count() const { return count_; }
   // "raw f64 little-endian, stride 24", "ply binary_little_endian", "npy <f8", "text".
   const std::string& format_name() const { return format_name_; }
+  // Whether every coordinate comes from a float32 in the file (raw f32, PLY float,
+  // npy <f4; several files: all of them): the sorted points and the container keep
+  // them as float32, which hold them exactly.
+  bool float32_input() const { return float32_; }
   // The path, or "<stdin>".
   const std::string& source_name() const { return source_name_; }
   // Points returned so far.
@@ -89,6 +93,7 @@ class PointReader {
   std::optional<std::uint64_t> count_;
   std::string format_name_, source_name_;
   std::uint64_t points_read_ = 0;
+  bool float32_ = false;
 };
 
 // Opens `path` ("-" for stdin), then options.more_inputs after it, with the format from

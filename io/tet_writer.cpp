@@ -23,7 +23,8 @@ std::array<std::uint8_t, kPreambleSize> preamble() {
   return b;
 }
 
-// The bytes every writer of `header` starts with: preamble, HEAD, PNTS's section header.
+}  // namespace
+
 std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
   const auto pre = preamble();
   const std::vector<std::uint8_t> head = serialize_head(h);
@@ -38,6 +39,8 @@ std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
   std::copy(ph.begin(), ph.end(), p + kSectionTrailerSize);
   return b;
 }
+
+namespace {
 
 void validate_options(const TetWriterOptions& o) {
   if (o.frame_tets == 0 || o.frame_tets > kMaxFrameTets) {
@@ -93,7 +96,13 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
   w->points_ = w->header_.point_count;
   // The committed points are trusted only against their CRC: a flipped coordinate
   // would otherwise end in a container whose CRC was computed over other bytes.
-  {
+  if (options.points_crc) {
+    std::uint8_t stored[4];
+    f.read_at(pnts_at + kSectionHeaderSize + pnts_len, stored, 4);
+    if (*options.points_crc != get_u32(stored))
+      throw InputError::at_byte(partial, pnts_at + kSectionHeaderSize + pnts_len, "points: checksum mismatch");
+    w->points_crc_ = *options.points_crc;
+  } else {
     std::vector<std::uint8_t> chunk(std::size_t(1) << 20);
     std::uint32_t crc = 0;
     const std::uint64_t begin = pnts_at + kSectionHeaderSize;

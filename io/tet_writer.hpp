@@ -28,6 +28,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -51,7 +52,17 @@ struct TetWriterOptions {
   // The job's claim on the output (io/output_file.hpp), taken before its work began;
   // null: the writer claims the output itself.
   const OutputClaim* claim = nullptr;
+  // resume() only: the CRC32C of the points' payload, when the caller has just checked
+  // or written those bytes itself (a job whose sort merged the points into the partial
+  // file): the stored CRC is compared with it instead of reading the points again (a
+  // pass over 28 GB at 10^9 points).
+  std::optional<std::uint32_t> points_crc;
 };
+
+// The bytes a container of `header` (resolved: TetFileHeader::resolve_and_validate)
+// starts with: the preamble, HEAD, and the PNTS section's header; the points' payload
+// follows them.
+std::vector<std::uint8_t> leading_bytes(const TetFileHeader& header);
 
 class TetWriter {
  public:

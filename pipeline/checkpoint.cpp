@@ -1,5 +1,7 @@
 #include "pipeline/checkpoint.hpp"
 
+#include "io/output_file.hpp"
+
 #include "core/error.hpp"
 #include "io/tet_container.hpp"
 #include "pipeline/temp_files.hpp"
@@ -139,23 +141,28 @@ void read_file_exactly(const std::string& path, void* data, std::size_t bytes, s
 }
 
 bool file_matches(const std::string& path, std::uint64_t bytes, std::uint32_t crc) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && std::uint64_t(st.st_size) == bytes && region_matches(path, 0, bytes, crc);
+}
+
+bool region_matches(const std::string& path, std::uint64_t offset, std::uint64_t bytes, std::uint32_t crc) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
   if (fd < 0) return false;
   std::vector<char> buf(std::size_t(1) << 20);
-  std::uint64_t total = 0;
   std::uint32_t c = 0;
-  for (;;) {
-    const ssize_t n = ::read(fd, buf.data(), buf.size());
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
+  for (std::uint64_t done = 0; done < bytes;) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(buf.size(), bytes - done));
+    if (!io::pread_exactly(fd, buf.data(), n, offset + done)) {
       ::close(fd);
-      return n == 0 && total == bytes && c == crc;
+      return false;  // short: the region is not all there
     }
-    c = io::crc32c(buf.data(), std::size_t(n), c);
-    total += std::uint64_t(n);
+    c = io::crc32c(buf.data(), n, c);
+    done += n;
     // Hand the pages back: a resume checks files larger than memory.
-    if (total % (std::uint64_t(64) << 20) == 0) ::posix_fadvise(fd, 0, off_t(total), POSIX_FADV_DONTNEED);
+    if (done % (std::uint64_t(64) << 20) == 0) ::posix_fadvise(fd, 0, off_t(offset + done), POSIX_FADV_DONTNEED);
   }
+  ::close(fd);
+  return c == crc;
 }
 
 }  // namespace tetstream::pipeline

@@ -42,7 +42,9 @@ nlohmann::json fingerprint_file(const std::string& path);
 class Checkpoint {
  public:
   // 2: every file the state names carries its CRC32C; the directory has a marker.
-  static constexpr int kVersion = 2;
+  // 3: runs in the container's point records (28 or 16 bytes, not 32), the sorted
+  //    points in the partial output's points section, runs consumed by the merge.
+  static constexpr int kVersion = 3;
 
   explicit Checkpoint(std::string dir) : dir_(std::move(dir)) {}
   Checkpoint(const Checkpoint&) = delete;
@@ -83,5 +85,8 @@ void read_file_exactly(const std::string& path, void* data, std::size_t bytes, s
 // Whether PATH holds exactly `bytes` bytes with the CRC32C `crc` (read in full): how a
 // resumed job decides to trust a file that its checkpoint names.
 bool file_matches(const std::string& path, std::uint64_t bytes, std::uint32_t crc);
+// Whether bytes [offset, offset + bytes) of PATH are all there with the CRC32C `crc`
+// (the points section inside a partial output).
+bool region_matches(const std::string& path, std::uint64_t offset, std::uint64_t bytes, std::uint32_t crc);
 
 }  // namespace tetstream::pipeline

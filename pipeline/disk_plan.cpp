@@ -1,6 +1,7 @@
 #include "pipeline/disk_plan.hpp"
 
 #include "core/error.hpp"
+#include "pipeline/point_record.hpp"
 #include "pipeline/progress.hpp"
 
 #include <cerrno>
@@ -13,8 +14,8 @@ namespace tetstream::pipeline {
 
 namespace {
 
-constexpr std::uint64_t kRunBytes = 32, kSortedBytes = 32;
 constexpr std::uint64_t kTetBytesPerPoint = 4 * 7;
+constexpr std::uint64_t kMergeSlack = std::uint64_t(64) << 20;
 
 struct Filesystem {
   dev_t device;
@@ -31,18 +32,20 @@ Filesystem examine(const std::string& dir) {
 
 }  // namespace
 
-std::vector<DiskNeed> plan_disk(std::uint64_t points, const std::string& work_parent, const std::string& output_dir,
-                                bool output_to_stdout, bool checkpointed) {
-  const std::uint64_t record = 24 + (points <= (std::uint64_t(1) << 32) ? 4 : 8);
-  const std::uint64_t output = points * (record + kTetBytesPerPoint);
+std::vector<DiskNeed> plan_disk(std::uint64_t points, bool float32, const std::string& work_parent,
+                                const std::string& output_dir, bool output_to_stdout, bool checkpointed) {
+  const std::uint64_t record = RecordLayout::for_input(float32, points).bytes();
+  const std::uint64_t sorted = points * record;
+  const std::uint64_t merge = sorted + sorted / 64 + kMergeSlack;  // runs given back as the merge reads them
+  const std::uint64_t tets = points * kTetBytesPerPoint;
   const std::uint64_t pending =
       checkpointed ? 2 * 32 * std::min<std::uint64_t>(7 * points, (std::uint64_t(1) << 18) + 4096) + (1 << 20) : 0;
-  const std::uint64_t merge_peak = points * (kRunBytes + kSortedBytes), sorted = points * kSortedBytes + pending;
   const Filesystem work = examine(work_parent);
-  if (output_to_stdout) return {{work_parent, merge_peak, work.available}};
+  // Standard output: the sorted points are a work file, the output takes no disk.
+  if (output_to_stdout) return {{work_parent, merge, work.available}};
   const Filesystem out = examine(output_dir);
-  if (out.device == work.device) return {{work_parent, std::max(merge_peak, sorted + output), work.available}};
-  return {{work_parent, merge_peak, work.available}, {output_dir, output, out.available}};
+  if (out.device == work.device) return {{work_parent, std::max(merge, sorted + tets + pending), work.available}};
+  return {{work_parent, std::max(merge, pending), work.available}, {output_dir, sorted + tets, out.available}};
 }
 
 void check_disk(const std::vector<DiskNeed>& plan) {

@@ -3,18 +3,28 @@
 // disk that cannot hold the job is refused with the figures instead of filling up
 // hours in (docs/safety.md, "Budgets never cost you the work done").
 //
-// Bytes per input point, by file (a planning bound, not a measurement):
-//   work directory   the sort's runs, 32 (a SortedPoint each), and the sorted file, 32:
-//                    both exist at the merge; the runs go after it, the sorted file
-//                    stays to the end;
-//   output           the points section, 24 + 4 (float64 and a 32-bit original index
-//                    below 2^32 points, else + 8), and the tets at 4 bytes a tet and 7
-//                    tets a point (measured: 2.2-3.5 bytes a tet, 5.8-6.8 tets a point).
+// Bytes per input point, by file (a planning bound, not a measurement), with r the
+// record of the sorted points, the container's PNTS record (docs/format.md 3.4):
+// r = 12 (float32 input) or 24 (float64), + 4 for the original index (+ 8 past 2^32
+// points): 28 for float64 input, 16 for float32.
+//   the sort's runs  r, in the work directory; the merge gives their space back as it
+//                    reads them (holes punched), so runs and merged points together
+//                    stay near r, plus the punching's step (16 MiB a run) and the
+//                    blocks in flight: planned as r/64 + 64 MiB;
+//   the points       r, once: the merge writes them into the output's points section
+//                    (a file of the work directory, sorted.points, only when the output
+//                    is standard output);
+//   the tets         4 bytes a tet and 7 tets a point (measured: 1.5-3.5 bytes a tet,
+//                    5.8-6.8 tets a point): 28;
 //   a checkpoint     the frame being filled, twice (the old pending file goes after the
 //                    state that replaces it): 32 bytes a tet, at most a frame (2^18
 //                    tets and a group's overrun), and 1 MiB for the state and slack.
-// On one filesystem the peak is the larger of the merge (64) and the end (32 + output);
-// on two, each has its own.
+// On one filesystem the peak is r N + 28 N + the checkpoint (the end; the merge's
+// r N + r N / 64 + 64 MiB when larger): 56 bytes a point for float64, 44 for float32
+// (it was 32 + 28 + 28 = 88 for both before the points went into the output). On two,
+// the work directory needs the runs (r N + slack) and the checkpoint, the output's
+// r N + 28 N. Where the filesystem cannot punch holes (EOPNOTSUPP) the merge holds
+// 2 r N for a moment: not planned.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -30,8 +40,9 @@ struct DiskNeed {
 // One entry per filesystem the job writes to: the work directory's parent and the
 // output's directory (none for an output streamed to stdout). Throws IoError when a
 // directory cannot be examined.
-std::vector<DiskNeed> plan_disk(std::uint64_t points, const std::string& work_parent, const std::string& output_dir,
-                                bool output_to_stdout, bool checkpointed);
+// `float32`: the input's coordinates are float32 (PointReader::float32_input).
+std::vector<DiskNeed> plan_disk(std::uint64_t points, bool float32, const std::string& work_parent,
+                                const std::string& output_dir, bool output_to_stdout, bool checkpointed);
 // Throws IoError naming every filesystem that cannot hold its share:
 // "needs 41.2 GiB in /scratch, 38.0 GiB free; ...".
 void check_disk(const std::vector<DiskNeed>& plan);

@@ -57,6 +57,11 @@ struct ExternalSortOptions {
   // sorter (not after a merge, not in the destructor): a checkpoint may still name
   // them, so their owner removes them once it no longer does.
   bool keep_files = false;
+  // The merge gives each run's space back as it reads it (a hole punched every
+  // 16 MiB read, and at the run's end: BinaryFile::give_back_before), so the runs and
+  // the merged output together take about one copy of the data on disk, not two. The run files are
+  // then spent as the merge goes: a resumable caller must stop naming them first.
+  bool give_back_runs = false;
 };
 
 struct ExternalSortStats {
@@ -234,6 +239,8 @@ class ExternalSorter {
   ExternalSorter& operator=(const ExternalSorter&) = delete;
 
   void set_reducer(Reducer r) { reducer_ = std::move(r); }
+  // ExternalSortOptions::give_back_runs, decided once the runs are written.
+  void set_give_back_runs(bool give_back) { opt_.give_back_runs = give_back; }
   // Replaces the comparison sort of the runs (e.g. by a radix sort for integer keys);
   // it must order the records as `Less` does.
   using RunSort = std::function<void(T* first, std::size_t n)>;
@@ -340,10 +347,15 @@ class ExternalSorter {
     std::uint32_t crc = 0;  // of the file's bytes, when this sorter wrote it in one piece
   };
 
-  // Sequential reader of one run, a block at a time.
+  // Sequential reader of one run, a block at a time; with `give_back`, the run's
+  // bytes already read into the block are given back to the filesystem in steps.
   class Cursor {
    public:
-    Cursor(const std::string& path, std::size_t block) : file_(path, "rb"), block_(block) { refill(); }
+    static constexpr std::uint64_t kGiveBackBytes = std::uint64_t(16) << 20;
+    Cursor(const std::string& path, std::size_t block, bool give_back)
+        : file_(path, give_back ? "r+b" : "rb"), block_(block), give_back_(give_back) {  // punching needs write access
+      refill();
+    }
     bool done() const { return pos_ == end_; }
     const T& head() const { return block_[pos_]; }
     void pop() {
@@ -353,11 +365,21 @@ class ExternalSorter {
    private:
     void refill() {
       end_ = file_.read(block_.data(), sizeof(T), block_.size());
+      served_ += end_ * sizeof(T);
       pos_ = 0;
+      // The records read are in the block now: the file's copy of them is not needed
+      // any more. Given back in steps, and all of it at the end of the run.
+      const bool at_end = end_ < block_.size();
+      if (give_back_ && (at_end || served_ >= given_back_ + kGiveBackBytes)) {
+        file_.give_back_before(at_end ? served_ + 4095 : served_);
+        given_back_ = served_;
+      }
     }
     BinaryFile file_;
     std::vector<T> block_;
     std::size_t pos_ = 0, end_ = 0;
+    bool give_back_;
+    std::uint64_t served_ = 0, given_back_ = 0;  // bytes of the file read, and given back
   };
 
   std::string run_path(std::uint64_t id) const {
@@ -423,7 +445,8 @@ class ExternalSorter {
     // a block sized from it alone (a third of 8G for 1000 points) cost seconds of page
     // zeroing for nothing.
     for (const Run& r : runs)
-      cur.push_back(std::make_unique<Cursor>(r.path, std::clamp<std::size_t>(std::size_t(r.records), 1, block)));
+      cur.push_back(std::make_unique<Cursor>(r.path, std::clamp<std::size_t>(std::size_t(r.records), 1, block),
+                                             opt_.give_back_runs));
     detail::MergeHeap heap([&](std::size_t a, std::size_t b) { return less_(cur[a]->head(), cur[b]->head()); }, k);
     for (std::size_t i = 0; i < k; ++i)
       if (!cur[i]->done()) heap.push(i);

@@ -38,7 +38,7 @@
 //
 // Memory, by the layout: a 4-byte entry per point plus a 36-byte node per 16 points
 // (2^18-label blocks split into leaves of 32): about 6 bytes per point.
-#include "pipeline/point_sort.hpp"
+#include "pipeline/point_record.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -82,7 +82,7 @@ class PointIndex {
   // release_file_pages hands each block's pages back to the page cache once it is
   // indexed (one pass, bounded resident set); never set it for anonymous memory,
   // whose pages MADV_DONTNEED would zero.
-  void build(const SortedPoint* points, std::uint64_t count, int axis, std::uint32_t block_points,
+  void build(const PointRecords& points, std::uint64_t count, int axis, std::uint32_t block_points,
              bool release_file_pages = false);
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
@@ -106,8 +106,8 @@ class PointIndex {
     if (first >= last) return;
     // The labels [first, last) have axis coordinates in [axis_lo, axis_hi] (the file
     // is sorted): a node entirely outside that interval holds none of them.
-    const double axis_lo = keys ? keys->lo : points_[first].xyz[axis_];
-    const double axis_hi = keys ? keys->hi : points_[last - 1].xyz[axis_];
+    const double axis_lo = keys ? keys->lo : points_.coord(first, axis_);
+    const double axis_hi = keys ? keys->hi : points_.coord(last - 1, axis_);
     const std::uint64_t b0 = first / block_points_, b1 = (last - 1) / block_points_;
     // The choice between the scaled and the plain boxes is made once a block, not
     // once a node (see Block).
@@ -289,7 +289,11 @@ class PointIndex {
     std::uint32_t mask;  // slices - 1
     double lo[3], step[3], first_hi[3], pad[3];
   };
-  const SortedPoint* points_ = nullptr;
+  // Builds block b (its entries, fine cells and nodes) over typed records.
+  template <class R>
+  void build_block(const R* points, std::uint64_t b, std::uint64_t count, std::vector<Node>& nodes,
+                   double& block_scale_out, bool release_file_pages);
+  PointRecords points_;
   int axis_ = 0;
   std::uint32_t block_points_ = kMinBlockPoints;
   std::vector<std::uint32_t> entries_;  // per block: its points' entries, grouped by leaf

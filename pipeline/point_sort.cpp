@@ -33,12 +33,230 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 
 constexpr std::size_t kReadChunk = 1 << 16;  // points per read() call
 
+
+// A sorted run of SortedPoint converted, in place, into the file's records (never
+// larger: record i is written at or before where point i was read, after it was).
+template <class R>
+std::span<R> compact_in_place(std::vector<SortedPoint>& run) {
+  static_assert(sizeof(R) <= sizeof(SortedPoint));
+  std::byte* out = reinterpret_cast<std::byte*>(run.data());
+  for (std::size_t i = 0; i < run.size(); ++i) {
+    R r;
+    r.set(run[i].xyz, run[i].original);
+    std::memcpy(out + i * sizeof(R), &r, sizeof r);
+  }
+  return {reinterpret_cast<R*>(out), run.size()};
+}
+
+// The sort's state between pass 2 and the merge, for records R.
+template <class R>
+struct RecordSort {
+  struct Less {
+    int axis;
+    bool operator()(const R& a, const R& b) const { return record_before(a, b, axis); }
+  };
+  using Sorter = ExternalSorter<R, Less>;
+};
+
+// Pass 2: the input read again into runs, each sorted, its hull vertex candidates
+// found (their original indices into hull_originals), written in records R.
+template <class R>
+void write_runs(typename RecordSort<R>::Sorter& sorter, const std::string& source,
+                const io::PointReadOptions& source_options, const PointSortOptions& options, const std::string& dir,
+                const SortShares& shares, SortProgress& done, SortedPoints& result,
+                std::unordered_set<std::uint64_t>& hull_originals) {
+  const bool resumable = options.resume != nullptr;
+  const int axis = result.axis;
+  const auto before = [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); };
+  const std::size_t run_points = options.run_points ? options.run_points : shares.run_points;
+  const std::size_t hull_piece = shares.hull_piece_points;
+  const int hull_threads = shares.hull_threads;
+  // Runs an earlier process finished: adopted as they are, their points skipped below.
+  std::uint64_t skip = 0;
+  for (const SortRunFile& r : done.runs) {
+    sorter.adopt_run(r.path, r.records);
+    std::vector<std::uint64_t> hull(r.hull_count);
+    read_file_exactly(r.hull_path, hull.data(), hull.size() * sizeof(std::uint64_t), r.hull_crc32c);
+    hull_originals.insert(hull.begin(), hull.end());
+    skip += r.records;
+  }
+  result.runs = done.runs.size();
+  std::vector<SortedPoint> run;
+  run.reserve(std::min<std::uint64_t>(run_points, result.input_count - std::min(skip, result.input_count)));
+  std::vector<double> chunk(3 * kReadChunk);
+  auto reader = io::open_points(source, source_options);
+  Progress progress("sorting", "points", result.input_count, options.progress);
+  std::uint64_t next_original = 0;
+  std::vector<double> run_xyz;
+  std::vector<std::uint64_t> run_hull;
+  auto flush_run = [&] {
+    if (run.empty()) return;
+    parallel_sort(run.data(), run.data() + run.size(), before);
+    run_xyz.resize(3 * run.size());
+    for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
+    // Hull candidates piece by piece, so the kernels' memory stays a fraction of
+    // the budget even when most points are on the hull (a thin shell); the pieces
+    // are independent and run on all threads, their results joined in order.
+    run_hull.clear();
+    const std::size_t pieces = (run.size() + hull_piece - 1) / hull_piece;
+    std::vector<std::vector<std::uint32_t>> piece_hull(pieces);
+    std::exception_ptr failure;  // (out of memory) rethrown after the join, never out of the region
+#pragma omp parallel for schedule(dynamic, 1) num_threads(hull_threads)
+    for (std::size_t p = 0; p < pieces; ++p) {
+      const std::size_t first = p * hull_piece, n = std::min(hull_piece, run.size() - first);
+      try {
+        piece_hull[p] = hull_vertex_candidates(&run_xyz[3 * first], n);
+      } catch (...) {
+#pragma omp critical(tetstream_hull_failure)
+        if (!failure) failure = std::current_exception();
+      }
+    }
+    if (failure) std::rethrow_exception(failure);
+    for (std::size_t p = 0; p < pieces; ++p)
+      for (std::uint32_t i : piece_hull[p]) run_hull.push_back(run[p * hull_piece + i].original);
+    hull_originals.insert(run_hull.begin(), run_hull.end());
+    maybe_inject_fault("sort-run", result.runs);
+    sorter.push_sorted_run(compact_in_place<R>(run));
+    ++result.runs;
+    if (resumable) {
+      SortRunFile r;
+      r.path = sorter.last_run_path();
+      r.records = sorter.last_run_records();
+      r.hull_path = r.path + ".hull";
+      r.hull_count = run_hull.size();
+      r.crc32c = sorter.last_run_crc();
+      r.hull_crc32c = io::crc32c(run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
+      const std::string name = std::filesystem::path(r.hull_path).filename().string();
+      write_file_atomically(dir, name, run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
+      done.runs.push_back(r);
+      if (options.on_step) options.on_step(done);
+    }
+    run.clear();
+  };
+  while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
+    for (std::size_t i = 0; i < n; ++i) {
+      if (next_original < skip) {  // in a run an earlier process finished
+        ++next_original;
+        continue;
+      }
+      SortedPoint p;
+      std::memcpy(p.xyz, &chunk[3 * i], sizeof p.xyz);
+      p.original = next_original++;
+      run.push_back(p);
+      if (run.size() == run_points) flush_run();
+    }
+    progress.add(n);
+    check_interrupted();
+  }
+  flush_run();
+  progress.finish();
+  if (next_original != result.input_count)
+    throw InputError(reader->source_name() + ": changed while being read (" + std::to_string(result.input_count) +
+                     " points, then " + std::to_string(next_original) + ")");
+}
+
+// The merge: the runs into one sorted file of records R, exact duplicates dropped
+// (the first, the smallest original index, stays), the hull candidates' labels found.
+// The default sink: sorted.points, a file of the sort's own.
+class FileSink final : public SortedSink {
+ public:
+  explicit FileSink(std::string path) : path_(std::move(path)), out_(path_, "wb") {}
+  void write(const void* data, std::size_t bytes) override { out_.write(data, 1, bytes); }
+  void finish(SortedPoints& result, bool sync) override {
+    out_.close(sync);
+    result.path = path_;
+    result.offset = 0;
+    result.crc32c = out_.crc();
+  }
+
+ private:
+  std::string path_;
+  BinaryFile out_;
+};
+
+template <class R>
+void merge_runs_into(typename RecordSort<R>::Sorter& sorter, const std::unordered_set<std::uint64_t>& hull_originals,
+                     SortedSink& out, bool sync, bool progress_on, SortedPoints& result) {
+  std::vector<R> block;
+  block.reserve(std::size_t(1) << 15);
+  R last{};
+  bool have_last = false;
+  std::vector<std::uint64_t> hull_labels;
+  Progress progress("merging", "points", result.input_count, progress_on);
+  sorter.merge([&](std::span<const R> batch) {
+    check_interrupted();
+    for (const R& p : batch) {
+      const bool candidate = hull_originals.count(p.original()) != 0;
+      // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
+      if (have_last && p.coord(0) == last.coord(0) && p.coord(1) == last.coord(1) && p.coord(2) == last.coord(2)) {
+        ++result.duplicates;  // the first occurrence (smallest original index) stays
+        if (candidate) hull_labels.push_back(result.count - 1);
+        continue;
+      }
+      if (candidate) hull_labels.push_back(result.count);
+      block.push_back(p);
+      last = p;
+      have_last = true;
+      ++result.count;
+      if (block.size() == block.capacity()) {
+        out.write(block.data(), sizeof(R) * block.size());
+        block.clear();
+      }
+    }
+    // Counted as read from the runs, duplicates included: the total is the input count.
+    progress.add(batch.size());
+  });
+  out.write(block.data(), sizeof(R) * block.size());
+  progress.finish();
+  std::sort(hull_labels.begin(), hull_labels.end());
+  hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
+  result.hull_labels = std::move(hull_labels);
+  out.finish(result, sync);
+}
+
+// Pass 2 and the merge, in records R (the sort's shares taken from the ledger first).
+template <class R>
+void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& source_options,
+                         const PointSortOptions& options, const std::string& dir, SortProgress& done,
+                         SortedPoints& result) {
+  auto t0 = Clock::now();
+  // The sort's shares of the ledger (run buffer, hull pieces, merge), sized for this
+  // input's count: a small input takes little of a large budget.
+  std::optional<MemoryBudget> own_budget;
+  MemoryBudget* budget = options.budget;
+  if (!budget) budget = &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
+  budget->set_points(result.input_count);
+  const SortShares shares = budget->plan_sort();
+  ExternalSortOptions sorter_options;
+  sorter_options.memory_bytes = shares.merge_bytes;
+  sorter_options.dir = dir;
+  sorter_options.name = "points";
+  sorter_options.keep_files = options.resume != nullptr;
+  typename RecordSort<R>::Sorter sorter(sorter_options, typename RecordSort<R>::Less{result.axis});
+  std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
+  write_runs<R>(sorter, source, source_options, options, dir, shares, done, result, hull_originals);
+  result.seconds_runs = since(t0);
+
+  t0 = Clock::now();
+  // The merge punches holes in the runs behind its reads: from here on they are not
+  // runs a resumed job could adopt. The state says so before the first hole (a job
+  // resumed during the merge sorts its runs again from the input).
+  if (options.resume) {
+    for (const SortRunFile& r : done.runs) done.consumed.push_back(r.path), done.consumed.push_back(r.hull_path);
+    done.runs.clear();
+    if (options.on_step) options.on_step(done);
+  }
+  sorter.set_give_back_runs(true);
+  const std::unique_ptr<SortedSink> sink =
+      options.open_sink ? options.open_sink(result) : std::make_unique<FileSink>(dir + "/sorted.points");
+  merge_runs_into<R>(sorter, hull_originals, *sink, /*sync=*/options.resume != nullptr, options.progress, result);
+  result.seconds_merge = since(t0);
+}
 }  // namespace
 
 SortedPoints sort_points(const std::string& input, const io::PointReadOptions& read_options,
                          const PointSortOptions& options, const std::string& dir) {
   SortedPoints result;
-  std::vector<double> chunk(3 * kReadChunk);
   SortProgress fresh;
   SortProgress& done = options.resume ? *options.resume : fresh;
   const bool resumable = options.resume != nullptr;
@@ -55,6 +273,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
     source_options.type = io::ScalarType::kFloat64;
   }
   if (!done.scanned) {
+    std::vector<double> chunk(3 * kReadChunk);
     auto reader = io::open_points(input, read_options);
     std::unique_ptr<BinaryFile> spool_file;
     if (source != input) spool_file = std::make_unique<BinaryFile>(source, "wb");
@@ -81,6 +300,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
       extent[k] = hi[k] - lo[k];
     }
     done.input_count = count;
+    done.float32 = reader->float32_input();
     done.axis = int(std::max_element(extent, extent + 3) - extent);
     done.scanned = true;
     if (options.on_step) options.on_step(done);
@@ -90,158 +310,13 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   for (int k = 0; k < 3; ++k) result.bbox_min[k] = done.bbox_min[k], result.bbox_max[k] = done.bbox_max[k];
   result.seconds_scan = since(t0);
 
-  // ---- pass 2: sorted runs, each with its hull vertex candidates ----
-  t0 = Clock::now();
-  const int axis = result.axis;
-  const auto before = [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); };
   if (options.on_scanned) options.on_scanned(done);
-  // The sort's shares of the ledger (run buffer, hull pieces, merge), sized for this
-  // input's count: a small input takes little of a large budget.
-  std::optional<MemoryBudget> own_budget;
-  MemoryBudget* budget = options.budget;
-  if (!budget) budget = &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
-  budget->set_points(result.input_count);
-  const SortShares shares = budget->plan_sort();
-  const std::size_t run_points = options.run_points ? options.run_points : shares.run_points;
-  const std::size_t hull_piece = shares.hull_piece_points;
-  const int hull_threads = shares.hull_threads;
-  ExternalSortOptions sorter_options;
-  sorter_options.memory_bytes = shares.merge_bytes;
-  sorter_options.dir = dir;
-  sorter_options.name = "points";
-  sorter_options.keep_files = resumable;
-  ExternalSorter<SortedPoint, decltype(before)> sorter(sorter_options, before);
-  std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
-  // Runs an earlier process finished: adopted as they are, their points skipped below.
-  std::uint64_t skip = 0;
-  for (const SortRunFile& r : done.runs) {
-    sorter.adopt_run(r.path, r.records);
-    std::vector<std::uint64_t> hull(r.hull_count);
-    read_file_exactly(r.hull_path, hull.data(), hull.size() * sizeof(std::uint64_t), r.hull_crc32c);
-    hull_originals.insert(hull.begin(), hull.end());
-    skip += r.records;
-  }
-  result.runs = done.runs.size();
-  std::vector<SortedPoint> run;
-  run.reserve(std::min<std::uint64_t>(run_points, result.input_count - std::min(skip, result.input_count)));
-  {
-    auto reader = io::open_points(source, source_options);
-    Progress progress("sorting", "points", result.input_count, options.progress);
-    std::uint64_t next_original = 0;
-    std::vector<double> run_xyz;
-    std::vector<std::uint64_t> run_hull;
-    auto flush_run = [&] {
-      if (run.empty()) return;
-      parallel_sort(run.data(), run.data() + run.size(), before);
-      run_xyz.resize(3 * run.size());
-      for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
-      // Hull candidates piece by piece, so the kernels' memory stays a fraction of
-      // the budget even when most points are on the hull (a thin shell); the pieces
-      // are independent and run on all threads, their results joined in order.
-      run_hull.clear();
-      const std::size_t pieces = (run.size() + hull_piece - 1) / hull_piece;
-      std::vector<std::vector<std::uint32_t>> piece_hull(pieces);
-      std::exception_ptr failure;  // (out of memory) rethrown after the join, never out of the region
-#pragma omp parallel for schedule(dynamic, 1) num_threads(hull_threads)
-      for (std::size_t p = 0; p < pieces; ++p) {
-        const std::size_t first = p * hull_piece, n = std::min(hull_piece, run.size() - first);
-        try {
-          piece_hull[p] = hull_vertex_candidates(&run_xyz[3 * first], n);
-        } catch (...) {
-#pragma omp critical(tetstream_hull_failure)
-          if (!failure) failure = std::current_exception();
-        }
-      }
-      if (failure) std::rethrow_exception(failure);
-      for (std::size_t p = 0; p < pieces; ++p)
-        for (std::uint32_t i : piece_hull[p]) run_hull.push_back(run[p * hull_piece + i].original);
-      hull_originals.insert(run_hull.begin(), run_hull.end());
-      maybe_inject_fault("sort-run", result.runs);
-      sorter.push_sorted_run(std::span<SortedPoint>(run));
-      ++result.runs;
-      if (resumable) {
-        SortRunFile r;
-        r.path = sorter.last_run_path();
-        r.records = sorter.last_run_records();
-        r.hull_path = r.path + ".hull";
-        r.hull_count = run_hull.size();
-        r.crc32c = sorter.last_run_crc();
-        r.hull_crc32c = io::crc32c(run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
-        const std::string name = std::filesystem::path(r.hull_path).filename().string();
-        write_file_atomically(dir, name, run_hull.data(), run_hull.size() * sizeof(std::uint64_t));
-        done.runs.push_back(r);
-        if (options.on_step) options.on_step(done);
-      }
-      run.clear();
-    };
-    while (std::size_t n = reader->read(chunk.data(), kReadChunk)) {
-      for (std::size_t i = 0; i < n; ++i) {
-        if (next_original < skip) {  // in a run an earlier process finished
-          ++next_original;
-          continue;
-        }
-        SortedPoint p;
-        std::memcpy(p.xyz, &chunk[3 * i], sizeof p.xyz);
-        p.original = next_original++;
-        run.push_back(p);
-        if (run.size() == run_points) flush_run();
-      }
-      progress.add(n);
-      check_interrupted();
-    }
-    flush_run();
-    progress.finish();
-    if (next_original != result.input_count)
-      throw InputError(reader->source_name() + ": changed while being read (" + std::to_string(result.input_count) +
-                       " points, then " + std::to_string(next_original) + ")");
-  }
-  std::vector<SortedPoint>().swap(run);
-  result.seconds_runs = since(t0);
-
-  // ---- merge, dropping exact duplicates ----
-  t0 = Clock::now();
-  result.path = dir + "/sorted.points";
-  {
-    BinaryFile out(result.path, "wb");
-    std::vector<SortedPoint> block;
-    block.reserve(std::size_t(1) << 15);
-    SortedPoint last{};
-    bool have_last = false;
-    std::vector<std::uint64_t> hull_labels;
-    Progress progress("merging", "points", result.input_count, options.progress);
-    sorter.merge([&](std::span<const SortedPoint> batch) {
-      check_interrupted();
-      for (const SortedPoint& p : batch) {
-        const bool candidate = hull_originals.count(p.original) != 0;
-        // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
-        if (have_last && p.xyz[0] == last.xyz[0] && p.xyz[1] == last.xyz[1] && p.xyz[2] == last.xyz[2]) {
-          ++result.duplicates;  // the first occurrence (smallest original index) stays
-          if (candidate) hull_labels.push_back(result.count - 1);
-          continue;
-        }
-        if (candidate) hull_labels.push_back(result.count);
-        block.push_back(p);
-        last = p;
-        have_last = true;
-        ++result.count;
-        if (block.size() == block.capacity()) {
-          out.write(block.data(), sizeof(SortedPoint), block.size());
-          block.clear();
-        }
-      }
-      // Counted as read from the runs, duplicates included: the total is the input count.
-      progress.add(batch.size());
-    });
-    out.write(block.data(), sizeof(SortedPoint), block.size());
-    out.close(/*sync=*/resumable);
-    result.crc32c = out.crc();
-    progress.finish();
-    std::sort(hull_labels.begin(), hull_labels.end());
-    hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
-    result.hull_labels = std::move(hull_labels);
-  }
-  result.seconds_merge = since(t0);
+  result.layout = RecordLayout::for_input(done.float32, done.input_count);
+  with_record(result.layout, [&](auto r) {
+    sort_runs_and_merge<decltype(r)>(source, source_options, options, dir, done, result);
+  });
   return result;
 }
+
 
 }  // namespace tetstream::pipeline

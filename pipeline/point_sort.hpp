@@ -13,10 +13,12 @@
 // A point's label is its position in the sorted, duplicate-free file. The order is a
 // total order on distinct points, so the labels do not depend on the budget.
 #include "io/point_reader.hpp"
+#include "pipeline/point_record.hpp"
 #include "pipeline/temp_files.hpp"
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -30,6 +32,8 @@ struct SortedPoint {
   std::uint64_t original;
 };
 static_assert(sizeof(SortedPoint) == 32);
+// Points in memory as records: SortedPoint has the bytes of PointRecord<double, uint64>.
+inline PointRecords records_of(const SortedPoint* points) { return PointRecords(points, RecordLayout{false, true}); }
 
 // One finished run of pass 2 and its hull vertex candidates (original indices).
 struct SortRunFile {
@@ -47,7 +51,27 @@ struct SortProgress {
   std::uint64_t input_count = 0;
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
   int axis = 0;
-  std::vector<SortRunFile> runs;  // pass 2's finished runs, in order
+  bool float32 = false;  // every coordinate of the input is a float32 (PointReader::float32_input)
+  std::vector<SortRunFile> runs;  // pass 2's finished runs, in order, in compact records
+  // Files of runs the merge started to consume (it gives their space back as it
+  // reads: no longer runs to adopt); removed once the sort is committed.
+  std::vector<std::string> consumed;
+};
+
+struct SortedPoints;
+
+// Where the merge puts the sorted records. By default a file of its own in the sort's
+// directory (sorted.points); a job that writes its container to a regular file hands
+// the container's points section instead (pipeline/points_in_output.hpp), so the
+// points are on disk once.
+class SortedSink {
+ public:
+  virtual ~SortedSink() = default;
+  // The next records, `bytes` of them, in label order.
+  virtual void write(const void* data, std::size_t bytes) = 0;
+  // Every record is written and `result` is complete but for where the records are:
+  // sets its path, offset and crc32c (of the records' bytes); synced when `sync`.
+  virtual void finish(SortedPoints& result, bool sync) = 0;
 };
 
 struct PointSortOptions {
@@ -65,10 +89,16 @@ struct PointSortOptions {
   // (out) what this one did, and `on_step` sees it after pass 1 and after each run.
   SortProgress* resume = nullptr;
   std::function<void(const SortProgress&)> on_step;
+  // Opens where the merge writes, given what is known before it (the count, the
+  // layout, the bounding box, the axis); null: sorted.points in the sort's directory.
+  std::function<std::unique_ptr<SortedSink>(const SortedPoints&)> open_sink;
 };
 
 struct SortedPoints {
-  std::string path;  // the sorted file: `count` SortedPoint records
+  std::string path;  // the sorted file: `count` records of `layout` from byte `offset` on
+  std::uint64_t offset = 0;  // 0 for a file of its own; the points section's payload in a container
+  std::uint64_t header_memory = 0;  // in a container: the budget its header names (pipeline/stage_sort.hpp)
+  RecordLayout layout;
   std::uint64_t count = 0;        // distinct points
   std::uint64_t input_count = 0;  // points read
   std::uint64_t duplicates = 0;   // input_count - count
@@ -94,6 +124,16 @@ inline bool sorted_before(const SortedPoint& a, const SortedPoint& b, int axis) 
     if (a.xyz[c] != b.xyz[c]) return a.xyz[c] < b.xyz[c];
   }
   return a.original < b.original;
+}
+// The same order on the file's records (float32 coordinates compare as their doubles).
+template <class R>
+bool record_before(const R& a, const R& b, int axis) {
+  for (int k = 0; k < 3; ++k) {
+    const int c = (axis + k) % 3;
+    const double x = a.coord(c), y = b.coord(c);
+    if (x != y) return x < y;
+  }
+  return a.original() < b.original();
 }
 
 }  // namespace tetstream::pipeline

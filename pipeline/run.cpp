@@ -130,13 +130,16 @@ class Job {
 RunSummary Job::run() {
   RunSummary& summary = summary_;
   summary.resumed = state_.contains("sort") || state_.contains("sorted");
-  const StageContext context{options_, dir_, checkpoint_, state_};
+  // The job's files on disk, measured at each stage boundary and checkpoint.
+  DiskMeter disk(dir_, io::is_std_stream(options_.output) ? "" : options_.output + ".partial");
+  const StageContext context{options_, dir_, checkpoint_, state_, &disk};
 
   // ---- sort: the external sort, or what the checkpoint kept of it ----
-  SortStage sort(context, budget_, threads_);
+  SortStage sort(context, budget_, threads_, claim_);
   sort.prepare();
   const SortedPoints& sorted = sort.run();
   sort.commit();
+  disk.sample();
   summary.input_points = sorted.input_count;
   summary.points = sorted.count;
   summary.duplicates = sorted.duplicates;
@@ -154,7 +157,7 @@ RunSummary Job::run() {
 
   // The triangulation's shares of the ledger, from the indexes as built, with the
   // frames of the budget the output was started with.
-  budget_.set_frame_tets(MemoryBudget::frame_tets_for(WriteStage::header_memory(context)));
+  budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
   const TriangulatePlan plan = plan_triangulation(index, options_, budget_, threads_);
 
   // ---- write, started before the triangulation feeds it: the output, new or resumed ----
@@ -162,6 +165,7 @@ RunSummary Job::run() {
   WriteStage write(context, sorted, index.view(), plan.shares, claim_);
   write.prepare();
   write.run();
+  disk.sample();
 
   // ---- triangulate: the segments' zones, `threads` at a time, written in order ----
   TriangulateStage triangulate(options_, index, plan.zones, plan.shares.query_page_bytes, threads_);
@@ -169,7 +173,9 @@ RunSummary Job::run() {
   budget_.plan_triangulate(plan.shares.index_bytes, triangulate.window_bytes());  // the windows as measured
   triangulate.run(write);
   write.commit();
+  disk.sample();
   write.finish();
+  summary.disk_peak_bytes = std::max(disk.peak(), disk.sample());
 
   record_work(write.work(), summary);
   summary.segments_resumed = write.segments_resumed();
@@ -220,11 +226,12 @@ std::uint64_t physical_memory_bytes() {
 // with the figures when a filesystem cannot hold its share.
 std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_parent, bool checkpointed) {
   if (io::is_std_stream(o.input)) return 0;
-  const std::optional<std::uint64_t> points = io::open_points(o.input, o.read)->count();
+  const auto reader = io::open_points(o.input, o.read);
+  const std::optional<std::uint64_t> points = reader->count();
   if (!points) return 0;
   std::string out_dir = io::is_std_stream(o.output) ? "" : std::filesystem::path(o.output).parent_path().string();
   if (out_dir.empty()) out_dir = ".";
-  const std::vector<DiskNeed> plan = plan_disk(*points, work_parent, out_dir, io::is_std_stream(o.output), checkpointed);
+  const std::vector<DiskNeed> plan = plan_disk(*points, reader->float32_input(), work_parent, out_dir, io::is_std_stream(o.output), checkpointed);
   std::uint64_t need = 0;
   for (const DiskNeed& d : plan) {
     need += d.need;
@@ -277,7 +284,15 @@ RunSummary run_job(const RunOptions& requested) {
     remove_stale_temporary_dirs(work_parent(options));
     const std::uint64_t disk = plan_and_check_disk(options, work_parent(options), false);
     TempDir tmp(work_parent(options), "tetstream-run");
-    RunSummary summary = Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr).run();
+    RunSummary summary;
+    try {
+      summary = Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr).run();
+    } catch (...) {
+      // The sort may have written the points into the partial output before any
+      // writer owned it: a job without a checkpoint leaves nothing behind.
+      if (claim && claim->created()) remove_file(options.output + ".partial");
+      throw;
+    }
     summary.disk_planned_bytes = disk;
     return summary;
   }

@@ -70,6 +70,10 @@ struct RunSummary {
   double seconds_build = 0, seconds_check = 0;  // kernel builds and exactness checks, summed over segments
   std::uint64_t tets = 0, output_bytes = 0;
   std::uint64_t disk_planned_bytes = 0;  // pipeline/disk_plan.hpp; 0: not planned (unknown count, resumed)
+  // The largest disk use of the job's own files (its working directory and partial
+  // output), sampled at stage boundaries and checkpoints: pipeline/disk_meter.hpp.
+  // A resumed job's covers its own process only.
+  std::uint64_t disk_peak_bytes = 0;
   std::uint64_t tet_bytes = 0;  // of the tet frames alone (the file also holds the points)
   int axis = 0;
   bool resumed = false;                // continued an earlier process's checkpoint

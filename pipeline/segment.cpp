@@ -92,6 +92,12 @@ struct BestConflict {
   bool enough() const { return found >= kEnough; }
 };
 
+// One point read by a query: its record as copied from the file, and its coordinates.
+struct QueryScratch {
+  alignas(8) std::byte record[32];
+  double xyz[3];
+};
+
 }  // namespace
 
 // The state of one thread's zone triangulations. It lives across zones: the kernel
@@ -171,14 +177,16 @@ class SegmentWorker {
   // keeps the regions it maps within their share of the budget, or reads the points
   // without mapping them when they are few and far between (points in memory: read
   // directly).
-  const double* query_point(std::uint64_t label, SortedPoint& scratch) const {
-    if (!view_.query_regions) return view_.points[label].xyz;
-    view_.query_regions->read(view_.points + label, &scratch, sizeof(SortedPoint));
+  // (scratch: room for one record; the point is decoded into `xyz`.)
+  const double* query_point(std::uint64_t label, QueryScratch& scratch) const {
+    if (!view_.query_regions) {
+      view_.points.xyz(label, scratch.xyz);
+    } else {
+      view_.query_regions->read(view_.points.record(label), scratch.record, view_.points.record_bytes());
+      view_.points.decode(scratch.record, scratch.xyz);
+    }
     return scratch.xyz;
   }
-  // Whether the point with this label, inside the window's label range, is in the
-  // strip's window (always, without strips).
-  bool in_strip_window(std::uint64_t label) const { return in_strip_window(view_.points[label].xyz); }
   bool in_strip_window(const double* xyz) const {
     return strip_.axis < 0 || (xyz[strip_.axis] >= strip_.window_lo && xyz[strip_.axis] <= strip_.window_hi);
   }
@@ -290,21 +298,22 @@ void SegmentWorker::load_window(bool with_hull) {
   }
   xyz_.clear();
   labels_.clear();
-  auto add = [&](std::uint64_t label) {
-    const SortedPoint& p = view_.points[label];
-    xyz_.insert(xyz_.end(), p.xyz, p.xyz + 3);
-    labels_.push_back(label);
-  };
   // A strip reads its segment's whole window range to pick its points: the pages of
   // that range are handed back as the copy goes (two threads loading 50 MiB windows at
-  // once took the mapped pages past their share of the budget).
-  {
+  // once took the mapped pages past their share of the budget). One loop per record
+  // type: each point is converted to doubles once, here.
+  view_.points.visit([&](const auto* records) {
     ReleaseBehind release(view_.points, w0, view_.query_regions != nullptr);
     for (std::uint64_t label = w0; label < w1; ++label) {
-      if (in_strip_window(label)) add(label);
+      double p[3];
+      records[label].xyz(p);
+      if (in_strip_window(p)) {
+        xyz_.insert(xyz_.end(), p, p + 3);
+        labels_.push_back(label);
+      }
       release.reached(label);
     }
-  }
+  });
   for (std::size_t i : hull_extra) {
     xyz_.insert(xyz_.end(), view_.hull_points[i].xyz, view_.hull_points[i].xyz + 3);
     labels_.push_back(view_.hull_points[i].original);
@@ -332,7 +341,7 @@ std::uint64_t SegmentWorker::best_missing_conflict(MayMeet&& may_meet, Conflict&
                                                    bool outside_clear, bool strip_clear) {
   ++stats_.queries;
   BestConflict best;
-  SortedPoint scratch;
+  QueryScratch scratch;
   auto in_window_already = [&](std::uint64_t label) { return std::binary_search(extra_.begin(), extra_.end(), label); };
   auto offer = [&](std::uint64_t label, const double* xyz) {
     const double score = conflict(label, xyz);
@@ -699,7 +708,7 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
     // Append the repair points to the window and insert them.
     const std::size_t old_n = labels_.size();
-    SortedPoint scratch;
+    QueryScratch scratch;
     for (std::uint64_t label : repairs) {
       const double* p = query_point(label, scratch);
       xyz_.insert(xyz_.end(), p, p + 3);
@@ -862,7 +871,7 @@ void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones) {
   const std::uint64_t stride = std::max<std::uint64_t>(1, zone_points / 65536);
   std::vector<double> coords;
   coords.reserve(std::size_t(zone_points / stride + 1));
-  for (std::uint64_t l = plan.zone_begin; l < plan.zone_end; l += stride) coords.push_back(view.points[l].xyz[axis]);
+  for (std::uint64_t l = plan.zone_begin; l < plan.zone_end; l += stride) coords.push_back(view.points.coord(l, axis));
   std::sort(coords.begin(), coords.end());
   cut_strips(coords, plan, axis, zones);
 }

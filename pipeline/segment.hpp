@@ -20,6 +20,7 @@
 // star whose minimum label is that vertex is emitted: every tet exactly once overall.
 #include "core/delaunay.hpp"
 #include "pipeline/point_index.hpp"
+#include "pipeline/point_record.hpp"
 #include "pipeline/point_sort.hpp"
 #include "pipeline/temp_files.hpp"
 
@@ -34,7 +35,7 @@ namespace tetstream::pipeline {
 
 // The sorted, duplicate-free points, read-only, addressed by label.
 struct SortedView {
-  const SortedPoint* points = nullptr;
+  PointRecords points;  // the sorted file's records (pipeline/point_record.hpp)
   std::uint64_t count = 0;
   int axis = 0;
   double bbox_min[3], bbox_max[3];
@@ -60,7 +61,7 @@ struct SortedView {
   // hands the pages back as it goes (a sample every 4 KiB touches every page).
   void sample_keys(bool release_file_pages = false);
 
-  double key(std::uint64_t label) const { return points[label].xyz[axis]; }
+  double key(std::uint64_t label) const { return points.coord(label, axis); }
   // First label whose axis coordinate is >= x (count when none).
   std::uint64_t lower_bound(double x) const;
   // First label whose axis coordinate is > x.
@@ -81,7 +82,7 @@ struct SortedView {
 // when `enabled` is false (anonymous memory, which MADV_DONTNEED would zero).
 class ReleaseBehind {
  public:
-  ReleaseBehind(const SortedPoint* points, std::uint64_t first, bool enabled)
+  ReleaseBehind(const PointRecords& points, std::uint64_t first, bool enabled)
       : points_(points), released_(first), enabled_(enabled) {}
   ~ReleaseBehind() { release_to(reached_); }
   // The scan is at `label`: every chunk wholly below it is handed back.
@@ -93,10 +94,11 @@ class ReleaseBehind {
  private:
   static constexpr std::uint64_t kChunk = std::uint64_t(1) << 17;
   void release_to(std::uint64_t end) {
-    if (enabled_ && end > released_) release_mapped_pages(points_ + released_, (end - released_) * sizeof(SortedPoint));
+    if (enabled_ && end > released_)
+      release_mapped_pages(points_.record(released_), (end - released_) * points_.record_bytes());
     released_ = std::max(released_, end);
   }
-  const SortedPoint* points_;
+  PointRecords points_;
   std::uint64_t released_, reached_ = 0;
   bool enabled_;
 };

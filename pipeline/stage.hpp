@@ -18,6 +18,7 @@
 // other stage reads or writes them. A stage with nothing worth keeping across a crash
 // (the index, rebuilt from the sorted file in one pass) has no record and no commit.
 #include "pipeline/checkpoint.hpp"
+#include "pipeline/disk_meter.hpp"
 #include "pipeline/run.hpp"
 
 #include <nlohmann/json.hpp>
@@ -42,8 +43,10 @@ struct StageContext {
   std::string dir;           // the job's working files: the checkpoint's directory, or a TempDir
   Checkpoint* checkpoint;    // null: the job is not resumable
   nlohmann::json& state;     // what the checkpoint holds
+  DiskMeter* disk = nullptr;  // sampled at every save (pipeline/disk_meter.hpp)
   void save() const {
     if (checkpoint) checkpoint->save(state);
+    if (disk) disk->sample();
   }
 };
 

@@ -7,6 +7,7 @@
 // step; and "sorted", the sorted file and the hull's labels (the file hull.labels)
 // once the runs are merged, when "sort" and the run files go. A file that a record
 // names and that fails its checksum is made again, never trusted.
+#include "io/output_file.hpp"
 #include "pipeline/memory_budget.hpp"
 #include "pipeline/point_sort.hpp"
 #include "pipeline/stage.hpp"
@@ -21,8 +22,11 @@ class SortStage {
   // The sort takes its shares from `budget` once pass 1 has counted the points (the
   // run buffer, the hull pieces on `threads` threads, the merge's blocks), and sorts
   // its runs on `threads` threads.
-  SortStage(const StageContext& context, MemoryBudget& budget, int threads)
-      : context_(context), budget_(budget), threads_(threads) {}
+  // `claim`: the output, when it is a regular file (null for standard output): the
+  // merge then writes the sorted points into its points section
+  // (pipeline/points_in_output.hpp) instead of a file of the sort's own.
+  SortStage(const StageContext& context, MemoryBudget& budget, int threads, const io::OutputClaim* claim = nullptr)
+      : context_(context), budget_(budget), threads_(threads), claim_(claim) {}
 
   // Reads "sorted" (a finished sort whose files pass their checksums: run does
   // nothing) or "sort" (the steps to skip).
@@ -40,9 +44,11 @@ class SortStage {
   const SortedPoints& result() const { return sorted_; }
 
  private:
+  void renew_header_budget();
   StageContext context_;
   MemoryBudget& budget_;
   const int threads_;
+  const io::OutputClaim* claim_;
   bool done_ = false;                         // prepare found the sort recorded
   std::optional<std::uint32_t> expected_crc_;  // of a recorded sorted file that failed its checksum
   SortProgress progress_;                      // the steps done (in: an earlier process's; out: all)

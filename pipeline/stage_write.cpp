@@ -40,6 +40,28 @@ constexpr Counter kCounters[] = {
     {"tets", &SegmentStats::tets, &RunSummary::tets},
 };
 
+// The points section from the sorted file's records, in label order, in the header's
+// coord_type (the records' own: a float32 record goes out as the float it is), the
+// file's pages handed back behind.
+template <class R>
+void write_points(io::TetWriter& w, const SortedView& view, const R* records) {
+  using Coord = typename R::Coord;
+  constexpr std::size_t kChunk = 1 << 16;
+  std::vector<Coord> xyz(3 * kChunk);
+  std::vector<std::uint64_t> ids(kChunk);
+  for (std::uint64_t first = 0; first < view.count; first += kChunk) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(kChunk, view.count - first));
+    for (std::size_t i = 0; i < n; ++i) {
+      const R& p = records[first + i];
+      for (int k = 0; k < 3; ++k) xyz[3 * i + std::size_t(k)] = p.c[k];
+      ids[i] = p.original();
+    }
+    w.add_points(xyz.data(), ids.data(), n);
+    release_mapped_pages(records + first, n * sizeof(R));
+    check_interrupted();
+  }
+}
+
 }  // namespace
 
 json counters_json(const WrittenWork& work) {
@@ -67,31 +89,37 @@ void record_work(const WrittenWork& work, RunSummary& s) {
   s.seconds_segments = work.stats.seconds_build + work.stats.seconds_check;
 }
 
-std::uint64_t WriteStage::header_memory(const StageContext& context) {
-  return context.state.value("header_memory", context.options.memory_bytes);
+std::uint64_t header_memory(json& state, const RunOptions& options) {
+  if (!state.contains("header_memory")) state["header_memory"] = options.memory_bytes;
+  return state["header_memory"].get<std::uint64_t>();
+}
+
+io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memory, const SortedPoints& sorted) {
+  io::TetFileHeader header;
+  header.point_count = sorted.count;
+  header.input_count = sorted.input_count;
+  // The sorted records' precision: float32 input stays float32 (docs/format.md 3.4).
+  header.coord_type = sorted.layout.float32 ? io::CoordType::kFloat32 : io::CoordType::kFloat64;
+  for (int k = 0; k < 3; ++k) header.bbox_min[k] = sorted.bbox_min[k], header.bbox_max[k] = sorted.bbox_max[k];
+  header.tool = "tetstream 0.1.0";
+  header.options = json{{"command", "run"},
+                        {"input", options.input},
+                        {"memory", memory},
+                        {"buffer_spacings", options.buffer_spacings},
+                        {"axis", std::string(1, "xyz"[sorted.axis])},
+                        {"duplicates_merged", sorted.duplicates}}
+                       .dump();
+  return header;
 }
 
 void WriteStage::prepare() {
   const RunOptions& options = context_.options;
   json& state = context_.state;
-  const std::uint64_t header_memory = WriteStage::header_memory(context_);
-  state["header_memory"] = header_memory;
-  if (header_memory != options.memory_bytes)
+  const std::uint64_t memory = header_memory(state, options);
+  if (memory != options.memory_bytes)
     spdlog::info("resumed with --memory {}: the output keeps the budget it was started with, {}",
-                 human_bytes(double(options.memory_bytes)), human_bytes(double(header_memory)));
-  io::TetFileHeader header;
-  header.point_count = view_.count;
-  header.input_count = sorted_.input_count;
-  header.coord_type = io::CoordType::kFloat64;
-  for (int k = 0; k < 3; ++k) header.bbox_min[k] = view_.bbox_min[k], header.bbox_max[k] = view_.bbox_max[k];
-  header.tool = "tetstream 0.1.0";
-  header.options = json{{"command", "run"},
-                        {"input", options.input},
-                        {"memory", header_memory},
-                        {"buffer_spacings", options.buffer_spacings},
-                        {"axis", std::string(1, "xyz"[view_.axis])},
-                        {"duplicates_merged", sorted_.duplicates}}
-                       .dump();
+                 human_bytes(double(options.memory_bytes)), human_bytes(double(memory)));
+  const io::TetFileHeader header = container_header(options, memory, sorted_);
   io::TetWriterOptions writer_options;
   writer_options.threads = encoders_;  // the writer stage's own team
   // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
@@ -100,8 +128,22 @@ void WriteStage::prepare() {
   writer_options.keep_partial = context_.checkpoint != nullptr;
   writer_options.claim = claim_;
   resumed_ = state.contains("output");
-  if (!resumed_) {
+  points_in_output_ = sorted_.offset != 0;
+  // The sort checked (resumed) or wrote (new) the points section's bytes: their CRC.
+  if (points_in_output_) writer_options.points_crc = sorted_.crc32c;
+  if (!resumed_ && !points_in_output_) {
     writer_ = std::make_unique<io::TetWriter>(options.output, header, writer_options);
+    return;
+  }
+  if (!resumed_) {
+    // The merge wrote the points section into the partial output: the writer goes on
+    // after it (checking its bytes against the header and its checksum).
+    const std::uint64_t points_end = sorted_.offset + sorted_.count * sorted_.layout.bytes() + io::kSectionTrailerSize;
+    try {
+      writer_ = io::TetWriter::resume(options.output, header, points_end, writer_options);
+    } catch (const InputError& e) {
+      throw DamagedCheckpoint(std::string(e.what()) + " (the points section the sort wrote)");
+    }
     return;
   }
   const json& out = state["output"];
@@ -131,28 +173,15 @@ void WriteStage::prepare() {
 void WriteStage::run() {
   const std::size_t encoders = std::size_t(encoders_);
   async_.emplace(*writer_, encoders, encoders);
-  if (!resumed_) {
+  if (!resumed_ && !points_in_output_) {
     // The points section, in label order, on the writer's thread while the first
     // zones are triangulated (a pass over the whole sorted file, which used to hold
     // the first segment back).
     async_->add_task([&view = view_](io::TetWriter& w) {
-      constexpr std::size_t kChunk = 1 << 16;
-      std::vector<double> xyz(3 * kChunk);
-      std::vector<std::uint64_t> ids(kChunk);
-      for (std::uint64_t first = 0; first < view.count; first += kChunk) {
-        const std::size_t n = std::size_t(std::min<std::uint64_t>(kChunk, view.count - first));
-        for (std::size_t i = 0; i < n; ++i) {
-          const SortedPoint& p = view.points[first + i];
-          xyz[3 * i] = p.xyz[0], xyz[3 * i + 1] = p.xyz[1], xyz[3 * i + 2] = p.xyz[2];
-          ids[i] = p.original;
-        }
-        w.add_points(xyz.data(), ids.data(), n);
-        release_mapped_pages(view.points + first, n * sizeof(SortedPoint));
-        check_interrupted();
-      }
+      view.points.visit([&](const auto* records) { write_points(w, view, records); });
     });
   }
-  cutter_.emplace(*async_, MemoryBudget::frame_tets_for(header_memory(context_)));
+  cutter_.emplace(*async_, MemoryBudget::frame_tets_for(header_memory(context_.state, context_.options)));
   cutter_->restore(std::move(pending_));
   if (!resumed_) record(0, false);
 }
@@ -192,10 +221,11 @@ void WriteStage::record(std::uint64_t next_label, bool wait) {
                      {"segments", segments_done_},
                      {"counters", counters_json(work_)}};
   const std::string old_path = old_pending.empty() || old_pending == pending_file ? "" : checkpoint->path(old_pending);
-  auto persist = [checkpoint, old_path](json saved, std::uint64_t committed) {
+  auto persist = [checkpoint, old_path, disk = context_.disk](json saved, std::uint64_t committed) {
     saved["output"]["committed"] = committed;
     checkpoint->save(std::move(saved));
     if (!old_path.empty()) remove_file(old_path);
+    if (disk) disk->sample();
   };
   if (wait) {
     state["output"]["committed"] = async_->checkpoint();  // drains first

@@ -41,6 +41,13 @@ WrittenWork counters_from(const nlohmann::json& j);
 // The summary's counters of the segments' work.
 void record_work(const WrittenWork& w, RunSummary& s);
 
+// The budget the output's header names: the first process's, recorded in the state
+// ("header_memory") by whichever stage asks first; a resumed job may run with another.
+std::uint64_t header_memory(nlohmann::json& state, const RunOptions& options);
+// The container's header for the sorted points (the sort's merge writes it first when
+// the points go straight into the output: pipeline/points_in_output.hpp).
+io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memory, const SortedPoints& sorted);
+
 class WriteStage final : public SegmentSink {
  public:
   // `shares`: the writer's compression threads and its file buffer, its memory share
@@ -55,9 +62,6 @@ class WriteStage final : public SegmentSink {
         file_buffer_bytes_(shares.file_buffer_bytes),
         claim_(claim) {}
 
-  // The budget the output's header names: the one its first process wrote it with (a
-  // resumed job may run with another, and the frames depend on this one only).
-  static std::uint64_t header_memory(const StageContext& context);
 
   // Opens the output: a new container, or the checkpoint's partial output reopened at
   // its last commit with the frame that was being filled and the counters
@@ -102,6 +106,7 @@ class WriteStage final : public SegmentSink {
   const std::size_t file_buffer_bytes_;
   const io::OutputClaim* claim_;
   bool resumed_ = false;  // the state held an "output" record
+  bool points_in_output_ = false;  // the sort merged the points into the partial output
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
   WrittenWork work_;
   std::vector<std::uint64_t> pending_;  // the resumed frame, until the cutter takes it

@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <vector>
 #include <fcntl.h>
+#include <linux/falloc.h>
 #include <sys/mman.h>
 #include <unistd.h>
 
@@ -152,6 +153,20 @@ std::size_t BinaryFile::read(void* data, std::size_t size, std::size_t count) {
   const std::size_t n = std::fread(data, size, count, f_);
   if (n < count && std::ferror(f_)) throw IoError(path_ + ": read failed: " + errno_text());
   return n;
+}
+
+void BinaryFile::give_back_before(std::uint64_t offset) {
+  offset &= ~std::uint64_t(4095);  // whole pages: a partial one would only be zeroed
+  if (!f_ || !can_punch_ || offset <= given_back_) return;
+  if (::fallocate(fileno(f_), FALLOC_FL_PUNCH_HOLE | FALLOC_FL_KEEP_SIZE, off_t(given_back_),
+                  off_t(offset - given_back_)) != 0) {
+    if (errno == EOPNOTSUPP || errno == ENOSYS) {
+      can_punch_ = false;
+      return;
+    }
+    throw IoError(path_ + ": cannot give back the read part: " + errno_text());
+  }
+  given_back_ = offset;
 }
 
 void BinaryFile::close(bool sync) {

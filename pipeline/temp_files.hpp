@@ -139,11 +139,19 @@ class BinaryFile {
   // CRC32C (io::crc32c) of every byte written so far: a checkpoint records it, and a
   // resumed job checks the file against it before trusting it.
   std::uint32_t crc() const { return crc_; }
+  // Gives the file's blocks before `offset` back to the filesystem (a hole punched,
+  // the size kept: fallocate PUNCH_HOLE | KEEP_SIZE), for a file read once front to
+  // back whose read part is no longer needed. Silently nothing where the filesystem
+  // cannot punch (EOPNOTSUPP: the space then comes back when the file is removed).
+  // Throws IoError on any other failure.
+  void give_back_before(std::uint64_t offset);
 
  private:
   std::string path_;
   std::FILE* f_ = nullptr;
   std::uint32_t crc_ = 0;
+  std::uint64_t given_back_ = 0;  // bytes [0, given_back_) are a hole
+  bool can_punch_ = true;
 };
 
 }  // namespace tetstream::pipeline

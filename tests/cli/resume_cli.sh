@@ -139,7 +139,8 @@ for fault in sort-run:1 segment:17 write:23; do
 done
 # A real write failure: a file-size limit (ulimit -f, in 1 KiB blocks) that the
 # output reaches while the tets are written.
-# The limit lies between the sorted file (32 bytes per point) and the finished output.
+# The limit lies between the points section (28 bytes per point, written by the
+# merge into the partial output) and the finished output.
 limit=$(( ($(stat -c %s reference.tets) - 200000) / 1024 ))
 [ $((limit * 1024)) -gt $((100000 * 32 + 100000)) ] || fail "test setup: the limit would stop the sort"
 set +e; msg=$(ulimit -f $limit; "$T" "${opts[@]}" 2>&1); rc=$?; set -e

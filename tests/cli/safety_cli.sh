@@ -130,15 +130,23 @@ fresh_checkpoint sort-run:3
 flip "$ck/points-1.run.hull" 3
 resumes_to_reference "a flipped byte in a run's hull candidates"
 fresh_checkpoint write:4
-flip "$ck/sorted.points" 4242
-resumes_to_reference "a flipped byte in the sorted points"
+# The sorted points are the output's points section (no file of their own): damaged,
+# they are sorted again from the input, into the same place, to the same bytes.
+flip out4.tets.partial 5000
+resumes_to_reference "a flipped byte in the sorted points (the partial output's points section)"
 fresh_checkpoint write:4
 pending=$(ls "$ck"/pending-*.tets | head -1)
 flip "$pending" 100
 expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
 [ -e "$ck/state.json" ] || fail "a damaged checkpoint was removed"
 fresh_checkpoint write:4
-flip out4.tets.partial 5000  # inside the committed points
+committed=$(python3 -c "import json; print(json.load(open('$ck/state.json'))['output']['committed'])")
+# The last committed byte: the last frame's checksum, or the points' when no frame is
+# committed yet (20000 points make less than a frame).
+python3 -c "f = open('out4.tets.partial', 'r+b'); f.seek($committed - 1); b = f.read(1)[0]; f.seek(-1, 1); f.write(bytes([b ^ 0xff]))"
+expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
+fresh_checkpoint write:4
+flip out4.tets.partial 20  # in the header
 expect 1 "damaged checkpoint" "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --resume
 "$T" "${base[@]}" --sort-run-points 5000 pts.f64 -o out4.tets --force
 cmp -s out4.tets reference.tets || fail "--force after damage"
@@ -199,10 +207,13 @@ fi
 if want 7; then
 "$T" -q gen --dist uniform --n 200000 --seed 7 -o b.f64
 # Far too small: refused after the first pass (count and box), before the sort writes
-# anything, naming a budget; nothing is left behind.
-expect 2 "use --memory [0-9]*M or more (refused before the sort)" "$T" -q run b.f64 -o b.tets --memory 32M
+# anything, naming a budget; nothing is left behind. (4 million points at 32M: 200,000
+# now nearly fit in 32M, and are refused after the sort, needing 34M.)
+"$T" -q gen --dist uniform --n 4000000 --seed 7 -o toomany.f64
+expect 2 "use --memory [0-9]*M or more (refused before the sort)" "$T" -q run toomany.f64 -o b.tets --memory 32M
 [ ! -e b.tets.ckpt ] && [ ! -e b.tets.partial ] || fail "a refusal before the sort left files"
 grep -q -- "--resume" err.txt && fail "a refusal before the sort advises a --resume"
+rm toomany.f64
 # Too small only for this input's real windows (thick buffers): refused after the
 # sort, whose work is kept for a --resume with the budget named.
 expect 2 "use --memory [0-9]*M or more" "$T" -q run b.f64 -o b.tets --memory 80M --buffer 20

@@ -230,6 +230,10 @@ def test_run_from_file_and_options(tmp_path):
     pts.tofile(src)
     s = tetstream.run(src, tmp_path / "a.tets", memory="128M", progress=False, checkpoint=False)
     assert s["points"] == 5000 and s["segments"] >= 1
+    # float32 input keeps its precision in the container (coord_type 1), exactly.
+    with tetstream.open(tmp_path / "a.tets") as f:
+        assert f.header["coord_type"] == "float32"
+        assert (f.points[np.argsort(f.original_ids)] == pts.astype(np.float64)).all()
     np.save(tmp_path / "in.npy", pts.astype(np.float64))
     s2 = tetstream.run(str(tmp_path / "in.npy"), str(tmp_path / "b.tets"), memory=256 << 20, progress=False,
                        format="npy")

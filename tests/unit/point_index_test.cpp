@@ -42,7 +42,7 @@ TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
         for (SortedPoint& q : p)
           for (double& x : q.xyz) x += offset;
         PointIndex index;
-        index.build(p.data(), p.size(), axis, block);
+        index.build(records_of(p.data()), p.size(), axis, block);
         std::mt19937_64 rng(block);
         std::uniform_real_distribution<double> u(-1.2, 1.2);
         std::uniform_int_distribution<std::uint64_t> label(0, p.size());
@@ -97,7 +97,7 @@ TEST(SortedView, SampledSearchMatchesBinarySearch) {
     for (const std::size_t n : {std::size_t(1), std::size_t(127), std::size_t(128), std::size_t(129), std::size_t(5000)}) {
       const std::vector<SortedPoint> p = sorted_points(n, 0, coarse, unsigned(n));
       SortedView view;
-      view.points = p.data();
+      view.points = records_of(p.data());
       view.count = p.size();
       view.axis = 0;
       std::vector<double> keys;

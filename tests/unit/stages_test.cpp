@@ -3,6 +3,7 @@
 // the index stage's hull is the in-core kernel's, the triangulation's tets are the
 // in-core kernel's, and the write stage's container holds the tets it was handed.
 #include "core/delaunay.hpp"
+#include "io/output_file.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/memory_budget.hpp"
@@ -21,6 +22,8 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -36,7 +39,11 @@ constexpr std::uint64_t kMiB = std::uint64_t(1) << 20;
 // array (4 labels a tet, positively oriented).
 std::vector<std::array<std::uint64_t, 4>> incore_tets(const SortedView& view) {
   std::vector<double> xyz;
-  for (std::uint64_t i = 0; i < view.count; ++i) xyz.insert(xyz.end(), view.points[i].xyz, view.points[i].xyz + 3);
+  for (std::uint64_t i = 0; i < view.count; ++i) {
+    double p[3];
+    view.points.xyz(i, p);
+    xyz.insert(xyz.end(), p, p + 3);
+  }
   core::Delaunay dt;
   std::vector<std::array<std::uint64_t, 4>> out;
   EXPECT_EQ(dt.build(xyz.data(), nullptr, std::size_t(view.count)), core::BuildStatus::kOk);
@@ -55,7 +62,11 @@ std::vector<Quad> sorted_quads(const std::vector<std::array<std::uint64_t, 4>>& 
 // vertices of its infinite tets.
 std::set<std::uint64_t> incore_hull_labels(const SortedView& view) {
   std::vector<double> xyz;
-  for (std::uint64_t i = 0; i < view.count; ++i) xyz.insert(xyz.end(), view.points[i].xyz, view.points[i].xyz + 3);
+  for (std::uint64_t i = 0; i < view.count; ++i) {
+    double p[3];
+    view.points.xyz(i, p);
+    xyz.insert(xyz.end(), p, p + 3);
+  }
   core::Delaunay dt;
   EXPECT_EQ(dt.build(xyz.data(), nullptr, std::size_t(view.count)), core::BuildStatus::kOk);
   std::set<std::uint64_t> hull;
@@ -108,9 +119,10 @@ class StagesTest : public testing_util::ScratchDirTest {
     return StageContext{options_, checkpoint ? checkpoint->dir() : dir_.string(), checkpoint, state_};
   }
   // Stage 1 run alone, as the job runs it.
-  SortedPoints sort(Checkpoint* checkpoint = nullptr) {
+  // With `claim`, the merge writes the points into the output's points section.
+  SortedPoints sort(Checkpoint* checkpoint = nullptr, const io::OutputClaim* claim = nullptr) {
     MemoryBudget budget(options_.memory_bytes, 0, 1, 1);
-    SortStage stage(context(checkpoint), budget, 1);
+    SortStage stage(context(checkpoint), budget, 1, claim);
     stage.prepare();
     SortedPoints sorted = stage.run();
     stage.commit();
@@ -127,19 +139,22 @@ TEST_F(StagesTest, SortStageWritesEveryPointInOrder) {
   EXPECT_EQ(sorted.count, kPoints);
   EXPECT_EQ(sorted.input_count, kPoints);
   EXPECT_GE(sorted.runs, 4u);
-  ASSERT_EQ(std::filesystem::file_size(sorted.path), kPoints * sizeof(SortedPoint));
-  std::vector<SortedPoint> records(kPoints);
-  std::ifstream(sorted.path, std::ios::binary).read(reinterpret_cast<char*>(records.data()), std::streamsize(kPoints * sizeof(SortedPoint)));
+  // float64 input below 2^32 points: the container's 28-byte record (format.md 3.4).
+  using Record = PointRecord<double, std::uint32_t>;
+  ASSERT_EQ(sorted.layout, (RecordLayout{false, false}));
+  ASSERT_EQ(std::filesystem::file_size(sorted.path), kPoints * sizeof(Record));
+  std::vector<Record> records(kPoints);
+  std::ifstream(sorted.path, std::ios::binary).read(reinterpret_cast<char*>(records.data()), std::streamsize(kPoints * sizeof(Record)));
   std::vector<bool> seen(kPoints, false);
   for (std::size_t i = 0; i < records.size(); ++i) {
     if (i > 0) {
-      EXPECT_TRUE(sorted_before(records[i - 1], records[i], sorted.axis)) << "label " << i;
+      EXPECT_TRUE(record_before(records[i - 1], records[i], sorted.axis)) << "label " << i;
     }
-    const std::uint64_t o = records[i].original;
+    const std::uint64_t o = records[i].original();
     ASSERT_LT(o, kPoints);
     EXPECT_FALSE(seen[o]) << "input point " << o << " twice";
     seen[o] = true;
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(records[i].xyz[k], xyz_[3 * o + std::size_t(k)]);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(records[i].coord(k), xyz_[3 * o + std::size_t(k)]);
   }
   EXPECT_TRUE(std::is_sorted(sorted.hull_labels.begin(), sorted.hull_labels.end()));
   EXPECT_TRUE(state_.empty()) << "a job without a checkpoint records nothing";
@@ -172,7 +187,7 @@ TEST_F(StagesTest, IndexStageFindsTheInCoreHull) {
   std::set<std::uint64_t> hull;
   for (const SortedPoint& p : view.hull_points) {
     hull.insert(p.original);  // the label, for the hull's points
-    for (int k = 0; k < 3; ++k) EXPECT_EQ(p.xyz[k], view.points[p.original].xyz[k]);
+    for (int k = 0; k < 3; ++k) EXPECT_EQ(p.xyz[k], view.points.coord(p.original, k));
   }
   EXPECT_EQ(hull.size(), view.hull_points.size()) << "a hull point twice";
   EXPECT_EQ(hull, incore_hull_labels(view));
@@ -204,42 +219,56 @@ TEST_F(StagesTest, TriangulateStageEqualsTheInCoreKernel) {
 
 // The write stage fed the in-core kernel's tets as two segments (grouped by minimum
 // label, as zones emit them): the container holds the points and exactly those tets.
+// Its points come from the sorted file, or (a claimed output) the sort merged them
+// into the output's points section itself: the same bytes either way.
 TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
-  const SortedPoints sorted = sort();
-  IndexStage index(sorted, 1);
-  index.prepare();
-  index.run();
-  std::vector<std::array<std::uint64_t, 4>> tets = incore_tets(index.view());
-  auto min_label = [](const std::array<std::uint64_t, 4>& t) { return *std::min_element(t.begin(), t.end()); };
-  std::stable_sort(tets.begin(), tets.end(), [&](const auto& a, const auto& b) { return min_label(a) < min_label(b); });
-  const std::uint64_t split = kPoints / 2;
-  ZoneTets parts[2];
-  for (ZoneTets& part : parts)
-    for (std::uint64_t i = 0; i < kPoints; ++i) part.labels.push_back(i);  // local id = label
-  for (const auto& t : tets)
-    for (std::uint64_t v : t) parts[min_label(t) < split ? 0 : 1].tets.push_back(std::uint32_t(v));
-  {
-    TriangulateShares shares;
-    shares.encoders = 1;
-    shares.file_buffer_bytes = std::size_t(1) << 16;
-    WriteStage stage(context(), sorted, index.view(), shares, nullptr);
-    stage.prepare();
-    EXPECT_EQ(stage.first_label(), 0u);
-    stage.run();
-    SegmentStats work;
-    work.tets = parts[0].size();
-    stage.add_segment({parts[0]}, work, split, split);
-    work.tets = parts[1].size();
-    stage.add_segment({parts[1]}, work, kPoints - split, kPoints);
-    stage.commit();
-    stage.finish();
-    EXPECT_EQ(stage.segments_done(), 2u);
-    EXPECT_EQ(stage.work().stats.tets, tets.size());
-    EXPECT_EQ(stage.bytes_written(), std::filesystem::file_size(options_.output));
+  std::string bytes[2];
+  for (const bool in_output : {false, true}) {
+    SCOPED_TRACE(in_output ? "points merged into the output" : "points from the sorted file");
+    std::optional<io::OutputClaim> claim;
+    if (in_output) claim.emplace(options_.output);
+    const SortedPoints sorted = sort(nullptr, claim ? &*claim : nullptr);
+    EXPECT_EQ(sorted.offset != 0, in_output);
+    if (in_output) EXPECT_EQ(sorted.path, options_.output + ".partial");
+    IndexStage index(sorted, 1);
+    index.prepare();
+    index.run();
+    std::vector<std::array<std::uint64_t, 4>> tets = incore_tets(index.view());
+    auto min_label = [](const std::array<std::uint64_t, 4>& t) { return *std::min_element(t.begin(), t.end()); };
+    std::stable_sort(tets.begin(), tets.end(), [&](const auto& a, const auto& b) { return min_label(a) < min_label(b); });
+    const std::uint64_t split = kPoints / 2;
+    ZoneTets parts[2];
+    for (ZoneTets& part : parts)
+      for (std::uint64_t i = 0; i < kPoints; ++i) part.labels.push_back(i);  // local id = label
+    for (const auto& t : tets)
+      for (std::uint64_t v : t) parts[min_label(t) < split ? 0 : 1].tets.push_back(std::uint32_t(v));
+    {
+      TriangulateShares shares;
+      shares.encoders = 1;
+      shares.file_buffer_bytes = std::size_t(1) << 16;
+      WriteStage stage(context(), sorted, index.view(), shares, claim ? &*claim : nullptr);
+      stage.prepare();
+      EXPECT_EQ(stage.first_label(), 0u);
+      stage.run();
+      SegmentStats work;
+      work.tets = parts[0].size();
+      stage.add_segment({parts[0]}, work, split, split);
+      work.tets = parts[1].size();
+      stage.add_segment({parts[1]}, work, kPoints - split, kPoints);
+      stage.commit();
+      stage.finish();
+      EXPECT_EQ(stage.segments_done(), 2u);
+      EXPECT_EQ(stage.work().stats.tets, tets.size());
+      EXPECT_EQ(stage.bytes_written(), std::filesystem::file_size(options_.output));
+    }
+    const io::TetReader reader(options_.output);
+    EXPECT_EQ(reader.point_count(), kPoints);
+    EXPECT_EQ(testing_util::container_quads(options_.output), sorted_quads(tets));
+    std::ifstream in(options_.output, std::ios::binary);
+    bytes[in_output] = std::string(std::istreambuf_iterator<char>(in), {});
+    std::filesystem::remove(options_.output);
   }
-  const io::TetReader reader(options_.output);
-  EXPECT_EQ(reader.point_count(), kPoints);
-  EXPECT_EQ(testing_util::container_quads(options_.output), sorted_quads(tets));
+  EXPECT_TRUE(bytes[0] == bytes[1]) << "the points merged into the output gave other bytes";
 }
 
 }  // namespace

@@ -27,7 +27,7 @@ struct ClusteredSegment {
       points.push_back(SortedPoint{{4 * unit(rng), y, 0.1 * unit(rng)}, i});
     }
     std::sort(points.begin(), points.end(), [](const SortedPoint& a, const SortedPoint& b) { return a.xyz[0] < b.xyz[0]; });
-    view.points = points.data();
+    view.points = records_of(points.data());
     view.count = n;
     view.axis = 0;
     for (int k = 0; k < 3; ++k) view.bbox_min[k] = 0;
