@@ -129,7 +129,7 @@ ZonePlan plan_for_budget(const PlanInputs& in, const RunOptions& o, int threads)
 
 namespace {
 
-// Points in zone `z`'s window (its strip's window within the segment's window
+// Points in a zone's window (its strip's window within the segment's window
 // labels), estimated from every stride-th label of the segment's window.
 std::uint64_t estimate_window(const SortedView& view, const SegmentPlan& p, const ZoneStrip& st) {
   const std::uint64_t n = p.window_end - p.window_begin;
