@@ -134,8 +134,9 @@ FieldSummary compute_fields(const FieldOptions& options) {
     if (!std::has_single_bit(options.ring_labels)) throw UsageError("field: ring_labels must be a power of two");
     max_labels = options.ring_labels;
   }
-  if (options.neighbours && n > (std::uint64_t(1) << 32))
-    throw UsageError("field: --neighbours handles up to 2^32 points");  // edges packed in 64 bits
+  // Edges and entries are packed in 64 bits: labels and original indices below 2^32.
+  if (options.neighbours && std::max(n, h.input_count) > (std::uint64_t(1) << 32))
+    throw UsageError("field: --neighbours handles up to 2^32 points");
   const BatchPlan plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
   summary.batches = plan.batches.size();
   summary.window_labels = plan.window_labels;

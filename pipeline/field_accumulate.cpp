@@ -1,7 +1,6 @@
 #include "pipeline/field_accumulate.hpp"
 
 #include "core/error.hpp"
-#include "core/huge_pages.hpp"
 #include "core/page_array.hpp"
 #include "pipeline/external_sort.hpp"
 #include "pipeline/field_geometry.hpp"
@@ -19,19 +18,6 @@
 
 namespace tetstream::pipeline {
 namespace {
-
-// Room for n elements in a vector that only grows, on huge pages (advised before the
-// new block is touched): the batch's scratch is hundreds of MiB, and with 4 KiB pages
-// its first touches were a fifth of the time in page faults.
-template <class T>
-void reserve_huge(std::vector<T>& v, std::size_t n) {
-  if (v.capacity() >= n) return;
-  std::vector<T> w;
-  w.reserve(n + n / 4);
-  core::advise_huge_pages(w.data(), w.capacity() * sizeof(T));
-  w.assign(v.begin(), v.end());
-  v.swap(w);
-}
 
 struct Accum {
   double volume = 0.0, voronoi = 0.0, angle = 0.0;
@@ -195,18 +181,18 @@ class Accumulator {
       kept += block_short_[k];
     }
     stats_.batch_edge_keys += kept + long_.size();
-    reserve_huge(radix_tmp_, kept);
     radix_sort(edges_.data(), kept, radix_tmp_, abits + dbits, [](std::uint64_t x) { return x; });
     const std::size_t short_edges = std::size_t(std::unique(edges_.data(), edges_.data() + kept) - edges_.data());
     stats_.batch_edges += short_edges + long_.size();
 
     // Pending entries (labels >= retired_ == lo) stay in front; the new ones follow.
-    const std::size_t pending = directed_.size();
+    // An entry is label << 32 | other (labels and originals are below 2^32, checked by
+    // the caller): 8 bytes instead of 16, half the radix sort's traffic.
+    const std::size_t pending = directed_size_;
     std::uint64_t reach = top;
-    for (std::size_t i = 0; i < pending; ++i) reach = std::max(reach, directed_[i].label - lo);
-    reserve_huge(directed_, pending + 2 * (short_edges + long_.size()));
-    directed_.resize(pending + 2 * (short_edges + long_.size()));
-    reserve_huge(directed_tmp_, directed_.size());
+    for (std::size_t i = 0; i < pending; ++i) reach = std::max(reach, (directed_[i] >> 32) - lo);
+    directed_size_ = pending + 2 * (short_edges + long_.size());
+    directed_.reserve(directed_size_);  // grows only; never zeroed (every entry is written first)
     const std::int64_t ne = std::int64_t(short_edges + long_.size());
 #pragma omp parallel for schedule(dynamic, 16384)
     for (std::int64_t i = 0; i < ne; ++i) {
@@ -218,11 +204,11 @@ class Accumulator {
         const std::uint64_t e = long_[std::size_t(i) - short_edges];
         a = lo + (e >> 32), c = lo + (e & 0xffffffffu);
       }
-      directed_[pending + 2 * std::size_t(i)] = {a, points_.original(c)};
-      directed_[pending + 2 * std::size_t(i) + 1] = {c, points_.original(a)};
+      directed_[pending + 2 * std::size_t(i)] = a << 32 | points_.original(c);
+      directed_[pending + 2 * std::size_t(i) + 1] = c << 32 | points_.original(a);
     }
-    radix_sort(directed_.data(), directed_.size(), directed_tmp_, std::bit_width(reach),
-               [lo](const Directed& d) { return d.label - lo; });
+    radix_sort(directed_.data(), directed_size_, directed_tmp_, std::bit_width(reach),
+               [lo](std::uint64_t d) { return (d >> 32) - lo; });
 
     // The rows of the labels retired after this batch: [retired_, below).
     const std::uint64_t below = b.retire_below;
@@ -231,10 +217,9 @@ class Accumulator {
     std::size_t cut = 0;
     for (std::size_t l = 0; l < labels; ++l) {
       row_start_[l] = cut;
-      while (cut < directed_.size() && directed_[cut].label == retired_ + l) ++cut;
+      while (cut < directed_size_ && directed_[cut] >> 32 == retired_ + l) ++cut;
     }
     row_start_[labels] = cut;
-    reserve_huge(row_others_, cut);
     row_others_.resize(cut);
     row_length_.resize(labels);
     const std::int64_t nl = std::int64_t(labels);
@@ -242,14 +227,15 @@ class Accumulator {
     for (std::int64_t l = 0; l < nl; ++l) {
       const std::size_t s = row_start_[std::size_t(l)], e = row_start_[std::size_t(l) + 1];
       std::uint64_t* o = row_others_.data() + s;
-      for (std::size_t i = s; i < e; ++i) o[i - s] = directed_[i].other;
+      for (std::size_t i = s; i < e; ++i) o[i - s] = directed_[i] & 0xffffffffu;
       std::sort(o, o + (e - s));
       row_length_[std::size_t(l)] = std::size_t(std::unique(o, o + (e - s)) - o);
     }
     for (std::size_t l = 0; l < labels; ++l)
       sinks_.row(points_.original(retired_ + l),
                  std::span<const std::uint64_t>(row_others_.data() + row_start_[l], row_length_[l]));
-    directed_.erase(directed_.begin(), directed_.begin() + std::ptrdiff_t(cut));
+    std::copy(directed_.data() + cut, directed_.data() + directed_size_, directed_.data());
+    directed_size_ -= cut;
   }
 
   void retire(std::uint64_t below) {
@@ -288,10 +274,11 @@ class Accumulator {
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;
   std::vector<std::uint64_t> seen_;            // the threads' tables of emitted edges
   std::vector<std::size_t> block_short_, block_long_;
-  struct Directed {
-    std::uint64_t label, other;  // other: the neighbour's original index
-  };
-  std::vector<Directed> directed_, directed_tmp_;  // entries of labels not retired yet, then the batch's
+  // Entries (label << 32 | the neighbour's original index) of the labels not retired
+  // yet, then the batch's: [0, directed_size_).
+  core::PageArray<std::uint64_t> directed_;
+  std::size_t directed_size_ = 0;
+  std::vector<std::uint64_t> directed_tmp_;
   std::vector<std::size_t> row_start_, row_length_;
   std::vector<std::uint64_t> row_others_;
   std::uint64_t retired_ = 0;

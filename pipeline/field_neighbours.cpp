@@ -1,7 +1,6 @@
 #include "pipeline/field_neighbours.hpp"
 
 #include "core/error.hpp"
-#include "core/huge_pages.hpp"
 #include "io/npy.hpp"
 #include "io/output_file.hpp"
 
@@ -153,10 +152,7 @@ void NeighbourRows::add(std::uint64_t original, std::span<const std::uint64_t> n
   const std::uint64_t row = 2 + neighbours.size();
   if (!buf.empty() && buf.size() + row > words_per_bucket_) spill(b);
   // Reserved once: a doubling vector would hold one and a half buffers while it grows.
-  if (buf.capacity() == 0) {
-    buf.reserve(std::size_t(words_per_bucket_));
-    core::advise_huge_pages(buf.data(), buf.capacity() * sizeof(std::uint64_t));  // before any page is touched
-  }
+  if (buf.capacity() == 0) buf.reserve(std::size_t(words_per_bucket_));
   buf.push_back(original);
   buf.push_back(neighbours.size());
   buf.insert(buf.end(), neighbours.begin(), neighbours.end());
