@@ -270,7 +270,7 @@ class Accumulator {
   core::PageArray<std::uint64_t> edges_;  // the batch's packed edges (its capacity: 6 a tet)
   std::vector<std::uint64_t> radix_tmp_, long_;
   static constexpr std::size_t kBlock = 4096;  // tets a block of the edge packing
-  static constexpr int kSeenBits = 14;         // 4096 entries, 32 KiB a thread: in L1
+  static constexpr int kSeenBits = 14;         // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;
   std::vector<std::uint64_t> seen_;            // the threads' tables of emitted edges
   std::vector<std::size_t> block_short_, block_long_;
