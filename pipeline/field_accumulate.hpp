@@ -35,6 +35,13 @@ struct FinalPoint {
 
 struct AccumulateSinks {
   bool voronoi = true;  // compute the Voronoi sums (FinalPoint::voronoi is 0 otherwise)
+  // false (only with `row`): no solid angles; the hull flag comes from the rows instead,
+  // combinatorially. A point's link (the triangles opposite it in its T tets, on its d
+  // neighbours) is a triangulated sphere when the point is interior, so T = 2 d - 4
+  // (Euler: d - 3T/2 + T = 2), and a disk with b >= 3 boundary edges when it is on the
+  // hull, so T = 2 d - 2 - b < 2 d - 4. Exact, where the angle sum is exact in practice;
+  // `--neighbours` alone then computes only the volumes (for `hull_volume`).
+  bool angles = true;
   std::function<void(const FinalPoint&)> point;
   // Set to collect neighbours: called once per point, in label order, when it retires,
   // with its original index and its Delaunay neighbours' original indices (increasing,
@@ -45,6 +52,7 @@ struct AccumulateSinks {
 struct AccumulateStats {
   std::uint64_t tets = 0, batches = 0;
   std::uint64_t batch_edges = 0;        // unique edges per batch, summed (copies across batches included)
+  std::uint64_t batch_edge_keys = 0;    // edges sorted (before the unique): what the repeat filter left
   std::uint64_t peak_far = 0;           // most far labels held (field_points.hpp)
 };
 

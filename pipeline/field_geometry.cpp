@@ -63,6 +63,12 @@ constexpr int face_without(int i, int j, int k) { return 6 - i - j - k; }
 
 }  // namespace
 
+double tet_volume(const double* const p[4]) {
+  V3 v[4];
+  for (int i = 1; i < 4; ++i) v[i] = {p[i][0] - p[0][0], p[i][1] - p[0][1], p[i][2] - p[0][2]};
+  return det3(v[1], v[2], v[3]) / 6.0;
+}
+
 TetContribution tet_contribution(const double* const p[4], bool voronoi) {
   // Everything relative to vertex 0, so the arithmetic sees the tet's own scale.
   V3 v[4];

@@ -38,6 +38,10 @@ struct TetContribution {
 // Voronoi pieces are left 0 (they are most of the cost).
 TetContribution tet_contribution(const double* const p[4], bool voronoi = true);
 
+// V(t) alone, the same bits as tet_contribution(p).volume (the same operations in the
+// same order): `field --neighbours` alone needs only the volume (for `hull_volume`).
+double tet_volume(const double* const p[4]);
+
 // atan2(y, x) for y >= 0, within 2e-6 rad (for the solid angles; see the .cpp).
 double fast_atan2(double y, double x);
 

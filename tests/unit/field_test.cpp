@@ -268,6 +268,43 @@ TEST_F(FieldTest, ClusteredMatchesReference) {
   EXPECT_GT(s.far_labels_peak, 0u);
 }
 
+// --neighbours alone computes no solid angles: its hull flag comes from the rows (an
+// interior point's T tets and d neighbours satisfy T = 2 d - 4). Against the facets
+// seen once and the angle-based flag of a full job, on a lattice too (points on the
+// hull's facets and edges), with far labels and many batches; the same volume bits,
+// and the same neighbour files as the full job's.
+TEST_F(FieldTest, NeighboursAloneHullFromRows) {
+  struct Case {
+    io::Distribution dist;
+    std::uint64_t n, seed;
+  };
+  for (const Case c : {Case{io::Distribution::kUniform, 8000, 31}, Case{io::Distribution::kClusters, 8000, 32},
+                       Case{io::Distribution::kGrid, 4096, 33}}) {
+    const std::string tets = container(c.dist, c.n, c.seed);
+    const Reference ref(tets);
+    const std::size_t hull = std::size_t(std::count(ref.hull.begin(), ref.hull.end(), true));
+    const pipeline::FieldSummary all = fields(tets, "all");
+    pipeline::FieldOptions o;
+    o.input = tets;
+    o.output = path("alone");
+    o.neighbours = true;
+    o.memory_bytes = std::uint64_t(256) << 20;
+    o.batch_tets = 5000;
+    o.ring_labels = 1024;
+    o.progress = false;
+    o.tmpdir = dir_.string();
+    const pipeline::FieldSummary alone = pipeline::compute_fields(o);
+    if (c.dist != io::Distribution::kGrid) EXPECT_GT(alone.far_labels_peak, 0u);  // the lattice's window fits the ring
+    EXPECT_GT(hull, 0u);
+    EXPECT_EQ(all.hull_points, hull);
+    EXPECT_EQ(alone.hull_points, hull);
+    EXPECT_EQ(alone.tet_volume, all.tet_volume);  // the same sums, bit for bit
+    for (const char* what : {"neighbours.offsets", "neighbours.indices"})
+      EXPECT_EQ(file_bytes(path(std::string("all.") + what + ".npy")), file_bytes(path(std::string("alone.") + what + ".npy")))
+          << what;
+  }
+}
+
 // A lattice: cospherical and coplanar points everywhere, decided by the perturbation.
 // Every interior cell is exactly the lattice's cube (h^3), whatever the tets.
 TEST_F(FieldTest, LatticeInteriorCellsAreCubes) {
