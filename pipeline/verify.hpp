@@ -33,7 +33,8 @@
 // Outputs written in label order (tetstream's own) keep only a thin front of open
 // facets in memory; any order is correct, just slower.
 //
-// Memory: 24 bytes per point (coordinates as doubles, random access by label), 2 bits
+// Memory: 12 or 24 bytes per point (coordinates as floats for a float32 container, else
+// doubles; random access by label), 2 bits
 // per point (vertex and hull-vertex bitmaps), a batch of scratch, and the open facets
 // and edges up to the budget; beyond that, disk.
 #include <array>
@@ -135,6 +136,9 @@ class VerifySource {
   virtual Batch batch(std::size_t k) const = 0;
   // Coordinates of labels [first, first + n), 3 doubles each.
   virtual void read_points(std::uint64_t first, std::size_t n, double* xyz) const = 0;
+  // True when every coordinate read_points gives is a float (verify then holds them in
+  // 12 bytes a point instead of 24).
+  virtual bool points_are_floats() const { return false; }
   // Batch k, 4 labels per tet in stored order. May be called from several threads at
   // once for different k.
   virtual void read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const = 0;
@@ -173,6 +177,7 @@ class ContainerSource : public VerifySource {
   std::size_t batch_count() const override;
   Batch batch(std::size_t k) const override;
   void read_points(std::uint64_t first, std::size_t n, double* xyz) const override;
+  bool points_are_floats() const override;  // a float32 container
   void read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const override;
   void read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const override;
   std::string name() const override;

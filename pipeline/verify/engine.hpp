@@ -197,6 +197,40 @@ inline bool volume_fits_double(const double* xyz, std::size_t n) {
   return true;
 }
 
+// The points by label, for random access: floats when every coordinate is a float
+// (a float32 container: the predicates then see exactly the stored values, as doubles),
+// else doubles. Half the memory for float32 input: 12 GB instead of 24 at 10^9 points.
+class PointCoords {
+ public:
+  // A point's coordinates as doubles; converts to the const double* the predicates
+  // take (valid until the end of the full expression, or while the value lives).
+  struct Point {
+    double c[3];
+    operator const double*() const { return c; }
+  };
+  void assign(std::uint64_t n, bool floats) {
+    floats_ = floats;
+    if (floats) f_.resize(3 * std::size_t(n)), d_ = {};
+    else d_.resize(3 * std::size_t(n)), f_ = {};
+  }
+  bool floats() const { return floats_; }
+  static std::size_t bytes_per_point(bool floats) { return floats ? 3 * sizeof(float) : 3 * sizeof(double); }
+  // Fills labels [first, first + n) from doubles that (when floats()) are floats.
+  void store(std::uint64_t first, std::size_t n, const double* xyz) {
+    if (floats_) std::transform(xyz, xyz + 3 * n, f_.begin() + std::ptrdiff_t(3 * first), [](double x) { return float(x); });
+    else std::copy(xyz, xyz + 3 * n, d_.begin() + std::ptrdiff_t(3 * first));
+  }
+  Point operator()(std::uint64_t l) const {
+    if (floats_) return {{f_[3 * l], f_[3 * l + 1], f_[3 * l + 2]}};
+    return {{d_[3 * l], d_[3 * l + 1], d_[3 * l + 2]}};
+  }
+
+ private:
+  bool floats_ = false;
+  std::vector<float> f_;
+  std::vector<double> d_;
+};
+
 // Bit set over labels with atomic set.
 class Bitmap {
  public:
@@ -336,7 +370,7 @@ class Engine {
     std::uint64_t tpos, tneg;
   };
 
-  const double* P(std::uint64_t l) const { return xyz_.data() + 3 * l; }
+  PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
   bool tet_sampled(std::uint64_t ordinal) const { return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_; }
   bool facet_sampled(L a, L b, L c) const {
     if (!sampled_) return true;
@@ -388,7 +422,7 @@ class Engine {
   bool sampled_ = false;
   std::uint64_t sample_cut_ = ~0ull;
 
-  std::vector<double> xyz_;
+  PointCoords xyz_;
   double origin_[3] = {0, 0, 0};  // the lexicographically smallest point: a hull vertex
   Bitmap used_, hull_used_;
 

@@ -39,7 +39,7 @@ std::string Engine<L>::make_tmpdir() {
 
 template <class L>
 void Engine<L>::plan_memory() {
-  const std::size_t points = std::size_t(n_) * 24 + used_.bytes() + hull_used_.bytes();
+  const std::size_t points = std::size_t(n_) * PointCoords::bytes_per_point(src_.points_are_floats()) + used_.bytes() + hull_used_.bytes();
   // A frame: two label buffers (one decoding) and flags. A step, per tet: the slices'
   // A, B, merged and radix buffers (11 facets, 15 edges), the merged copy (4 facets,
   // 6 edges) and up to 2 pair checks.
@@ -52,7 +52,8 @@ void Engine<L>::plan_memory() {
   const std::size_t fixed = points + scratch;
   std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
   if (rest < (std::size_t(16) << 20)) {
-    spdlog::warn("verify: --memory {} is below what the points and one batch need ({}); going over it",
+    spdlog::warn("verify: --memory {} leaves less than 16 MiB for the open facets beside the points and one batch "
+                 "({}); going over it",
                  human_bytes(double(opt_.memory_bytes)), human_bytes(double(fixed)));
     rest = std::size_t(16) << 20;
   }
@@ -73,7 +74,7 @@ void Engine<L>::plan_memory() {
 template <class L>
 void Engine<L>::load_points() {
   const auto t0 = Clock::now();
-  xyz_.resize(3 * std::size_t(n_));
+  xyz_.assign(n_, src_.points_are_floats());
   constexpr std::uint64_t kChunk = 1 << 20;
   const std::int64_t chunks = std::int64_t((n_ + kChunk - 1) / kChunk);
   std::exception_ptr error;
@@ -82,7 +83,10 @@ void Engine<L>::load_points() {
   for (std::int64_t c = 0; c < chunks; ++c) {
     const std::uint64_t first = std::uint64_t(c) * kChunk;
     try {
-      src_.read_points(first, std::size_t(std::min(kChunk, n_ - first)), xyz_.data() + 3 * first);
+      const std::size_t n = std::size_t(std::min(kChunk, n_ - first));
+      std::vector<double> chunk(3 * n);
+      src_.read_points(first, n, chunk.data());
+      xyz_.store(first, n, chunk.data());
     } catch (...) {
       std::lock_guard<std::mutex> lock(error_mutex);
       if (!error) error = std::current_exception();
@@ -93,12 +97,13 @@ void Engine<L>::load_points() {
   // from it over the hull facets have non-negative volume (no cancellation).
   std::uint64_t best = 0;
   for (std::uint64_t i = 1; i < n_; ++i) {
-    const double* p = P(i);
-    const double* b = P(best);
+    const PointCoords::Point p = P(i), b = P(best);
     if (p[0] < b[0] || (p[0] == b[0] && (p[1] < b[1] || (p[1] == b[1] && p[2] < b[2])))) best = i;
   }
-  if (n_ > 0) std::copy(P(best), P(best) + 3, origin_);
-  wide_volume_ = !volume_fits_double(xyz_.data(), std::size_t(n_));
+  if (n_ > 0) std::copy_n(P(best).c, 3, origin_);
+  // Floats always fit (nonzero magnitudes in [2^-149, 2^128]).
+  wide_volume_ = false;
+  for (std::uint64_t i = 0; i < n_ && !xyz_.floats() && !wide_volume_; ++i) wide_volume_ = !volume_fits_double(P(i), 1);
   seconds_points_ = since(t0);
 }
 

@@ -44,7 +44,7 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
       ++good;
       if (std::uint64_t(v[0]) < b.min_label) below_min = true;
       for (int j = 0; j < 4; ++j) used_.set(v[j]);
-      const double *p0 = P(g[0]), *p1 = P(g[1]), *p2 = P(g[2]), *p3 = P(g[3]);
+      const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
       sum += std::fabs(volume6(p0, p1, p2, p3));
       if (tet_sampled(ordinal)) {
         ++checked;

@@ -87,7 +87,7 @@ void Engine<L>::finish() {
     for (std::uint64_t l = 0; l < n_; ++l)
       if (!used_.get(l))
         log_.add(Violation::kMissingPoint, l, [&] {
-          const double* p = P(l);
+          const PointCoords::Point p = P(l);
           return "point " + std::to_string(l) + " (" + std::to_string(p[0]) + ", " + std::to_string(p[1]) + ", " +
                  std::to_string(p[2]) + ") is in no tet";
         });

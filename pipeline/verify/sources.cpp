@@ -72,6 +72,7 @@ void ContainerSource::read_points(std::uint64_t first, std::size_t n, double* xy
   const std::uintptr_t lo = (b + page - 1) / page * page, hi = e / page * page;
   if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_DONTNEED);
 }
+bool ContainerSource::points_are_floats() const { return reader_.header().coord_type == io::CoordType::kFloat32; }
 void ContainerSource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
   reader_.read_frame(k, labels);
 }

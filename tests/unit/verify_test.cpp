@@ -130,15 +130,18 @@ TempFiles& temp() {
   return t;
 }
 
-std::string write_container(const Output& o, const std::string& name, std::uint32_t frame_tets = 500) {
+std::string write_container(const Output& o, const std::string& name, std::uint32_t frame_tets = 500,
+                            io::CoordType coords = io::CoordType::kFloat64) {
   io::TetFileHeader h;
+  h.coord_type = coords;
   h.point_count = o.count();
-  h.bbox_min = {o.xyz[0], o.xyz[1], o.xyz[2]};
-  h.bbox_max = h.bbox_min;
+  // The box of the coordinates as stored (float32 rounds them).
+  auto stored = [coords](double x) { return coords == io::CoordType::kFloat32 ? double(float(x)) : x; };
+  for (int c = 0; c < 3; ++c) h.bbox_min[c] = h.bbox_max[c] = stored(o.xyz[std::size_t(c)]);
   for (std::size_t i = 0; i < o.count(); ++i)
     for (int c = 0; c < 3; ++c) {
-      h.bbox_min[c] = std::min(h.bbox_min[c], o.xyz[3 * i + c]);
-      h.bbox_max[c] = std::max(h.bbox_max[c], o.xyz[3 * i + c]);
+      h.bbox_min[c] = std::min(h.bbox_min[c], stored(o.xyz[3 * i + c]));
+      h.bbox_max[c] = std::max(h.bbox_max[c], stored(o.xyz[3 * i + c]));
     }
   h.tool = "verify_test";
   io::TetWriterOptions wo;
@@ -329,6 +332,39 @@ TEST(Verify, FlippedTet) {
   EXPECT_EQ(count(r, Violation::kOrientation), 1u) << r.summary();
   ASSERT_FALSE(r.listed.empty());
   EXPECT_EQ(r.listed.front().kind, Violation::kOrientation);
+}
+
+// A float32 container is held as floats (12 bytes a point, not 24) and checked on the
+// floats it stores: the same answers as the doubles of the same values, and a
+// triangulation of other values (the doubles before rounding) is caught.
+TEST(Verify, Float32ContainersAreCheckedOnTheirFloats) {
+  test::Points raw = test::uniform_cube(3000, 41);
+  for (double& x : raw) x = double(float(x));
+  const Output o = triangulate(raw);
+  VerifyOptions small = quiet_options();
+  small.memory_bytes = 16 << 20;  // below what is fixed + 16 MiB: the plan is fixed + 16 MiB
+  const VerifyReport d = pipeline::verify_file(write_container(o, "f64.tets"), small);
+  const VerifyReport f = pipeline::verify_file(write_container(o, "f32.tets", 500, io::CoordType::kFloat32), small);
+  ASSERT_TRUE(d.ok()) << d.summary();
+  ASSERT_TRUE(f.ok()) << f.summary();
+  EXPECT_EQ(f.facets, d.facets);
+  EXPECT_EQ(f.insphere_tests, d.insphere_tests);
+  EXPECT_EQ(f.hull_volume, d.hull_volume);
+  EXPECT_EQ(d.memory_planned - f.memory_planned, 12 * o.count());
+
+  // A grid (coordinates 1 to 6) jittered by far less than a float's spacing:
+  // triangulated on the doubles it passes as float64; stored as float32 the points are
+  // the exact grid, whose cospherical cells the labels' perturbation splits otherwise.
+  test::Points g = test::grid(6);
+  test::Rng rng(3);
+  for (double& x : g) x += 1 + rng.uniform(-1e-12, 1e-12);
+  const Output j = triangulate(g);
+  const VerifyReport jd = verify_output(j, "jitter64.tets");
+  EXPECT_TRUE(jd.ok()) << jd.summary();
+  const VerifyReport jf = pipeline::verify_file(write_container(j, "jitter32.tets", 500, io::CoordType::kFloat32),
+                                                quiet_options());
+  EXPECT_FALSE(jf.ok());
+  EXPECT_GT(count(jf, Violation::kDelaunay) + count(jf, Violation::kOrientation), 0u) << jf.summary();
 }
 
 TEST(Verify, RemovedInteriorTet) {
