@@ -3,9 +3,13 @@
 #include "core/error.hpp"
 #include "io/output_file.hpp"
 
+#include <fcntl.h>
 #include <omp.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <exception>
 #include <stdexcept>
@@ -46,6 +50,29 @@ void validate_options(const TetWriterOptions& o) {
   if (o.frame_tets == 0 || o.frame_tets > kMaxFrameTets) {
     throw std::invalid_argument("frame size must be 1.." + std::to_string(kMaxFrameTets) + " tets");
   }
+}
+
+// Reads the TETF section at `at` of `name` (read(offset, data, n) reads its bytes),
+// which must end by `end`: its payload and CRC into `section` (resized to hold them),
+// its frame header into `fh`. Checks the tag, the length, the CRC and the frame
+// header: InputError naming the file and the offset otherwise. Returns the payload's
+// length.
+template <class Read>
+std::uint64_t read_frame_section(Read&& read, const std::string& name, std::uint64_t at, std::uint64_t end,
+                                 std::size_t frame, std::vector<std::uint8_t>& section, FrameHeader& fh) {
+  std::uint8_t sh[kSectionHeaderSize];
+  if (end - at < kSectionHeaderSize + kSectionTrailerSize) throw InputError::at_byte(name, at, "ends inside a section");
+  read(at, sh, sizeof sh);
+  const std::uint64_t len = get_u64(sh + 8);
+  if (get_u32(sh) != kTagFrame || len > end - at - kSectionHeaderSize - kSectionTrailerSize)
+    throw InputError::at_byte(name, at, "not a complete frame");
+  section.resize(len + kSectionTrailerSize);
+  read(at + kSectionHeaderSize, section.data(), section.size());
+  if (crc32c(section.data(), len) != get_u32(section.data() + len))
+    throw InputError::at_byte(name, at, "frame " + std::to_string(frame) + ": checksum mismatch");
+  if (const std::string problem = parse_frame_header({section.data(), len}, fh); !problem.empty())
+    throw InputError::at_byte(name, at + kSectionHeaderSize, problem);
+  return len;
 }
 
 }  // namespace
@@ -121,30 +148,57 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
   // Rebuild the frame index from the frames after the points.
   std::uint64_t at = w->points_end_;
   std::vector<std::uint8_t> payload;
+  auto read = [&f](std::uint64_t offset, void* data, std::size_t n) { f.read_at(offset, data, n); };
   while (at < committed) {
-    std::uint8_t sh[kSectionHeaderSize];
-    if (committed - at < kSectionHeaderSize + kSectionTrailerSize) {
-      throw InputError::at_byte(partial, at, "checkpoint ends inside a section");
-    }
-    f.read_at(at, sh, sizeof sh);
-    const std::uint64_t len = get_u64(sh + 8);
-    if (get_u32(sh) != kTagFrame || len > committed - at - kSectionHeaderSize - kSectionTrailerSize) {
-      throw InputError::at_byte(partial, at, "not a complete frame before the checkpoint");
-    }
-    payload.resize(len + kSectionTrailerSize);
-    f.read_at(at + kSectionHeaderSize, payload.data(), payload.size());
-    if (crc32c(payload.data(), len) != get_u32(payload.data() + len)) {
-      throw InputError::at_byte(partial, at, "frame " + std::to_string(w->frames_.size()) + ": checksum mismatch");
-    }
     FrameHeader fh;
-    if (const std::string problem = parse_frame_header({payload.data(), len}, fh); !problem.empty()) {
-      throw InputError::at_byte(partial, at + kSectionHeaderSize, problem);
-    }
+    const std::uint64_t len = read_frame_section(read, partial + " (before the checkpoint)", at, committed,
+                                                 w->frames_.size(), payload, fh);
     w->frames_.push_back({at, w->tets_, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
     w->tets_ += fh.tet_count;
     at += kSectionHeaderSize + len + kSectionTrailerSize;
   }
   return w;
+}
+
+std::unique_ptr<TetWriter> TetWriter::fragment(std::string path, TetFileHeader header, TetWriterOptions options) {
+  header.resolve_and_validate();
+  validate_options(options);
+  std::unique_ptr<TetWriter> w(new TetWriter(Resume{}, std::move(path), std::move(header), options));
+  w->fragment_ = true;
+  w->points_ = w->header_.point_count;  // the container's, not this file's
+  w->out_ = std::make_unique<OutputFile>(w->path_, options.buffer_bytes, options.claim);
+  w->out_->keep_on_failure(options.keep_partial);
+  return w;
+}
+
+void TetWriter::add_fragment(const std::string& path) {
+  if (finished_ || fragment_) throw std::logic_error("TetWriter: add_fragment to a fragment or after finish");
+  if (points_ != header_.point_count) throw std::logic_error("TetWriter: a fragment before all points");
+  // Not through a link, and only a regular file: the job made it, in its own directory.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+  if (fd < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
+  struct Close {
+    int fd;
+    ~Close() { ::close(fd); }
+  } closer{fd};
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) throw IoError(path + ": not a regular file");
+  const std::uint64_t end = std::uint64_t(st.st_size);
+  auto read = [&](std::uint64_t offset, void* data, std::size_t n) {
+    if (!pread_exactly(fd, data, n, offset)) throw IoError(path + ": read failed: " + std::strerror(errno));
+  };
+  std::vector<std::uint8_t> section;
+  for (std::uint64_t at = 0; at < end;) {
+    FrameHeader fh;
+    const std::uint64_t len = read_frame_section(read, path, at, end, frames_.size(), section, fh);
+    if (fh.max_label >= header_.point_count)
+      throw InputError::at_byte(path, at, "label " + std::to_string(fh.max_label) + " is not below the point count");
+    frames_.push_back({out_->offset(), tets_, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
+    write_section_start(kTagFrame, len);
+    out_->write(section.data(), section.size());  // the payload and its CRC
+    tets_ += fh.tet_count;
+    at += kSectionHeaderSize + len + kSectionTrailerSize;
+  }
 }
 
 TetWriter::~TetWriter() = default;  // out_'s destructor removes the partial file unless finished or kept
@@ -298,6 +352,11 @@ std::uint64_t TetWriter::checkpoint() {
 
 void TetWriter::finish() {
   if (finished_) throw std::logic_error("TetWriter: finish twice");
+  if (fragment_) {  // frames only: the container that appends them has the index
+    out_->commit(options_.sync);
+    finished_ = true;
+    return;
+  }
   if (points_ != header_.point_count) {
     throw std::logic_error("TetWriter: finish with " + std::to_string(points_) + " of " +
                            std::to_string(header_.point_count) + " points");

@@ -77,6 +77,11 @@ class TetWriter {
   // drops anything after them. Throws InputError when the partial file does not match.
   static std::unique_ptr<TetWriter> resume(std::string path, TetFileHeader header, std::uint64_t committed,
                                            TetWriterOptions options = {});
+  // A fragment: PATH.partial holding frames only (TETF sections, no preamble, header,
+  // points, index or footer), the frames of a label range that another writer of the
+  // same container appends with add_fragment() (the ranks of a job under MPI). Its
+  // frames are added as a container's are; finish() renames it to PATH.
+  static std::unique_ptr<TetWriter> fragment(std::string path, TetFileHeader header, TetWriterOptions options = {});
   ~TetWriter();
   TetWriter(const TetWriter&) = delete;
   TetWriter& operator=(const TetWriter&) = delete;
@@ -99,6 +104,10 @@ class TetWriter {
   void add_tets(std::span<const std::span<const std::uint64_t>> batches);
   // One frame from FrameEncoder, appended as the next frame.
   void add_frame(const EncodedFrame& frame);
+  // Appends the frames of a finished fragment file (a regular file, not through a
+  // link) as the next frames, checking each one's section, CRC and frame header
+  // (InputError naming the file and the offset otherwise).
+  void add_fragment(const std::string& path);
 
   // Flushes (and syncs, if options.sync) everything written so far and returns the
   // size of the partial file: the `committed` argument of resume(). Call it between
@@ -133,6 +142,7 @@ class TetWriter {
   std::uint32_t points_crc_ = 0;
   std::uint64_t points_end_ = 0;  // offset just after the PNTS section
   bool finished_ = false;
+  bool fragment_ = false;  // frames only (fragment())
   std::vector<std::unique_ptr<FrameEncoder>> encoders_;
   std::vector<EncodedFrame> batch_;
 };

@@ -9,6 +9,7 @@
 #include "pipeline/disk_plan.hpp"
 #include "pipeline/memory_budget.hpp"
 #include "pipeline/progress.hpp"
+#include "pipeline/run_internal.hpp"
 #include "pipeline/stage.hpp"
 #include "pipeline/stage_index.hpp"
 #include "pipeline/stage_sort.hpp"
@@ -196,14 +197,15 @@ RunSummary Job::run() {
 
 }  // namespace
 
-namespace {
+namespace detail {
 // Where a job's working files go: --tmpdir, else the output's directory.
 std::string work_parent(const RunOptions& options) {
   std::string dir = options.tmpdir;
   if (dir.empty() && !io::is_std_stream(options.output)) dir = std::filesystem::path(options.output).parent_path().string();
   return dir.empty() ? "." : dir;
 }
-}  // namespace
+}  // namespace detail
+using detail::work_parent;
 
 std::string checkpoint_directory(const RunOptions& options) {
   // Always a directory of the job's own, inside the one the user named: the job may
@@ -212,7 +214,7 @@ std::string checkpoint_directory(const RunOptions& options) {
   return parent + "/" + base_name(options.output) + ".ckpt";
 }
 
-namespace {
+namespace detail {
 
 // The machine's physical memory: a larger --memory is capped there (a budget is a
 // ceiling, and buffers sized from 1T fail to allocate).
@@ -253,9 +255,7 @@ void remove_stale_temporary_dirs(const std::string& parent) {
   }
 }
 
-}  // namespace
-
-RunSummary run_job(const RunOptions& requested) {
+RunOptions capped_options(const RunOptions& requested) {
   requested.validate();
   RunOptions options = requested;
   if (const std::uint64_t ram = physical_memory_bytes(); options.memory_bytes > ram) {
@@ -263,6 +263,14 @@ RunSummary run_job(const RunOptions& requested) {
                  human_bytes(double(ram)));
     options.memory_bytes = ram;
   }
+  return options;
+}
+
+}  // namespace detail
+using namespace detail;
+
+RunSummary run_job(const RunOptions& requested) {
+  RunOptions options = capped_options(requested);
   // The user's files before anything else (docs/safety.md): never the input as the
   // output, never through a link or into a device, and one job per output at a time
   // (the claim's lock is held until the job ends).

@@ -88,6 +88,15 @@ struct RunSummary {
   // planned for this input (empty when a finished checkpoint was only collected).
   std::uint64_t memory_ceiling = 0;
   std::vector<MemoryBudget::Share> memory_shares;
+  // A job under MPI (pipeline/run_distributed.hpp): each rank's part, in rank order
+  // (empty for one process). Memory figures above are rank 0's (--memory is per rank).
+  struct Rank {
+    std::uint64_t first_label = 0, end_label = 0;  // the labels whose tets it wrote
+    std::uint64_t segments = 0, zones = 0, tets = 0;
+    std::uint64_t frame_bytes = 0;  // of its frames
+    double seconds_index = 0, seconds_triangulate = 0, seconds_write = 0;
+  };
+  std::vector<Rank> ranks;
   double redundant_ratio() const {  // points inserted beyond one per point, per point
     return points ? double(window_points + repair_points) / double(points) - 1.0 : 0.0;
   }

@@ -792,11 +792,12 @@ int strip_axis(const SortedView& view) {
 }
 
 std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width,
-                                       std::uint64_t first_label) {
+                                       std::uint64_t first_label, std::uint64_t end_label) {
   std::vector<SegmentPlan> plans;
-  if (first_label >= view.count) return plans;
+  end_label = std::min(end_label, view.count);
+  if (first_label >= end_label) return plans;
   zone_points = std::max<std::uint64_t>(zone_points, 1);
-  const std::uint64_t todo = view.count - first_label;
+  const std::uint64_t todo = end_label - first_label;
   const std::uint64_t segments = std::max<std::uint64_t>(1, (todo + zone_points - 1) / zone_points);
   for (std::uint64_t s = 0; s < segments; ++s) {
     SegmentPlan p;

@@ -125,11 +125,12 @@ struct SegmentPlan {
   std::vector<ZoneStrip> zones{ZoneStrip{}};
 };
 
-// Splits [first_label, count) into segments of about `zone_points` labels and gives
-// each a window extended by `buffer_width` along the axis on each side. (A resumed job
-// plans the labels it has not written yet; the output does not depend on the plan.)
+// Splits [first_label, min(end_label, count)) into segments of about `zone_points`
+// labels and gives each a window extended by `buffer_width` along the axis on each
+// side. (A resumed job plans the labels it has not written yet, a rank under MPI its
+// own range; the output does not depend on the plan.)
 std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t zone_points, double buffer_width,
-                                       std::uint64_t first_label = 0);
+                                       std::uint64_t first_label = 0, std::uint64_t end_label = ~std::uint64_t(0));
 
 // The axis zones are cut along: the longer of the two other than the sort axis.
 int strip_axis(const SortedView& view);

@@ -53,11 +53,12 @@ TriangulateStage::TriangulateStage(const RunOptions& options, IndexStage& indexe
 
 TriangulateStage::~TriangulateStage() { indexed_.view().query_regions = nullptr; }
 
-void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_segment) {
+void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_segment, std::uint64_t end_label) {
   const SortedView& view = indexed_.view();
   first_label_ = first_label;
   first_segment_ = first_segment;
-  SegmentCut cut = cut_segments(view, plan_, first_label, threads_);
+  end_label_ = std::min(end_label, view.count);
+  SegmentCut cut = cut_segments(view, plan_, first_label, threads_, end_label_);
   plans_ = std::move(cut.plans);
   window_bytes_ = cut.window_bytes;
   for (std::size_t s = 0; s < plans_.size(); ++s)
@@ -80,7 +81,7 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
 // zones finished or started since.
 void TriangulateStage::run(SegmentSink& out) {
   const SortedView& view = indexed_.view();
-  Progress progress("triangulating", "points", view.count, options_.progress);
+  Progress progress("triangulating", "points", end_label_, options_.progress);
   progress.add(first_label_);
   std::exception_ptr failure;
   std::atomic<bool> cancelled{false};

@@ -55,10 +55,11 @@ class TriangulateStage {
   TriangulateStage(const TriangulateStage&) = delete;
   TriangulateStage& operator=(const TriangulateStage&) = delete;
 
-  // Plans the segments of the labels from `first_label` on (the write stage's record:
+  // Plans the segments of the labels from `first_label` (the write stage's record:
   // the labels below are written, by `first_segment` segments; the output does not
-  // depend on the plan) and cuts each into its zones.
-  void prepare(std::uint64_t first_label, std::uint64_t first_segment);
+  // depend on the plan) to `end_label` (a rank's range; by default the last) and cuts
+  // each into its zones.
+  void prepare(std::uint64_t first_label, std::uint64_t first_segment, std::uint64_t end_label = ~std::uint64_t(0));
   // Triangulates every zone and hands each segment's tets to `out` once its last zone
   // is done. The first failure stops the others and is rethrown after the join.
   void run(SegmentSink& out);
@@ -83,7 +84,7 @@ class TriangulateStage {
   const ZonePlan plan_;
   const int threads_;
   MappedRegions query_regions_;
-  std::uint64_t first_label_ = 0, first_segment_ = 0;
+  std::uint64_t first_label_ = 0, first_segment_ = 0, end_label_ = 0;
   std::vector<SegmentPlan> plans_;
   std::vector<Unit> units_;  // every zone of every segment, in plan order
   // Filled by collect, in plan order: the current segment's zones' tets and work.

@@ -127,6 +127,12 @@ void WriteStage::prepare() {
   writer_options.buffer_bytes = file_buffer_bytes_;
   writer_options.keep_partial = context_.checkpoint != nullptr;
   writer_options.claim = claim_;
+  if (!fragment_path_.empty()) {
+    writer_options.keep_partial = false;
+    writer_options.claim = nullptr;  // a file of the job's own, in its work directory
+    writer_ = io::TetWriter::fragment(fragment_path_, header, writer_options);
+    return;
+  }
   resumed_ = state.contains("output");
   points_in_output_ = sorted_.offset != 0;
   // The sort checked (resumed) or wrote (new) the points section's bytes: their CRC.
@@ -173,7 +179,7 @@ void WriteStage::prepare() {
 void WriteStage::run() {
   const std::size_t encoders = std::size_t(encoders_);
   async_.emplace(*writer_, encoders, encoders);
-  if (!resumed_ && !points_in_output_) {
+  if (!resumed_ && !points_in_output_ && fragment_path_.empty()) {
     // The points section, in label order, on the writer's thread while the first
     // zones are triangulated (a pass over the whole sorted file, which used to hold
     // the first segment back).
@@ -247,6 +253,12 @@ void WriteStage::commit() {
     context_.save();
   }
   seconds_ += seconds_since(t0);
+}
+
+void WriteStage::add_fragments(std::vector<std::string> paths) {
+  async_->add_task([paths = std::move(paths)](io::TetWriter& w) {
+    for (const std::string& p : paths) w.add_fragment(p);
+  });
 }
 
 void WriteStage::finish() {

@@ -63,6 +63,11 @@ class WriteStage final : public SegmentSink {
         claim_(claim) {}
 
 
+  // The frames of this process's label range go to a fragment file at `path`
+  // (io::TetWriter::fragment) instead of the container, which another process
+  // assembles (a rank other than 0 under MPI: pipeline/run_distributed.cpp). Before
+  // prepare(); a fragment keeps no checkpoint.
+  void write_fragment(std::string path) { fragment_path_ = std::move(path); }
   // Opens the output: a new container, or the checkpoint's partial output reopened at
   // its last commit with the frame that was being filled and the counters
   // (DamagedCheckpoint when the partial file or the pending tets disagree with it).
@@ -79,7 +84,10 @@ class WriteStage final : public SegmentSink {
   // Every tet is in: the last frame, the last record (waiting for the writer), and the
   // mark that only the container's index, footer and rename are left.
   void commit();
-  // The index, footer and rename. Nothing may follow it.
+  // After commit(): the frames of these fragment files, in order, follow this
+  // process's (the other ranks' label ranges, in label order).
+  void add_fragments(std::vector<std::string> paths);
+  // The index, footer and rename (a fragment: its rename). Nothing may follow it.
   void finish();
 
   // From the record prepare read: the label the triangulation goes on from, and the
@@ -105,6 +113,7 @@ class WriteStage final : public SegmentSink {
   const int encoders_;
   const std::size_t file_buffer_bytes_;
   const io::OutputClaim* claim_;
+  std::string fragment_path_;  // write_fragment()
   bool resumed_ = false;  // the state held an "output" record
   bool points_in_output_ = false;  // the sort merged the points into the partial output
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;

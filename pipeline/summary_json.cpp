@@ -49,6 +49,20 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
   nlohmann::json memory = {{"ceiling", s.memory_ceiling}};
   for (const MemoryBudget::Share& share : s.memory_shares) memory[share.phase][share.name] = share.bytes;
   j["memory_planned"] = memory;
+  if (!s.ranks.empty()) {
+    nlohmann::json ranks = nlohmann::json::array();
+    for (const RunSummary::Rank& r : s.ranks)
+      ranks.push_back({{"rank", ranks.size()},
+                       {"labels", {r.first_label, r.end_label}},
+                       {"segments", r.segments},
+                       {"zones", r.zones},
+                       {"tets", r.tets},
+                       {"frame_bytes", r.frame_bytes},
+                       {"seconds", {{"index", r.seconds_index},
+                                    {"triangulate", r.seconds_triangulate},
+                                    {"write", r.seconds_write}}}});
+    j["ranks"] = ranks;
+  }
   return j;
 }
 

@@ -145,14 +145,15 @@ std::uint64_t estimate_window(const SortedView& view, const SegmentPlan& p, cons
 
 }  // namespace
 
-SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads) {
+SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads,
+                        std::uint64_t end_label) {
   std::uint64_t segment_points = plan.segment_points;
   const double t = double(std::max(threads, 1));
   bool local_buffers = false;  // each segment's buffers at its own points' spacing
   SegmentCut best;
   for (int attempt = 0;; ++attempt) {
     SegmentCut cut;
-    cut.plans = plan_segments(view, segment_points, plan.buffer_width, first_label);
+    cut.plans = plan_segments(view, segment_points, plan.buffer_width, first_label, end_label);
     std::uint64_t largest_zone = 0, zones = 1;
     std::vector<std::uint64_t> windows;  // each zone's, in the order the zones run
     for (SegmentPlan& p : cut.plans) {

@@ -76,7 +76,10 @@ struct SegmentCut {
   double window_bytes = 0;
   std::uint64_t largest_window = 0;  // points, estimated
 };
-SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads);
+// The segments of labels [first_label, end_label) (a rank's range under MPI; by default
+// to the last label) and their zones.
+SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads,
+                        std::uint64_t end_label = ~std::uint64_t(0));
 
 // A budget refused before the sort: nothing worth keeping was done.
 class BudgetTooSmall : public UsageError {

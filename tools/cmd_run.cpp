@@ -3,9 +3,11 @@
 #include "io/point_format.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/run.hpp"
+#include "pipeline/run_distributed.hpp"
 #include "pipeline/summary_json.hpp"
 #include "tools/command.hpp"
 #include "tools/point_options.hpp"
+#include "tools/world.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -23,7 +25,11 @@ void run_run(RunArgs& args, Context& ctx) {
   o.threads = ctx.global.threads;
   o.progress = !ctx.global.quiet;
   ctx.stdout_is_data = io::is_std_stream(o.output);
-  const pipeline::RunSummary s = pipeline::run_job(o);
+  // Under mpirun with several ranks, the distributed job (the same bytes); rank 0
+  // reports it.
+  pipeline::Communicator& comm = world();
+  const pipeline::RunSummary s = comm.size() > 1 ? pipeline::run_job_distributed(o, comm) : pipeline::run_job(o);
+  if (comm.rank() != 0) return;
   const double tets_per_s = s.seconds_total > 0 ? double(s.tets) / s.seconds_total : 0;
   spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments ({} zones); {} written, tets {:.2f} B/tet", s.points,
                s.duplicates, s.tets, s.segments, s.zones, pipeline::human_bytes(double(s.output_bytes)),

@@ -3,6 +3,7 @@
 #include "io/output_file.hpp"
 #include "pipeline/interrupt.hpp"
 #include "tools/command.hpp"
+#include "tools/world.hpp"
 
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <iostream>
 #include <new>
+#include <optional>
 #include <string>
 #include <vector>
 #include <omp.h>
@@ -88,6 +90,16 @@ int main(int argc, char** argv) {
   using namespace tetstream;
   using namespace tetstream::cli;
 
+  // MPI first (it may rewrite argv), and last: under mpirun, every rank runs this.
+  std::optional<WorldSession> world_session;
+  try {
+    world_session.emplace(argc, argv);
+  } catch (const Error& e) {
+    std::cerr << "tetstream: error: " << e.what() << '\n';
+    return static_cast<int>(e.code());
+  }
+  const bool other_rank = world().rank() != 0;
+
   Context ctx;
   CLI::App app{"tetstream: exact 3D Delaunay triangulation of point sets larger than memory,\n"
                "streamed to a compressed container of tetrahedra.",
@@ -113,7 +125,20 @@ int main(int argc, char** argv) {
                    [](const auto& a, const auto& b) { return a.order < b.order; });
   for (auto& reg : registry) reg.setup(app, ctx);
 
-  app.parse_complete_callback([&ctx] {
+  app.parse_complete_callback([&ctx, &app, other_rank] {
+    // Under mpirun, rank 0 speaks for the job: the other ranks print errors only (the
+    // one that fails prints its line) and no summary.
+    if (other_rank) {
+      ctx.global.quiet = true;
+      ctx.global.log_level = "error";
+      ctx.global.json = false;
+      ctx.global.json_file.clear();
+    }
+    if (world().size() > 1)
+      for (const CLI::App* sub : app.get_subcommands())
+        if (sub->get_name() != "run")
+          throw UsageError("only `tetstream run` runs under mpirun; start `tetstream " + sub->get_name() +
+                           "` as one process");
     configure_logging(ctx.global);
     pipeline::install_interrupt_handlers();
     if (ctx.global.threads > 0) omp_set_num_threads(ctx.global.threads);
@@ -128,6 +153,8 @@ int main(int argc, char** argv) {
     const std::string unknown = unknown_subcommand(app, argc, argv);
     std::cerr << "tetstream: error: " << (unknown.empty() ? std::string(e.what()) : unknown) << " (see tetstream --help)\n";
     return static_cast<int>(ExitCode::kUsage);
+  } catch (const pipeline::PeerFailed& e) {
+    return static_cast<int>(e.code());  // the failing rank printed the job's error line
   } catch (const Error& e) {
     std::fflush(stdout);
     std::cerr << "tetstream: error: " << e.what() << '\n';

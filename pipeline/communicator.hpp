@@ -1,0 +1,79 @@
+#pragma once
+// The processes of one job: a single process (the default), or the ranks of a job
+// started by `mpirun -n K tetstream run ...` (pipeline/run_distributed.hpp). The
+// collective calls here are all a distributed job needs; every rank calls each of
+// them in the same order. MPI itself is confined to communicator_mpi.cpp, built when
+// the build found it (-DTETSTREAM_MPI): the rest of the code sees only this class.
+//
+// Failures: a rank that fails keeps its exception and tells the others at the end of
+// the step (together(), below); every rank then stops, the failing one with its error
+// line, the others with PeerFailed (no line of their own, the same exit code), so one
+// error line and one exit code come out of the job, as from a single process.
+#include "core/error.hpp"
+
+#include <cstdint>
+#include <exception>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// Another rank of this job failed and said why: this one stops with the same exit code
+// and no message of its own.
+class PeerFailed : public Error {
+ public:
+  explicit PeerFailed(ExitCode code) : Error(code, "another rank of the job failed") {}
+};
+
+class Communicator {
+ public:
+  virtual ~Communicator() = default;
+  virtual int rank() const = 0;
+  virtual int size() const = 0;
+  // The exit code every rank reached (the largest; 0: every rank went well): how
+  // ranks decide together to go on or stop.
+  virtual int agree(int code) = 0;
+  // Every rank's value, by rank.
+  virtual std::vector<std::uint64_t> all_gather(std::uint64_t value) = 0;
+  // `root`'s bytes, on every rank.
+  virtual std::string broadcast(const std::string& bytes, int root) = 0;
+  // Every rank's bytes, by rank, on `root` (empty elsewhere).
+  virtual std::vector<std::string> gather(const std::string& bytes, int root) = 0;
+};
+
+// One process of its own: rank 0 of 1.
+Communicator& single_process();
+// How many processes an MPI launcher started, from its environment (OpenMPI, MPICH,
+// PMIx); 1 when none did.
+int launcher_size();
+
+// Runs `work` on this rank, then learns how every rank's went: when any failed, the
+// lowest failing rank rethrows its error here and every other rank throws PeerFailed
+// with that rank's exit code, so the job prints one error line (several ranks failing
+// alike, on bad options, say, would print it several times) and exits with one code.
+template <class F>
+void together(Communicator& comm, F&& work) {
+  std::uint64_t code = 0;
+  std::exception_ptr failure;
+  try {
+    work();
+  } catch (const PeerFailed& e) {
+    code = std::uint64_t(e.code());
+    failure = std::current_exception();
+  } catch (const Error& e) {
+    code = std::uint64_t(e.code());
+    failure = std::current_exception();
+  } catch (...) {
+    code = std::uint64_t(ExitCode::kIoFailure);
+    failure = std::current_exception();
+  }
+  const std::vector<std::uint64_t> codes = comm.all_gather(code);
+  for (std::size_t r = 0; r < codes.size(); ++r) {
+    if (codes[r] == 0) continue;
+    if (int(r) == comm.rank()) std::rethrow_exception(failure);
+    throw PeerFailed(ExitCode(int(codes[r])));
+  }
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,294 @@
+#include "pipeline/run_distributed.hpp"
+
+#include "core/error.hpp"
+#include "io/output_file.hpp"
+#include "io/point_format.hpp"
+#include "pipeline/disk_meter.hpp"
+#include "pipeline/frame_cutter.hpp"
+#include "pipeline/memory_budget.hpp"
+#include "pipeline/progress.hpp"
+#include "pipeline/run_internal.hpp"
+#include "pipeline/stage.hpp"
+#include "pipeline/stage_index.hpp"
+#include "pipeline/stage_sort.hpp"
+#include "pipeline/stage_triangulate.hpp"
+#include "pipeline/stage_write.hpp"
+#include "pipeline/temp_files.hpp"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <omp.h>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+using nlohmann::json;
+
+std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks) {
+  const std::uint64_t k = std::uint64_t(std::max(ranks, 1));
+  const std::uint64_t blocks = block ? (count + block - 1) / block : 0;
+  std::vector<std::uint64_t> bounds(k + 1);
+  for (std::uint64_t r = 0; r <= k; ++r) bounds[r] = std::min(count, blocks * r / k * block);
+  return bounds;
+}
+
+namespace {
+
+// The sorted points as rank 0 made them, for the others (who map the same file).
+json sorted_json(const SortedPoints& s) {
+  return {{"path", s.path},
+          {"offset", s.offset},
+          {"header_memory", s.header_memory},
+          {"float32", s.layout.float32},
+          {"id64", s.layout.id64},
+          {"count", s.count},
+          {"input_count", s.input_count},
+          {"duplicates", s.duplicates},
+          {"axis", s.axis},
+          {"bbox_min", {s.bbox_min[0], s.bbox_min[1], s.bbox_min[2]}},
+          {"bbox_max", {s.bbox_max[0], s.bbox_max[1], s.bbox_max[2]}},
+          {"hull_labels", s.hull_labels},
+          {"crc32c", s.crc32c},
+          {"runs", s.runs}};
+}
+
+SortedPoints sorted_from_json(const json& j) {
+  SortedPoints s;
+  s.path = j.at("path").get<std::string>();
+  s.offset = j.at("offset").get<std::uint64_t>();
+  s.header_memory = j.at("header_memory").get<std::uint64_t>();
+  s.layout = RecordLayout{j.at("float32").get<bool>(), j.at("id64").get<bool>()};
+  s.count = j.at("count").get<std::uint64_t>();
+  s.input_count = j.at("input_count").get<std::uint64_t>();
+  s.duplicates = j.at("duplicates").get<std::uint64_t>();
+  s.axis = j.at("axis").get<int>();
+  for (int k = 0; k < 3; ++k) {
+    s.bbox_min[k] = j.at("bbox_min").at(std::size_t(k)).get<double>();
+    s.bbox_max[k] = j.at("bbox_max").at(std::size_t(k)).get<double>();
+  }
+  s.hull_labels = j.at("hull_labels").get<std::vector<std::uint64_t>>();
+  s.crc32c = j.at("crc32c").get<std::uint32_t>();
+  s.runs = j.at("runs").get<std::size_t>();
+  return s;
+}
+
+json rank_json(const RunSummary::Rank& r, const WrittenWork& work) {
+  return {{"first_label", r.first_label},       {"end_label", r.end_label},
+          {"segments", r.segments},             {"zones", r.zones},
+          {"tets", r.tets},                     {"frame_bytes", r.frame_bytes},
+          {"seconds_index", r.seconds_index},   {"seconds_triangulate", r.seconds_triangulate},
+          {"seconds_write", r.seconds_write},   {"work", counters_json(work)}};
+}
+
+RunSummary::Rank rank_from(const json& j) {
+  RunSummary::Rank r;
+  r.first_label = j.at("first_label").get<std::uint64_t>();
+  r.end_label = j.at("end_label").get<std::uint64_t>();
+  r.segments = j.at("segments").get<std::uint64_t>();
+  r.zones = j.at("zones").get<std::uint64_t>();
+  r.tets = j.at("tets").get<std::uint64_t>();
+  r.frame_bytes = j.at("frame_bytes").get<std::uint64_t>();
+  r.seconds_index = j.at("seconds_index").get<double>();
+  r.seconds_triangulate = j.at("seconds_triangulate").get<double>();
+  r.seconds_write = j.at("seconds_write").get<double>();
+  return r;
+}
+
+std::string fragment_name(int rank) { return "rank-" + std::to_string(rank) + ".tets"; }
+
+// One rank's part of the job, from the sort to its frames written. Rank 0 owns the
+// output's claim, the work directory and the sort; every collective step is inside
+// together(), so the ranks stop at the same step when one fails.
+class RankJob {
+ public:
+  RankJob(const RunOptions& options, Communicator& comm, const std::string& dir, const io::OutputClaim* claim)
+      : options_(options),
+        comm_(comm),
+        dir_(dir),
+        claim_(claim),
+        threads_(options.threads > 0 ? options.threads : omp_get_max_threads()),
+        budget_(options.memory_bytes, 0, threads_, omp_get_num_procs()) {}
+
+  RunSummary run() {
+    const bool root = comm_.rank() == 0;
+    const int size = comm_.size();
+    RunSummary& summary = summary_;
+    DiskMeter disk(dir_, root ? options_.output + ".partial" : "");
+    const StageContext context{options_, dir_, nullptr, state_, root ? &disk : nullptr};
+
+    // ---- sort, on rank 0; the others wait for the sorted points ----
+    std::optional<SortStage> sort;
+    std::string sorted_text;
+    together(comm_, [&] {
+      if (!root) return;
+      sort.emplace(context, budget_, threads_, claim_);
+      sort->prepare();
+      const SortedPoints& s = sort->run();
+      sort->commit();
+      if (s.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
+      sorted_text = sorted_json(s).dump();
+      summary.seconds_sort = seconds_since(start_);
+      spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs, {:.1f}s", s.count, s.duplicates,
+                   "xyz"[s.axis], s.runs, summary.seconds_sort);
+    });
+    sorted_text = comm_.broadcast(sorted_text, 0);
+    const SortedPoints sorted = root ? sort->result() : sorted_from_json(json::parse(sorted_text));
+    summary.input_points = sorted.input_count;
+    summary.points = sorted.count;
+    summary.duplicates = sorted.duplicates;
+    summary.axis = sorted.axis;
+
+    // ---- index and plan, on every rank: the same plan everywhere ----
+    IndexStage index(sorted, threads_);
+    std::optional<TriangulatePlan> plan;
+    RunSummary::Rank mine;
+    together(comm_, [&] {
+      const auto t0 = StageClock::now();
+      index.prepare();
+      index.run();
+      mine.seconds_index = seconds_since(t0);
+      budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
+      plan = plan_triangulation(index, options_, budget_, threads_);
+    });
+    summary.hull_vertices = index.view().hull_points.size();
+
+    // ---- triangulate this rank's blocks of labels; its frames to the output (rank
+    // 0) or to its fragment ----
+    const std::uint64_t block = frame_block_labels(budget_.frame_tets());
+    const std::vector<std::uint64_t> bounds = rank_label_bounds(sorted.count, block, size);
+    mine.first_label = bounds[std::size_t(comm_.rank())];
+    mine.end_label = bounds[std::size_t(comm_.rank()) + 1];
+    if (root)
+      spdlog::info("{} ranks: blocks of {} labels, rank 0 from label {} to {}", size, block, mine.first_label,
+                   mine.end_label);
+    WriteStage write(context, sorted, index.view(), plan->shares, root ? claim_ : nullptr);
+    std::optional<TriangulateStage> triangulate;
+    together(comm_, [&] {
+      if (!root) write.write_fragment(context.dir + "/" + fragment_name(comm_.rank()));
+      write.prepare();
+      write.run();
+      triangulate.emplace(options_, index, plan->zones, plan->shares.query_page_bytes, threads_);
+      triangulate->prepare(mine.first_label, 0, mine.end_label);
+      budget_.plan_triangulate(plan->shares.index_bytes, triangulate->window_bytes());
+      triangulate->run(write);
+      write.commit();
+      if (!root) write.finish();
+      mine.segments = triangulate->segments();
+      mine.zones = triangulate->zones();
+      mine.tets = write.work().stats.tets;
+      mine.frame_bytes = write.tet_bytes();
+      mine.seconds_triangulate = triangulate->seconds();
+      mine.seconds_write = write.seconds();
+    });
+
+    // ---- assemble: rank 0 appends the fragments, then the index and footer ----
+    const std::vector<std::string> ranks = comm_.gather(rank_json(mine, write.work()).dump(), 0);
+    together(comm_, [&] {
+      if (!root) return;
+      std::vector<std::string> fragments;
+      for (int r = 1; r < size; ++r) fragments.push_back(context.dir + "/" + fragment_name(r));
+      const auto t0 = StageClock::now();
+      write.add_fragments(std::move(fragments));
+      write.finish();
+      summary.seconds_write = seconds_since(t0);
+      disk.sample();
+      summary.disk_peak_bytes = std::max(disk.peak(), disk.sample());
+      summary.output_bytes = write.bytes_written();
+      summary.tet_bytes = write.tet_bytes();
+    });
+
+    if (root) {
+      WrittenWork all;
+      for (const std::string& text : ranks) {
+        const json j = json::parse(text);
+        summary.ranks.push_back(rank_from(j));
+        const WrittenWork w = counters_from(j.at("work"));
+        all.stats += w.stats;
+        all.zone_points += w.zone_points;
+        summary.segments += summary.ranks.back().segments;
+        summary.zones += summary.ranks.back().zones;
+        summary.seconds_triangulate = std::max(summary.seconds_triangulate, summary.ranks.back().seconds_triangulate);
+      }
+      record_work(all, summary);
+      summary.query_region_releases = triangulate ? triangulate->query_region_releases() : 0;
+      summary.seconds_write += mine.seconds_write;
+      summary.seconds_total = seconds_since(start_);
+      summary.memory_ceiling = budget_.ceiling();
+      summary.memory_shares = budget_.shares();
+    } else {
+      summary.ranks.push_back(mine);
+      summary.tets = mine.tets;
+      summary.segments = mine.segments;
+      summary.zones = mine.zones;
+    }
+    return summary;
+  }
+
+ private:
+  const RunOptions& options_;
+  Communicator& comm_;
+  const std::string dir_;
+  const io::OutputClaim* claim_;
+  const int threads_;
+  MemoryBudget budget_;
+  json state_ = json::object();  // no checkpoint: the stages' records stay in memory
+  RunSummary summary_;
+  StageClock::time_point start_ = StageClock::now();
+};
+
+}  // namespace
+
+RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) {
+  const bool root = comm.rank() == 0;
+  RunOptions options;
+  // The same checks on every rank (the same options): the same answer everywhere.
+  together(comm, [&] {
+    options = detail::capped_options(requested);
+    if (io::is_std_stream(options.input) || io::is_std_stream(options.output))
+      throw UsageError("under mpirun, the input and the output must be files (not - )");
+    if (options.resume) throw UsageError("--resume is not available under mpirun yet (docs/scaling.md)");
+  });
+  options.checkpoint = false;
+
+  // Rank 0: the user's files before anything else, as one process checks them
+  // (pipeline/run.cpp), and the work directory every rank writes its fragment into.
+  std::optional<io::OutputClaim> claim;
+  std::optional<TempDir> tmp;
+  std::uint64_t disk = 0;
+  std::string dir;
+  together(comm, [&] {
+    if (!root) return;
+    io::refuse_input_as_output(options.input, options.output);
+    for (const std::string& more : options.read.more_inputs) io::refuse_input_as_output(more, options.output);
+    claim.emplace(options.output);
+    detail::remove_stale_temporary_dirs(detail::work_parent(options));
+    disk = detail::plan_and_check_disk(options, detail::work_parent(options), false);
+    tmp.emplace(detail::work_parent(options), "tetstream-run");
+    dir = tmp->dir();
+  });
+  dir = comm.broadcast(dir, 0);
+
+  RunSummary summary;
+  std::exception_ptr failure;
+  try {
+    summary = RankJob(options, comm, dir, claim ? &*claim : nullptr).run();
+  } catch (...) {
+    failure = std::current_exception();
+  }
+  // Every rank's stages (and their files) are gone before rank 0 removes the work
+  // directory: every failure above was agreed on, so every rank is here.
+  comm.agree(0);
+  if (failure) {
+    // A job without a checkpoint leaves nothing behind (as in one process).
+    if (claim && claim->created()) remove_file(options.output + ".partial");
+    std::rethrow_exception(failure);
+  }
+  summary.disk_planned_bytes = disk;
+  return summary;
+}
+
+}  // namespace tetstream::pipeline
