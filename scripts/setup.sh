@@ -12,6 +12,8 @@ packages=(
   python3-scipy python3-matplotlib
   # HDF5 input (optional at build time) and the h5py files its tests read
   libhdf5-dev python3-h5py
+  # runs under mpirun (optional at build time: -DTETSTREAM_MPI) and their tests
+  libopenmpi-dev openmpi-bin
   # the Python package (optional at build time: -DTETSTREAM_PYTHON) and its tests
   pybind11-dev python3-pybind11 python3-dev python3-pytest python3-setuptools python3-pip python3-wheel
 )

@@ -13,6 +13,8 @@ jobs=$(nproc)
 
 echo "== Release build and full suite"
 "$root/scripts/build.sh" "$root/build"
+# setup.sh installed OpenMPI: the mpirun tests must run, not skip.
+export TETSTREAM_REQUIRE_MPI=1
 ctest --test-dir "$root/build" --output-on-failure -j "$jobs" --timeout 900
 
 if ((sanitize)); then

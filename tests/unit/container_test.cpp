@@ -29,6 +29,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 namespace fs = std::filesystem;
@@ -493,17 +494,28 @@ TEST(Container, WriterRejectsMisuse) {
   EXPECT_THROW(w.add_tets(beyond), std::invalid_argument);
 }
 
+// A mesh written whole (whole.tets, batches of 400 tets in frames of 200), for tests
+// that write the same tets in pieces and compare the bytes.
+struct WrittenWhole {
+  Mesh m = lattice(6, 6, 6, 1.0, 1.0, 1.0, 7, 3);
+  TetFileHeader h = header_for(m);
+  TetWriterOptions o = [] {
+    TetWriterOptions o;
+    o.frame_tets = 200;
+    o.sync = false;
+    return o;
+  }();
+  std::vector<std::uint32_t> labels = flatten<std::uint32_t>(m.tets);
+  explicit WrittenWhole(const TempDir& tmp) { write_mesh(tmp / "whole.tets", m, h, o, 400); }
+};
+
 TEST(Container, ResumeGivesTheSameBytes) {
   TempDir tmp;
-  const Mesh m = lattice(6, 6, 6, 1.0, 1.0, 1.0, 7, 3);
-  const auto h = header_for(m);
-  TetWriterOptions o;
-  o.frame_tets = 200;
-  o.sync = false;
-  write_mesh(tmp / "whole.tets", m, h, o, 400);
-
-  const auto labels = flatten<std::uint32_t>(m.tets);
-  const std::span<const std::uint32_t> all(labels);
+  const WrittenWhole whole(tmp);
+  const Mesh& m = whole.m;
+  const TetFileHeader& h = whole.h;
+  const TetWriterOptions& o = whole.o;
+  const std::span<const std::uint32_t> all(whole.labels);
   const std::string path = tmp / "resumed.tets";
   std::uint64_t committed = 0;
   std::vector<std::uint8_t> crashed;
@@ -533,6 +545,50 @@ TEST(Container, ResumeGivesTheSameBytes) {
   auto other = h;
   other.options = "{}";
   expect_input_error([&] { TetWriter::resume(path, other, committed, o); }, {"header differs"});
+}
+
+// A container assembled from frames written in pieces (the ranks of a job under MPI):
+// the first part by the container's writer, the others as fragment files appended in
+// order, gives the bytes of one writer; a damaged fragment or a link is refused.
+TEST(Container, FragmentsAppendToTheSameBytes) {
+  TempDir tmp;
+  const WrittenWhole whole(tmp);
+  const Mesh& m = whole.m;
+  const TetFileHeader& h = whole.h;
+  const TetWriterOptions& o = whole.o;
+  const std::span<const std::uint32_t> all(whole.labels);
+  // Pieces of whole batches (a batch's frames are cut as it alone would be).
+  const std::size_t t = m.tets.size(), cut1 = 400, cut2 = 1200;
+  ASSERT_GT(t, cut2);
+  for (const auto& [first, last, name] : {std::tuple{cut1, cut2, "a.tets"}, std::tuple{cut2, t, "b.tets"}}) {
+    auto f = TetWriter::fragment(tmp / name, h, o);
+    for (std::size_t i = first; i < last; i += 400) f->add_tets(all.subspan(4 * i, 4 * std::min<std::size_t>(400, last - i)));
+    f->finish();
+    EXPECT_FALSE(fs::exists(tmp / (std::string(name) + ".partial")));
+  }
+  auto assemble = [&](const std::string& out, const std::string& second) {
+    TetWriter w(out, h, o);
+    w.add_points(m.xyz.data(), m.ids.data(), m.ids.size());
+    w.add_tets(all.subspan(0, 4 * cut1));
+    w.add_fragment(tmp / "a.tets");
+    w.add_fragment(second);
+    w.finish();
+  };
+  assemble(tmp / "assembled.tets", tmp / "b.tets");
+  EXPECT_EQ(slurp(tmp / "assembled.tets"), slurp(tmp / "whole.tets"));
+
+  // A flipped byte in a frame of the fragment: its file, offset and frame are named,
+  // and no output is left.
+  std::vector<std::uint8_t> b = slurp(tmp / "b.tets");
+  b[b.size() / 2] ^= 0x40;
+  spit(tmp / "bad.tets", b);
+  expect_input_error([&] { assemble(tmp / "out.tets", tmp / "bad.tets"); }, {"bad.tets", "byte", "checksum"});
+  EXPECT_FALSE(fs::exists(tmp / "out.tets"));
+  EXPECT_FALSE(fs::exists(tmp / "out.tets.partial"));
+  // A fragment through a link is not followed.
+  fs::create_symlink(tmp / "b.tets", tmp / "link.tets");
+  EXPECT_THROW(assemble(tmp / "out.tets", tmp / "link.tets"), IoError);
+  EXPECT_FALSE(fs::exists(tmp / "out.tets"));
 }
 
 // ---------------------------------------------------------------- damaged files

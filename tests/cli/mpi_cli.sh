@@ -1,0 +1,99 @@
+#!/usr/bin/env bash
+# `mpirun -n K tetstream run` (issue #20): K = 1, 2, 3 ranks on this machine write the
+# bytes of one process with the same --memory, on uniform (float64 and float32),
+# clustered and degenerate (grid) points with several blocks a rank; a failing rank
+# stops the job with one error line, the single process's exit code and nothing left
+# behind; what does not run distributed yet is refused with one line.
+#
+# Needs mpirun and a tetstream built with MPI. Without them the test reports itself
+# skipped (exit 77), unless TETSTREAM_REQUIRE_MPI=1 (scripts/test.sh sets it, after
+# scripts/setup.sh installed OpenMPI): then it fails.
+# Usage: bash mpi_cli.sh /path/to/tetstream
+set -euo pipefail
+T=$(realpath "${1:?usage: mpi_cli.sh /path/to/tetstream}")
+fail() { echo "FAIL: $*" >&2; exit 1; }
+skip() {
+  [ "${TETSTREAM_REQUIRE_MPI:-}" = 1 ] && fail "$* (TETSTREAM_REQUIRE_MPI=1)"
+  echo "mpi_cli: skipped: $*"
+  exit 77
+}
+command -v mpirun >/dev/null || skip "no mpirun (Debian: openmpi-bin)"
+
+# OpenMPI refuses root unless told; CI runs as root. Shared memory between ranks
+# without the ptrace-based single copy, which containers often forbid.
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=none
+mpi() { local n=$1; shift; mpirun -q --oversubscribe -n "$n" "$@"; }
+
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+cd "$dir"
+if ! mpi 2 "$T" --version >version.out 2>version.err; then
+  grep -q "built without MPI" version.err && skip "this tetstream was built without MPI"
+  cat version.err >&2
+  fail "mpirun -n 2 tetstream --version failed"
+fi
+
+"$T" -q gen --dist uniform --n 200000 --seed 1 -o uniform.f64
+"$T" -q gen --dist uniform --n 150000 --seed 2 -o uniform.f32
+"$T" -q gen --dist clusters --n 200000 --seed 3 -o clusters.f64
+"$T" -q gen --dist grid --n 125000 -o grid.f64  # 50^3: cospherical everywhere
+
+# --memory 32M: frames of 32768 tets, blocks of 32768 labels: 4 to 7 blocks an input,
+# so 2 and 3 ranks each take some. One thread a rank (two cores here).
+for input in uniform.f64 uniform.f32 clusters.f64 grid.f64; do
+  base=${input%.*}-${input#*.}
+  "$T" -q --threads 1 run "$input" -o "$base-1p.tets" --memory 32M --no-checkpoint
+  for n in 1 2 3; do
+    mpi "$n" "$T" -q --threads 1 --json run "$input" -o "$base-$n.tets" --memory 32M >"$base-$n.json"
+    cmp "$base-1p.tets" "$base-$n.tets" || fail "$input: $n ranks wrote other bytes than one process"
+    if [ "$n" -gt 1 ]; then
+      python3 - "$base-$n.json" "$n" <<'PY' || fail "$input: $n ranks: the summary's ranks"
+import json, sys
+s = json.load(open(sys.argv[1])); n = int(sys.argv[2])
+ranks = s["ranks"]
+assert len(ranks) == n, ranks
+assert all(r["tets"] > 0 for r in ranks), ranks  # every rank wrote some
+assert sum(r["tets"] for r in ranks) == s["tets"], (ranks, s["tets"])
+assert ranks[0]["labels"][0] == 0 and ranks[-1]["labels"][1] == s["points"]
+assert all(a["labels"][1] == b["labels"][0] for a, b in zip(ranks, ranks[1:])), ranks
+PY
+    fi
+  done
+  ls | grep -q '^tetstream-run-' && fail "$input: a work directory was left behind"
+done
+"$T" -q verify clusters-f64-3.tets || fail "verify of the 3-rank output"
+
+# A rank that fails mid-run (rank 1 only: a full disk at its third segment) stops
+# every rank: exit 3, one error line, no output and no partial file or work directory.
+set +e
+mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M \
+  : -n 1 -x TETSTREAM_FAULT=segment:2 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M \
+  : -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M 2>failed.err
+rc=$?
+set -e
+[ "$rc" = 3 ] || { cat failed.err >&2; fail "a failing rank: exit $rc, expected 3"; }
+[ "$(grep -c 'tetstream: error:' failed.err)" = 1 ] || { cat failed.err >&2; fail "a failing rank: not one error line"; }
+grep -q "injected failure at segment:2" failed.err || fail "a failing rank: not its error"
+[ ! -e failed.tets ] && [ ! -e failed.tets.partial ] || fail "a failing rank left an output"
+ls | grep -q '^tetstream-run-' && fail "a failing rank left a work directory"
+
+# Bad input (rank 0 sorts it): exit 1, one line naming the file and the offset.
+head -c 1000 uniform.f64 >truncated.f64
+set +e
+mpi 3 "$T" -q run truncated.f64 -o bad.tets --memory 32M 2>bad.err
+rc=$?
+set -e
+[ "$rc" = 1 ] || { cat bad.err >&2; fail "bad input: exit $rc, expected 1"; }
+[ "$(grep -c 'tetstream: error:' bad.err)" = 1 ] && grep -q "truncated.f64" bad.err || { cat bad.err >&2; fail "bad input: not one line naming the file"; }
+[ ! -e bad.tets ] && [ ! -e bad.tets.partial ] || fail "bad input left an output"
+
+# Not distributed yet, refused with one line and exit 2: --resume, and other commands.
+for cmd in "run uniform.f64 -o r.tets --memory 32M --resume" "info uniform-f64-1p.tets"; do
+  set +e
+  # shellcheck disable=SC2086
+  mpi 2 "$T" -q $cmd 2>refused.err
+  rc=$?
+  set -e
+  [ "$rc" = 2 ] && [ "$(grep -c 'tetstream: error:' refused.err)" = 1 ] || { cat refused.err >&2; fail "'$cmd' under mpirun: exit $rc"; }
+done
+echo "mpi_cli: OK"

@@ -1,0 +1,98 @@
+// The pieces of a job under MPI that need no MPI: how ranks split the labels, and how
+// they stop together when one fails (pipeline/communicator.hpp,
+// pipeline/run_distributed.hpp). The job itself is tested under mpirun by
+// tests/cli/mpi_cli.sh.
+#include "pipeline/communicator.hpp"
+#include "pipeline/run_distributed.hpp"
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <tuple>
+#include <vector>
+
+namespace tetstream::pipeline {
+namespace {
+
+TEST(RankLabelBounds, WholeBlocksBalancedAndCoveringEveryLabel) {
+  for (const auto& [count, block, ranks] : std::vector<std::tuple<std::uint64_t, std::uint64_t, int>>{
+           {200000, 32768, 3}, {1000000, 4096, 7}, {10, 4096, 3}, {65536, 32768, 2}, {65537, 32768, 2}, {5, 1, 8}}) {
+    SCOPED_TRACE(std::to_string(count) + " labels, blocks of " + std::to_string(block) + ", " + std::to_string(ranks));
+    const std::vector<std::uint64_t> b = rank_label_bounds(count, block, ranks);
+    ASSERT_EQ(b.size(), std::size_t(ranks) + 1);
+    EXPECT_EQ(b.front(), 0u);
+    EXPECT_EQ(b.back(), count);
+    const std::uint64_t blocks = (count + block - 1) / block;
+    for (int r = 0; r < ranks; ++r) {
+      EXPECT_LE(b[std::size_t(r)], b[std::size_t(r) + 1]);
+      // Every inner bound on a block boundary (the last one may be the count).
+      if (b[std::size_t(r)] != count) EXPECT_EQ(b[std::size_t(r)] % block, 0u);
+      // A rank has blocks/ranks or one more.
+      const std::uint64_t mine = (std::min(b[std::size_t(r) + 1], blocks * block) - b[std::size_t(r)] + block - 1) / block;
+      EXPECT_GE(mine, blocks / std::uint64_t(ranks));
+      EXPECT_LE(mine, blocks / std::uint64_t(ranks) + 1);
+    }
+  }
+}
+
+// A job of `codes.size()` ranks seen from `rank`: all_gather hands back every rank's
+// code as given (the others' as if they had reached the same step).
+class ScriptedRanks final : public Communicator {
+ public:
+  ScriptedRanks(int rank, std::vector<std::uint64_t> codes) : rank_(rank), codes_(std::move(codes)) {}
+  int rank() const override { return rank_; }
+  int size() const override { return int(codes_.size()); }
+  int agree(int code) override { return code; }
+  std::vector<std::uint64_t> all_gather(std::uint64_t value) override {
+    std::vector<std::uint64_t> all = codes_;
+    all[std::size_t(rank_)] = value;  // this rank's own, as it came out of the work
+    return all;
+  }
+  std::string broadcast(const std::string& bytes, int) override { return bytes; }
+  std::vector<std::string> gather(const std::string& bytes, int) override { return {bytes}; }
+
+ private:
+  int rank_;
+  std::vector<std::uint64_t> codes_;
+};
+
+TEST(Together, TheLowestFailingRankSpeaksAndEveryRankStopsWithItsCode) {
+  const auto input = [] { throw InputError("in.f64: byte 24: not a number"); };
+  const auto fine = [] {};
+  // Every rank went well: nothing thrown.
+  ScriptedRanks all_well(1, {0, 0, 0});
+  EXPECT_NO_THROW(together(all_well, fine));
+  // Rank 1 fails alone: it rethrows its own error; ranks 0 and 2 stop with its code.
+  ScriptedRanks failing(1, {0, 0, 0});
+  EXPECT_THROW(together(failing, input), InputError);
+  for (int r : {0, 2}) {
+    ScriptedRanks other(r, {0, 1, 0});
+    try {
+      together(other, fine);
+      ADD_FAILURE() << "rank " << r << " went on";
+    } catch (const PeerFailed& e) {
+      EXPECT_EQ(e.code(), ExitCode::kBadInput);
+    }
+  }
+  // Ranks 1 and 2 both fail (the same bad option everywhere, say): only rank 1's
+  // error is rethrown; rank 2 stops quietly with rank 1's code.
+  ScriptedRanks second(2, {0, 2, 0});
+  try {
+    together(second, [] { throw UsageError("bad"); });
+    ADD_FAILURE() << "rank 2 went on";
+  } catch (const PeerFailed& e) {
+    EXPECT_EQ(e.code(), ExitCode::kUsage);
+  }
+  // An exception that is not one of ours counts as an I/O failure (exit 3).
+  ScriptedRanks odd(0, {0, 0});
+  EXPECT_THROW(together(odd, [] { throw std::runtime_error("odd"); }), std::runtime_error);
+  ScriptedRanks after_odd(1, {3, 0});
+  try {
+    together(after_odd, fine);
+  } catch (const PeerFailed& e) {
+    EXPECT_EQ(e.code(), ExitCode::kIoFailure);
+  }
+}
+
+}  // namespace
+}  // namespace tetstream::pipeline
