@@ -145,19 +145,37 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
     w->points_crc_ = crc;
   }
 
-  // Rebuild the frame index from the frames after the points.
-  std::uint64_t at = w->points_end_;
+  w->rebuild_frame_index(w->points_end_, committed);
+  return w;
+}
+
+std::unique_ptr<TetWriter> TetWriter::resume_fragment(std::string path, TetFileHeader header, std::uint64_t committed,
+                                                      TetWriterOptions options) {
+  header.resolve_and_validate();
+  validate_options(options);
+  std::unique_ptr<TetWriter> w(new TetWriter(Resume{}, std::move(path), std::move(header), options));
+  w->fragment_ = true;
+  w->points_ = w->header_.point_count;
+  w->out_ = OutputFile::reopen(w->path_, committed, options.buffer_bytes, options.claim);
+  w->out_->keep_on_failure(options.keep_partial);
+  w->rebuild_frame_index(0, committed);
+  return w;
+}
+
+void TetWriter::rebuild_frame_index(std::uint64_t from, std::uint64_t committed) {
+  // The frames between the points (or a fragment's start) and the checkpoint, each
+  // checked, as this writer's.
+  const std::string partial = path_ + ".partial";
   std::vector<std::uint8_t> payload;
-  auto read = [&f](std::uint64_t offset, void* data, std::size_t n) { f.read_at(offset, data, n); };
-  while (at < committed) {
+  auto read = [this](std::uint64_t offset, void* data, std::size_t n) { out_->read_at(offset, data, n); };
+  for (std::uint64_t at = from; at < committed;) {
     FrameHeader fh;
-    const std::uint64_t len = read_frame_section(read, partial + " (before the checkpoint)", at, committed,
-                                                 w->frames_.size(), payload, fh);
-    w->frames_.push_back({at, w->tets_, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
-    w->tets_ += fh.tet_count;
+    const std::uint64_t len =
+        read_frame_section(read, partial + " (before the checkpoint)", at, committed, frames_.size(), payload, fh);
+    frames_.push_back({at, tets_, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
+    tets_ += fh.tet_count;
     at += kSectionHeaderSize + len + kSectionTrailerSize;
   }
-  return w;
 }
 
 std::unique_ptr<TetWriter> TetWriter::fragment(std::string path, TetFileHeader header, TetWriterOptions options) {

@@ -82,6 +82,10 @@ class TetWriter {
   // same container appends with add_fragment() (the ranks of a job under MPI). Its
   // frames are added as a container's are; finish() renames it to PATH.
   static std::unique_ptr<TetWriter> fragment(std::string path, TetFileHeader header, TetWriterOptions options = {});
+  // Continues a fragment's PATH.partial after its first `committed` bytes (a value its
+  // checkpoint() returned), as resume() continues a container.
+  static std::unique_ptr<TetWriter> resume_fragment(std::string path, TetFileHeader header, std::uint64_t committed,
+                                                    TetWriterOptions options = {});
   ~TetWriter();
   TetWriter(const TetWriter&) = delete;
   TetWriter& operator=(const TetWriter&) = delete;
@@ -131,6 +135,7 @@ class TetWriter {
   template <class L>
   void add_tets_impl(std::span<const std::span<const L>> batches);
   void write_section_start(std::uint32_t tag, std::uint64_t length);
+  void rebuild_frame_index(std::uint64_t from, std::uint64_t committed);
 
   std::string path_;
   TetFileHeader header_;

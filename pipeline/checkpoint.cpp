@@ -24,7 +24,6 @@ namespace {
 
 std::string errno_text() { return std::strerror(errno); }
 
-constexpr const char* kStateFile = "state.json";
 constexpr const char* kFormat = "tetstream-checkpoint";
 
 std::uint32_t state_crc(const nlohmann::json& body) {
@@ -68,7 +67,15 @@ nlohmann::json fingerprint_file(const std::string& path) {
 
 bool Checkpoint::exists() const {
   std::error_code ec;
-  return std::filesystem::exists(path(kStateFile), ec);
+  return std::filesystem::exists(path(state_name_), ec);
+}
+
+void Checkpoint::join() const {
+  struct stat st {};
+  if (::lstat(dir_.c_str(), &st) != 0 || !S_ISDIR(st.st_mode))
+    throw IoError(dir_ + ": not the job's checkpoint directory (missing, or not a directory)");
+  if (::lstat(path(WorkDir::kMarker).c_str(), &st) != 0 || !S_ISREG(st.st_mode))
+    throw IoError(dir_ + ": not a directory tetstream made (no marker)");
 }
 
 void Checkpoint::create_and_lock() {
@@ -80,7 +87,7 @@ void Checkpoint::clear() const {
 }
 
 nlohmann::json Checkpoint::load() const {
-  const std::string file = path(kStateFile);
+  const std::string file = path(state_name_);
   std::ifstream in(file, std::ios::binary);
   if (!in) throw IoError(file + ": cannot open: " + errno_text());
   std::stringstream text;
@@ -108,7 +115,7 @@ void Checkpoint::save(nlohmann::json state) {
   state.erase("crc32c");
   state["crc32c"] = state_crc(state);
   const std::string text = state.dump(1);
-  write_file_atomically(dir_, kStateFile, text.data(), text.size());
+  write_file_atomically(dir_, state_name_, text.data(), text.size());
 }
 
 void Checkpoint::remove() {

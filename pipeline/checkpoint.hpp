@@ -47,12 +47,17 @@ class Checkpoint {
   static constexpr int kVersion = 3;
 
   explicit Checkpoint(std::string dir) : dir_(std::move(dir)) {}
+  // A rank's part of a job's checkpoint under MPI (pipeline/run_distributed.hpp): its
+  // state in `state_name` ("rank-R.json"), beside rank 0's state.json in the directory
+  // that rank 0 made and holds locked. It joins that directory (join(), not
+  // create_and_lock()); its files are removed with rank 0's (clear(), remove()).
+  Checkpoint(std::string dir, std::string state_name) : dir_(std::move(dir)), state_name_(std::move(state_name)) {}
   Checkpoint(const Checkpoint&) = delete;
   Checkpoint& operator=(const Checkpoint&) = delete;
 
   const std::string& dir() const { return dir_; }
   std::string path(const std::string& name) const { return dir_ + "/" + name; }
-  bool exists() const;  // the directory holds a state.json
+  bool exists() const;  // the directory holds this checkpoint's state file
 
   // Makes the directory if needed (its parent must exist; IoError otherwise), or
   // reopens one that tetstream made (a WorkDir: never a link, another user's or a
@@ -60,6 +65,9 @@ class Checkpoint {
   // kernel if the process dies): UsageError when another process holds it, i.e. runs
   // the same job right now.
   void create_and_lock();
+  // A rank's checkpoint: checks that the directory is one tetstream made (not a link,
+  // the marker in it): IoError otherwise. Takes no lock (rank 0 holds it).
+  void join() const;
   // The saved state (without its CRC). Throws InputError naming the file when it is
   // damaged: unreadable JSON, a CRC mismatch, another format or version.
   nlohmann::json load() const;
@@ -73,6 +81,7 @@ class Checkpoint {
 
  private:
   std::string dir_;
+  std::string state_name_ = "state.json";
   std::optional<WorkDir> work_;  // set by create_and_lock
 };
 

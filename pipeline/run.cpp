@@ -69,8 +69,10 @@ void RunOptions::validate() const {
 using nlohmann::json;
 
 namespace {
-
 std::string base_name(const std::string& path) { return std::filesystem::path(path).filename().string(); }
+}  // namespace
+
+namespace detail {
 
 // What makes two processes the same job: the input (its fingerprint) and every option
 // that changes the output's bytes. The thread count and zone size are not among
@@ -100,6 +102,10 @@ std::string identity_difference(const json& saved, const json& now) {
     if (saved.at(key) != now.at(key)) return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
   return "";
 }
+}  // namespace detail
+
+namespace {
+using namespace detail;
 
 // The job: the stages of `run` wired together (pipeline/stage.hpp says what each
 // stage's prepare, run and commit do). Owns what the stages share: the checkpoint
@@ -306,20 +312,25 @@ RunSummary run_job(const RunOptions& requested) {
   }
 
   Checkpoint checkpoint(checkpoint_directory(options));
+  OpenedJob opened = open_checkpointed_job(options, checkpoint, *claim);
+  if (opened.finished) return *opened.finished;
+  try {
+    RunSummary summary;
+    trusting_checkpoint(checkpoint, [&] { summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim).run(); });
+    checkpoint.remove();
+    summary.disk_planned_bytes = opened.disk;
+    return summary;
+  } catch (...) {
+    rethrow_job_failure(checkpoint, options);
+  }
+}
+
+namespace detail {
+
+OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoint, const io::OutputClaim& claim) {
+  OpenedJob opened;
+  json& state = opened.state;
   const json identity = job_identity(options);
-  json state = json::object();
-  const std::string how_to_restart = "rerun with --force to discard it and start over";
-  // Runs f, which reads the checkpoint; a missing field or any other damage becomes a
-  // DamagedCheckpoint that says how to start over.
-  auto trusting_checkpoint = [&](auto&& f) {
-    try {
-      f();
-    } catch (const json::exception& e) {
-      throw DamagedCheckpoint(checkpoint.dir() + "/state.json: damaged checkpoint (" + e.what() + "); " + how_to_restart);
-    } catch (const DamagedCheckpoint& e) {
-      throw DamagedCheckpoint(std::string(e.what()) + "; " + how_to_restart);
-    }
-  };
   checkpoint.create_and_lock();
   if (checkpoint.exists()) {
     if (options.force) {
@@ -330,18 +341,18 @@ RunSummary run_job(const RunOptions& requested) {
                        "it, or with --force to discard it and start over");
     } else {
       std::string difference;
-      trusting_checkpoint([&] {
+      trusting_checkpoint(checkpoint, [&] {
         state = checkpoint.load();
         difference = identity_difference(state.at("job"), identity);
       });
       if (!difference.empty())
-        throw UsageError("cannot resume from " + checkpoint.dir() + ": " + difference + "; " + how_to_restart);
+        throw UsageError("cannot resume from " + checkpoint.dir() + ": " + difference + "; " + kHowToRestart);
       spdlog::info("resuming the job checkpointed in {}", checkpoint.dir());
     }
   } else if (options.resume) {
     spdlog::warn("no checkpoint in {}: starting from the beginning", checkpoint.dir());
   }
-  if (state.contains("output") && state["output"].value("finishing", false) && claim->created() &&
+  if (state.contains("output") && state["output"].value("finishing", false) && claim.created() &&
       std::filesystem::exists(options.output)) {
     // The job had finished; only the removal of its checkpoint was cut short.
     const io::TetReader finished(options.output);  // throws unless complete
@@ -356,13 +367,13 @@ RunSummary run_job(const RunOptions& requested) {
     summary.output_bytes = finished.file_bytes();
     summary.tet_bytes = finished.tet_bytes();
     checkpoint.remove();
-    return summary;
+    opened.finished = summary;
+    return opened;
   }
-  std::uint64_t disk = 0;
   if (!state.contains("job")) {
     const std::string parent = std::filesystem::path(checkpoint.dir()).parent_path().string();
     try {
-      disk = plan_and_check_disk(options, parent.empty() ? "." : parent, true);
+      opened.disk = plan_and_check_disk(options, parent.empty() ? "." : parent, true);
     } catch (...) {
       checkpoint.remove();  // made just now, and empty: nothing to resume
       throw;
@@ -370,12 +381,12 @@ RunSummary run_job(const RunOptions& requested) {
     state = {{"job", identity}};
     checkpoint.save(state);
   }
+  return opened;
+}
+
+void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
   try {
-    RunSummary summary;
-    trusting_checkpoint([&] { summary = Job(options, checkpoint.dir(), &checkpoint, state, &*claim).run(); });
-    checkpoint.remove();
-    summary.disk_planned_bytes = disk;
-    return summary;
+    throw;
   } catch (const DamagedCheckpoint&) {
     throw;  // left for the user to inspect or --force away
   } catch (const InputError&) {
@@ -402,5 +413,7 @@ RunSummary run_job(const RunOptions& requested) {
     throw;
   }
 }
+
+}  // namespace detail
 
 }  // namespace tetstream::pipeline

@@ -20,6 +20,7 @@
 
 #include <omp.h>
 
+#include <filesystem>
 #include <optional>
 #include <string>
 #include <vector>
@@ -98,18 +99,24 @@ RunSummary::Rank rank_from(const json& j) {
   return r;
 }
 
-std::string fragment_name(int rank) { return "rank-" + std::to_string(rank) + ".tets"; }
+std::string rank_prefix(int rank) { return "rank-" + std::to_string(rank); }
+std::string fragment_name(int rank) { return rank_prefix(rank) + ".tets"; }
 
 // One rank's part of the job, from the sort to its frames written. Rank 0 owns the
 // output's claim, the work directory and the sort; every collective step is inside
 // together(), so the ranks stop at the same step when one fails.
 class RankJob {
  public:
-  RankJob(const RunOptions& options, Communicator& comm, const std::string& dir, const io::OutputClaim* claim)
+  // `dir`: the job's work directory (rank 0's checkpoint, or a TempDir); `checkpoint`:
+  // this rank's (null: not resumable), whose state is `state`.
+  RankJob(const RunOptions& options, Communicator& comm, const std::string& dir, const io::OutputClaim* claim,
+          Checkpoint* checkpoint, json& state)
       : options_(options),
         comm_(comm),
         dir_(dir),
         claim_(claim),
+        checkpoint_(checkpoint),
+        state_(state),
         threads_(options.threads > 0 ? options.threads : omp_get_max_threads()),
         budget_(options.memory_bytes, 0, threads_, omp_get_num_procs()) {}
 
@@ -118,7 +125,8 @@ class RankJob {
     const int size = comm_.size();
     RunSummary& summary = summary_;
     DiskMeter disk(dir_, root ? options_.output + ".partial" : "");
-    const StageContext context{options_, dir_, nullptr, state_, root ? &disk : nullptr};
+    const StageContext context{options_, dir_, checkpoint_, state_, root ? &disk : nullptr};
+    summary.resumed = state_.contains("sort") || state_.contains("sorted") || state_.contains("output");
 
     // ---- sort, on rank 0; the others wait for the sorted points ----
     std::optional<SortStage> sort;
@@ -165,28 +173,42 @@ class RankJob {
     if (root)
       spdlog::info("{} ranks: blocks of {} labels, rank 0 from label {} to {}", size, block, mine.first_label,
                    mine.end_label);
+    // A rank whose fragment an earlier process finished (and rank 0 did not yet
+    // assemble) has nothing left to do: rank 0 checks its frames as it appends them.
+    const std::string fragment = context.dir + "/" + fragment_name(comm_.rank());
+    const bool fragment_done = !root && state_.contains("output") && state_["output"].value("finishing", false) &&
+                               std::filesystem::exists(fragment) && !std::filesystem::exists(fragment + ".partial");
     WriteStage write(context, sorted, index.view(), plan->shares, root ? claim_ : nullptr);
     std::optional<TriangulateStage> triangulate;
+    WrittenWork work;
     together(comm_, [&] {
-      if (!root) write.write_fragment(context.dir + "/" + fragment_name(comm_.rank()));
+      if (fragment_done) {
+        work = counters_from(state_["output"].at("counters"));
+        mine.segments = state_["output"].at("segments").get<std::uint64_t>();
+        return;
+      }
+      if (!root) write.write_fragment(fragment, rank_prefix(comm_.rank()) + "-pending-");
       write.prepare();
       write.run();
+      // From where this rank's record says its labels are written (a resumed job).
+      const std::uint64_t from = std::max(mine.first_label, write.first_label());
       triangulate.emplace(options_, index, plan->zones, plan->shares.query_page_bytes, threads_);
-      triangulate->prepare(mine.first_label, 0, mine.end_label);
+      triangulate->prepare(from, write.segments_done(), mine.end_label);
       budget_.plan_triangulate(plan->shares.index_bytes, triangulate->window_bytes());
       triangulate->run(write);
-      write.commit();
+      write.commit(mine.end_label);
       if (!root) write.finish();
-      mine.segments = triangulate->segments();
+      work = write.work();
+      mine.segments = write.segments_done();
       mine.zones = triangulate->zones();
-      mine.tets = write.work().stats.tets;
       mine.frame_bytes = write.tet_bytes();
       mine.seconds_triangulate = triangulate->seconds();
       mine.seconds_write = write.seconds();
     });
+    mine.tets = work.stats.tets;
 
     // ---- assemble: rank 0 appends the fragments, then the index and footer ----
-    const std::vector<std::string> ranks = comm_.gather(rank_json(mine, write.work()).dump(), 0);
+    const std::vector<std::string> ranks = comm_.gather(rank_json(mine, work).dump(), 0);
     together(comm_, [&] {
       if (!root) return;
       std::vector<std::string> fragments;
@@ -233,9 +255,10 @@ class RankJob {
   Communicator& comm_;
   const std::string dir_;
   const io::OutputClaim* claim_;
+  Checkpoint* checkpoint_;
+  json& state_;  // the stages' records: saved in the checkpoint, or only held here
   const int threads_;
   MemoryBudget budget_;
-  json state_ = json::object();  // no checkpoint: the stages' records stay in memory
   RunSummary summary_;
   StageClock::time_point start_ = StageClock::now();
 };
@@ -250,44 +273,103 @@ RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) 
     options = detail::capped_options(requested);
     if (io::is_std_stream(options.input) || io::is_std_stream(options.output))
       throw UsageError("under mpirun, the input and the output must be files (not - )");
-    if (options.resume) throw UsageError("--resume is not available under mpirun yet (docs/scaling.md)");
   });
-  options.checkpoint = false;
 
   // Rank 0: the user's files before anything else, as one process checks them
-  // (pipeline/run.cpp), and the work directory every rank writes its fragment into.
+  // (pipeline/run.cpp), and the work directory every rank writes into: the job's
+  // checkpoint (rank 0's state.json, rank R's rank-R.json and fragment beside it), or
+  // a temporary directory.
   std::optional<io::OutputClaim> claim;
   std::optional<TempDir> tmp;
-  std::uint64_t disk = 0;
+  std::optional<Checkpoint> checkpoint;
+  detail::OpenedJob opened;
   std::string dir;
   together(comm, [&] {
     if (!root) return;
     io::refuse_input_as_output(options.input, options.output);
     for (const std::string& more : options.read.more_inputs) io::refuse_input_as_output(more, options.output);
     claim.emplace(options.output);
-    detail::remove_stale_temporary_dirs(detail::work_parent(options));
-    disk = detail::plan_and_check_disk(options, detail::work_parent(options), false);
-    tmp.emplace(detail::work_parent(options), "tetstream-run");
-    dir = tmp->dir();
+    if (options.checkpoint) {
+      checkpoint.emplace(checkpoint_directory(options));
+      opened = detail::open_checkpointed_job(options, *checkpoint, *claim);
+      dir = checkpoint->dir();
+      // The split into ranks is part of the checkpoint (each rank's fragment holds its
+      // labels' frames): a resume keeps it, checked before any rank writes.
+      json& state = opened.state;
+      if (!opened.finished) {
+        const std::uint64_t recorded = state.value("ranks", std::uint64_t(comm.size()));
+        if (recorded != std::uint64_t(comm.size()))
+          throw UsageError("the job was started on " + std::to_string(recorded) +
+                           " ranks: resume it with mpirun -n " + std::to_string(recorded) + " (" +
+                           checkpoint->dir() + " is kept)");
+        state["ranks"] = comm.size();
+        checkpoint->save(state);
+      }
+    } else {
+      detail::remove_stale_temporary_dirs(detail::work_parent(options));
+      opened.disk = detail::plan_and_check_disk(options, detail::work_parent(options), false);
+      tmp.emplace(detail::work_parent(options), "tetstream-run");
+      dir = tmp->dir();
+    }
   });
+  // The checkpointed job had finished (its checkpoint, every rank's files in it, is
+  // gone): rank 0 reports it.
+  if (comm.broadcast(opened.finished ? "finished" : "", 0) == "finished") return root ? *opened.finished : RunSummary{};
   dir = comm.broadcast(dir, 0);
+
+  // Ranks 1 and up: their part of the checkpoint, beside rank 0's.
+  std::optional<Checkpoint> member;
+  json member_state = json::object();
+  together(comm, [&] {
+    if (root || !options.checkpoint) return;
+    member.emplace(dir, rank_prefix(comm.rank()) + ".json");
+    member->join();
+    const json identity = detail::job_identity(options);
+    if (member->exists()) {
+      std::string difference;
+      detail::trusting_checkpoint(*member, [&] {
+        member_state = member->load();
+        difference = detail::identity_difference(member_state.at("job"), identity);
+        if (member_state.at("rank").get<int>() != comm.rank()) difference = "another rank's state";
+      });
+      if (!difference.empty())
+        throw UsageError("cannot resume from " + member->path(rank_prefix(comm.rank()) + ".json") + ": " + difference +
+                         "; " + detail::kHowToRestart);
+    } else {
+      member_state = {{"job", identity}, {"rank", comm.rank()}};
+      member->save(member_state);
+    }
+  });
 
   RunSummary summary;
   std::exception_ptr failure;
   try {
-    summary = RankJob(options, comm, dir, claim ? &*claim : nullptr).run();
+    summary = RankJob(options, comm, dir, claim ? &*claim : nullptr, root ? (checkpoint ? &*checkpoint : nullptr)
+                                                                          : (member ? &*member : nullptr),
+                      root ? opened.state : member_state)
+                  .run();
   } catch (...) {
     failure = std::current_exception();
   }
-  // Every rank's stages (and their files) are gone before rank 0 removes the work
-  // directory: every failure above was agreed on, so every rank is here.
+  // Every rank's stages (and their files) are done with before rank 0 removes the
+  // work directory or the checkpoint: every failure above was agreed on, so every
+  // rank is here.
   comm.agree(0);
   if (failure) {
+    if (!root) std::rethrow_exception(failure);
+    if (checkpoint) {
+      try {
+        std::rethrow_exception(failure);
+      } catch (...) {
+        detail::rethrow_job_failure(*checkpoint, options);  // keeps it, or removes it with every rank's files
+      }
+    }
     // A job without a checkpoint leaves nothing behind (as in one process).
     if (claim && claim->created()) remove_file(options.output + ".partial");
     std::rethrow_exception(failure);
   }
-  summary.disk_planned_bytes = disk;
+  if (checkpoint) checkpoint->remove();  // rank 0's files and every rank's
+  summary.disk_planned_bytes = opened.disk;
   return summary;
 }
 

@@ -18,10 +18,19 @@
 //                CRC and header checked), writes the index and footer, renames.
 //
 // Every phase ends with the ranks agreeing (pipeline/communicator.hpp): a rank that
-// fails stops every rank with its error line and exit code; OUT.partial and the work
-// directory are removed as a failed single-process job without a checkpoint removes
-// them. Not yet distributed: the sort (rank 0 alone), a checkpoint (--resume is
-// refused under mpirun).
+// fails stops every rank with its error line and exit code.
+//
+// Checkpoint: rank 0's is the single process's (OUT.tets.ckpt: the sort, its own
+// frames' record), which also records the number of ranks; rank R keeps its record
+// (rank-R.json), its pending frame and its fragment in the same directory, which rank
+// 0 locks, clears (--force) and removes (on success) with every rank's files in it.
+// `--resume` under the same number of ranks continues every rank from its record and
+// ends with the same bytes (another number is refused before any rank writes: each
+// fragment holds its rank's labels). Without a checkpoint (--no-checkpoint) the files
+// go in a temporary directory, and a failure leaves nothing.
+//
+// Not distributed yet: the sort (rank 0 alone, the others wait), the indexes (every
+// rank builds all of them), verify.
 #include "pipeline/communicator.hpp"
 #include "pipeline/run.hpp"
 

@@ -127,14 +127,14 @@ void WriteStage::prepare() {
   writer_options.buffer_bytes = file_buffer_bytes_;
   writer_options.keep_partial = context_.checkpoint != nullptr;
   writer_options.claim = claim_;
-  if (!fragment_path_.empty()) {
-    writer_options.keep_partial = false;
-    writer_options.claim = nullptr;  // a file of the job's own, in its work directory
+  const bool fragment = !fragment_path_.empty();
+  if (fragment) writer_options.claim = nullptr;  // a file of the job's own, in its work directory
+  resumed_ = state.contains("output");
+  if (fragment && !resumed_) {
     writer_ = io::TetWriter::fragment(fragment_path_, header, writer_options);
     return;
   }
-  resumed_ = state.contains("output");
-  points_in_output_ = sorted_.offset != 0;
+  points_in_output_ = !fragment && sorted_.offset != 0;
   // The sort checked (resumed) or wrote (new) the points section's bytes: their CRC.
   if (points_in_output_) writer_options.points_crc = sorted_.crc32c;
   if (!resumed_ && !points_in_output_) {
@@ -155,13 +155,15 @@ void WriteStage::prepare() {
   const json& out = state["output"];
   const std::uint64_t committed = out.at("committed").get<std::uint64_t>();
   std::error_code ec;
-  const std::string partial = options.output + ".partial";
+  const std::string target = fragment ? fragment_path_ : options.output;
+  const std::string partial = target + ".partial";
   const std::uintmax_t have = std::filesystem::file_size(partial, ec);
   if (ec || have < committed)
     throw DamagedCheckpoint(partial + ": " + (ec ? std::string("missing") : std::to_string(have) + " bytes") +
                             ", but the checkpoint committed " + std::to_string(committed) + " (damaged checkpoint)");
   try {
-    writer_ = io::TetWriter::resume(options.output, header, committed, writer_options);
+    writer_ = fragment ? io::TetWriter::resume_fragment(target, header, committed, writer_options)
+                       : io::TetWriter::resume(target, header, committed, writer_options);
   } catch (const InputError& e) {
     throw DamagedCheckpoint(std::string(e.what()) + " (damaged checkpoint)");
   }
@@ -215,7 +217,7 @@ void WriteStage::record(std::uint64_t next_label, bool wait) {
   Checkpoint* checkpoint = context_.checkpoint;
   if (!checkpoint) return;
   json& state = context_.state;
-  const std::string pending_file = "pending-" + std::to_string(segments_done_) + ".tets";
+  const std::string pending_file = pending_prefix_ + std::to_string(segments_done_) + ".tets";
   const auto& p = cutter_->pending();
   if (!p.empty()) write_file_atomically(context_.dir, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
   const std::string old_pending = state.contains("output") ? state["output"].value("pending_file", "") : "";
@@ -241,13 +243,13 @@ void WriteStage::record(std::uint64_t next_label, bool wait) {
   }
 }
 
-void WriteStage::commit() {
+void WriteStage::commit(std::uint64_t end_label) {
   const auto t0 = StageClock::now();
   cutter_->flush();
   // Every tet is in the partial output; what is left is its index and footer and
   // the rename. A crash after the rename but before the checkpoint is removed
   // leaves this mark, and a resumed job then finds the output complete.
-  record(view_.count, true);
+  record(std::min(end_label, view_.count), true);
   if (context_.checkpoint) {
     context_.state["output"]["finishing"] = true;
     context_.save();

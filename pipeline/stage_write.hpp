@@ -65,9 +65,13 @@ class WriteStage final : public SegmentSink {
 
   // The frames of this process's label range go to a fragment file at `path`
   // (io::TetWriter::fragment) instead of the container, which another process
-  // assembles (a rank other than 0 under MPI: pipeline/run_distributed.cpp). Before
-  // prepare(); a fragment keeps no checkpoint.
-  void write_fragment(std::string path) { fragment_path_ = std::move(path); }
+  // assembles (a rank other than 0 under MPI: pipeline/run_distributed.cpp); the
+  // checkpoint's files of the frame being filled are named `prefix`N.tets. Before
+  // prepare().
+  void write_fragment(std::string path, std::string prefix) {
+    fragment_path_ = std::move(path);
+    pending_prefix_ = std::move(prefix);
+  }
   // Opens the output: a new container, or the checkpoint's partial output reopened at
   // its last commit with the frame that was being filled and the counters
   // (DamagedCheckpoint when the partial file or the pending tets disagree with it).
@@ -81,9 +85,10 @@ class WriteStage final : public SegmentSink {
   // on disk, so the triangulation never waits for the writer.
   void add_segment(const std::vector<ZoneTets>& parts, const SegmentStats& work, std::uint64_t points,
                    std::uint64_t next_label) override;
-  // Every tet is in: the last frame, the last record (waiting for the writer), and the
+  // Every tet of the labels below `end_label` (all of them; a rank's: the end of its
+  // range) is in: the last frame, the last record (waiting for the writer), and the
   // mark that only the container's index, footer and rename are left.
-  void commit();
+  void commit(std::uint64_t end_label = ~std::uint64_t(0));
   // After commit(): the frames of these fragment files, in order, follow this
   // process's (the other ranks' label ranges, in label order).
   void add_fragments(std::vector<std::string> paths);
@@ -114,6 +119,7 @@ class WriteStage final : public SegmentSink {
   const std::size_t file_buffer_bytes_;
   const io::OutputClaim* claim_;
   std::string fragment_path_;  // write_fragment()
+  std::string pending_prefix_ = "pending-";
   bool resumed_ = false;  // the state held an "output" record
   bool points_in_output_ = false;  // the sort merged the points into the partial output
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;

@@ -134,11 +134,14 @@ int main(int argc, char** argv) {
       ctx.global.json = false;
       ctx.global.json_file.clear();
     }
+    // (Every rank refuses; rank 0 says why.)
     if (world().size() > 1)
       for (const CLI::App* sub : app.get_subcommands())
-        if (sub->get_name() != "run")
+        if (sub->get_name() != "run") {
+          if (other_rank) throw pipeline::PeerFailed(ExitCode::kUsage);
           throw UsageError("only `tetstream run` runs under mpirun; start `tetstream " + sub->get_name() +
                            "` as one process");
+        }
     configure_logging(ctx.global);
     pipeline::install_interrupt_handlers();
     if (ctx.global.threads > 0) omp_set_num_threads(ctx.global.threads);

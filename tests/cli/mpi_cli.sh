@@ -2,8 +2,9 @@
 # `mpirun -n K tetstream run` (issue #20): K = 1, 2, 3 ranks on this machine write the
 # bytes of one process with the same --memory, on uniform (float64 and float32),
 # clustered and degenerate (grid) points with several blocks a rank; a failing rank
-# stops the job with one error line, the single process's exit code and nothing left
-# behind; what does not run distributed yet is refused with one line.
+# stops the job with one error line and the single process's exit code; a failed or
+# killed job resumed on the same ranks ends with the same bytes; what does not run
+# distributed yet is refused with one line.
 #
 # Needs mpirun and a tetstream built with MPI. Without them the test reports itself
 # skipped (exit 77), unless TETSTREAM_REQUIRE_MPI=1 (scripts/test.sh sets it, after
@@ -64,18 +65,54 @@ done
 "$T" -q verify clusters-f64-3.tets || fail "verify of the 3-rank output"
 
 # A rank that fails mid-run (rank 1 only: a full disk at its third segment) stops
-# every rank: exit 3, one error line, no output and no partial file or work directory.
+# every rank: exit 3, one error line, no output; the checkpoint is kept, a resume on
+# another number of ranks is refused (the split is part of it), and a resume on the
+# same number ends with the bytes of one process.
+run3() { mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M "$@" \
+  : -n 1 -x TETSTREAM_FAULT="${FAULT1:-}" "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M "$@" \
+  : -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M "$@"; }
 set +e
-mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M \
-  : -n 1 -x TETSTREAM_FAULT=segment:2 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M \
-  : -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M 2>failed.err
+FAULT1=segment:2 run3 2>failed.err
 rc=$?
 set -e
 [ "$rc" = 3 ] || { cat failed.err >&2; fail "a failing rank: exit $rc, expected 3"; }
 [ "$(grep -c 'tetstream: error:' failed.err)" = 1 ] || { cat failed.err >&2; fail "a failing rank: not one error line"; }
 grep -q "injected failure at segment:2" failed.err || fail "a failing rank: not its error"
-[ ! -e failed.tets ] && [ ! -e failed.tets.partial ] || fail "a failing rank left an output"
-ls | grep -q '^tetstream-run-' && fail "a failing rank left a work directory"
+[ ! -e failed.tets ] || fail "a failing rank left an output under its final name"
+[ -f failed.tets.ckpt/state.json ] && [ -f failed.tets.ckpt/rank-1.json ] || fail "a failing rank: no checkpoint kept"
+set +e
+mpi 2 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M --resume 2>other.err
+rc=$?
+set -e
+[ "$rc" = 2 ] && grep -q "started on 3 ranks" other.err || { cat other.err >&2; fail "a resume on 2 ranks of a 3-rank job: exit $rc"; }
+run3 --resume
+cmp uniform-f64-1p.tets failed.tets || fail "resumed after a failing rank: other bytes than one process"
+[ ! -e failed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
+
+# A rank killed with -9 mid-run (rank 2, once its checkpoint records a segment): mpirun
+# stops the others; --resume with the same ranks ends with the same bytes.
+rank_pid() {  # the pid of rank $1 of this test's job
+  local p
+  for p in $(pgrep -f -- "$T -q --threads 1 run uniform.f64 -o killed.tets" || true); do
+    tr '\0' '\n' <"/proc/$p/environ" 2>/dev/null | grep -qx "OMPI_COMM_WORLD_RANK=$1" && { echo "$p"; return; }
+  done
+}
+mpi 3 "$T" -q --threads 1 run uniform.f64 -o killed.tets --memory 32M --segment-points 4000 2>killed.err &
+job=$!
+for _ in $(seq 600); do
+  python3 -c "import json,sys; sys.exit(0 if json.load(open('killed.tets.ckpt/rank-2.json'))['output']['segments'] >= 2 else 1)" \
+    2>/dev/null && break
+  sleep 0.05
+done
+pid=$(rank_pid 2)
+[ -n "$pid" ] || fail "rank 2 not found (the job ended before it could be killed?)"
+kill -9 "$pid"
+wait "$job" && fail "the job went on after a rank was killed"
+[ ! -e killed.tets ] || fail "a killed job left an output under its final name"
+mpi 3 "$T" -q --threads 1 run uniform.f64 -o killed.tets --memory 32M --segment-points 4000 --resume
+cmp uniform-f64-1p.tets killed.tets || fail "resumed after rank 2 was killed: other bytes than one process"
+[ ! -e killed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
+ls | grep -q '^tetstream-run-' && fail "a work directory was left behind"
 
 # Bad input (rank 0 sorts it): exit 1, one line naming the file and the offset.
 head -c 1000 uniform.f64 >truncated.f64
@@ -87,8 +124,8 @@ set -e
 [ "$(grep -c 'tetstream: error:' bad.err)" = 1 ] && grep -q "truncated.f64" bad.err || { cat bad.err >&2; fail "bad input: not one line naming the file"; }
 [ ! -e bad.tets ] && [ ! -e bad.tets.partial ] || fail "bad input left an output"
 
-# Not distributed yet, refused with one line and exit 2: --resume, and other commands.
-for cmd in "run uniform.f64 -o r.tets --memory 32M --resume" "info uniform-f64-1p.tets"; do
+# Not distributed yet, refused with one line and exit 2: other commands than run.
+for cmd in "info uniform-f64-1p.tets" "verify uniform-f64-1p.tets"; do
   set +e
   # shellcheck disable=SC2086
   mpi 2 "$T" -q $cmd 2>refused.err
