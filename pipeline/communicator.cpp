@@ -14,6 +14,7 @@ class SingleProcess final : public Communicator {
   std::vector<std::uint64_t> all_gather(std::uint64_t value) override { return {value}; }
   std::string broadcast(const std::string& bytes, int) override { return bytes; }
   std::vector<std::string> gather(const std::string& bytes, int) override { return {bytes}; }
+  std::uint64_t bytes_sent() const override { return 0; }
 };
 
 }  // namespace

@@ -40,6 +40,10 @@ class Communicator {
   virtual std::string broadcast(const std::string& bytes, int root) = 0;
   // Every rank's bytes, by rank, on `root` (empty elsewhere).
   virtual std::vector<std::string> gather(const std::string& bytes, int root) = 0;
+  // The bytes this rank has handed to the calls above as a sender (counts, codes,
+  // payloads; a broadcast's payload counted once, at its root): what a job's ranks
+  // tell each other, as opposed to what they share through files.
+  virtual std::uint64_t bytes_sent() const = 0;
 };
 
 // One process of its own: rank 0 of 1.

@@ -158,8 +158,10 @@ RunSummary Job::run() {
 
   // ---- index: the spatial index and the global hull ----
   IndexStage index(sorted, threads_);
+  const auto index_start = StageClock::now();
   index.prepare();
   index.run();
+  summary.seconds_index = seconds_since(index_start);
   summary.hull_vertices = index.view().hull_points.size();
 
   // The triangulation's shares of the ledger, from the indexes as built, with the

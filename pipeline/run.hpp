@@ -81,6 +81,7 @@ struct RunSummary {
   // Wall clock. seconds_write: the segment loop waiting on the writer stage (a full
   // queue, checkpoints) and the writer's finish; its own work is seconds_writer_busy.
   double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;
+  double seconds_index = 0;  // the indexes and the global hull (under mpirun: the slowest rank)
   double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
   double seconds_writer_busy = 0;  // the writer thread compressing and writing (overlapped)
   double seconds_writer_wait = 0;  // the segment loop blocked on the writer (full queue, drains)
@@ -93,7 +94,8 @@ struct RunSummary {
   struct Rank {
     std::uint64_t first_label = 0, end_label = 0;  // the labels whose tets it wrote
     std::uint64_t segments = 0, zones = 0, tets = 0;
-    std::uint64_t frame_bytes = 0;  // of its frames
+    std::uint64_t frame_bytes = 0;    // of its frames
+    std::uint64_t message_bytes = 0;  // it sent to the other ranks (Communicator::bytes_sent)
     double seconds_index = 0, seconds_triangulate = 0, seconds_write = 0;
   };
   std::vector<Rank> ranks;

@@ -82,7 +82,8 @@ json rank_json(const RunSummary::Rank& r, const WrittenWork& work) {
           {"segments", r.segments},             {"zones", r.zones},
           {"tets", r.tets},                     {"frame_bytes", r.frame_bytes},
           {"seconds_index", r.seconds_index},   {"seconds_triangulate", r.seconds_triangulate},
-          {"seconds_write", r.seconds_write},   {"work", counters_json(work)}};
+          {"seconds_write", r.seconds_write},   {"message_bytes", r.message_bytes},
+          {"work", counters_json(work)}};
 }
 
 RunSummary::Rank rank_from(const json& j) {
@@ -96,6 +97,7 @@ RunSummary::Rank rank_from(const json& j) {
   r.seconds_index = j.at("seconds_index").get<double>();
   r.seconds_triangulate = j.at("seconds_triangulate").get<double>();
   r.seconds_write = j.at("seconds_write").get<double>();
+  r.message_bytes = j.at("message_bytes").get<std::uint64_t>();
   return r;
 }
 
@@ -206,6 +208,8 @@ class RankJob {
       mine.seconds_write = write.seconds();
     });
     mine.tets = work.stats.tets;
+    // Up to this summary; the summaries and the last agreements add a few hundred bytes.
+    mine.message_bytes = comm_.bytes_sent();
 
     // ---- assemble: rank 0 appends the fragments, then the index and footer ----
     const std::vector<std::string> ranks = comm_.gather(rank_json(mine, work).dump(), 0);
@@ -233,6 +237,7 @@ class RankJob {
         all.zone_points += w.zone_points;
         summary.segments += summary.ranks.back().segments;
         summary.zones += summary.ranks.back().zones;
+        summary.seconds_index = std::max(summary.seconds_index, summary.ranks.back().seconds_index);
         summary.seconds_triangulate = std::max(summary.seconds_triangulate, summary.ranks.back().seconds_triangulate);
       }
       record_work(all, summary);

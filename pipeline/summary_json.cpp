@@ -33,6 +33,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
           {"tet_bytes", s.tet_bytes},
           {"bytes_per_tet", s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0},
           {"seconds", {{"sort", s.seconds_sort},
+                       {"index", s.seconds_index},
                        {"segments_summed", s.seconds_segments},
                        {"segments_build_summed", s.seconds_build},
                        {"segments_check_summed", s.seconds_check},
@@ -58,6 +59,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
                        {"zones", r.zones},
                        {"tets", r.tets},
                        {"frame_bytes", r.frame_bytes},
+                       {"message_bytes", r.message_bytes},
                        {"seconds", {{"index", r.seconds_index},
                                     {"triangulate", r.seconds_triangulate},
                                     {"write", r.seconds_write}}}});

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 #include <omp.h>
+#include <sched.h>
 
 namespace tetstream::cli {
 
@@ -35,6 +36,20 @@ constexpr const char* kExitCodes =
     "  2  usage error (unknown option, bad value; a checkpoint exists, or belongs to other input or options)\n"
     "  3  I/O or resource failure (unreadable file, disk full, out of memory): run keeps its checkpoint\n"
     "  130  interrupted (Ctrl-C, SIGTERM): no output under its final name; run keeps its checkpoint\n";
+
+// A process allowed fewer cores than --threads asks for runs its threads in turn, at
+// the speed of fewer threads and with the memory of more. The usual cause: mpirun
+// binds each rank to one core by default (OpenMPI, for two ranks or fewer).
+void warn_if_fewer_cores_than_threads(int threads) {
+  cpu_set_t allowed;
+  CPU_ZERO(&allowed);
+  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return;
+  const int cores = CPU_COUNT(&allowed);
+  if (cores > 0 && threads > cores)
+    spdlog::warn("--threads {} but this process may run on {} core{} (its CPU affinity; under mpirun, add "
+                 "--bind-to none, or give each rank its cores with --map-by ...:PE={}): the threads will take turns",
+                 threads, cores, cores == 1 ? "" : "s", threads);
+}
 
 // Edit distance, for "unknown subcommand runn; did you mean run?".
 std::size_t edit_distance(const std::string& a, const std::string& b) {
@@ -144,7 +159,10 @@ int main(int argc, char** argv) {
         }
     configure_logging(ctx.global);
     pipeline::install_interrupt_handlers();
-    if (ctx.global.threads > 0) omp_set_num_threads(ctx.global.threads);
+    if (ctx.global.threads > 0) {
+      omp_set_num_threads(ctx.global.threads);
+      warn_if_fewer_cores_than_threads(ctx.global.threads);
+    }
   });
 
   try {

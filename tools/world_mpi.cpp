@@ -35,11 +35,13 @@ class MpiWorld final : public Communicator {
   int size() const override { return size_; }
   int agree(int code) override {
     int all = 0;
+    sent_ += sizeof code;
     check(MPI_Allreduce(&code, &all, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD), "agree");
     return all;
   }
   std::vector<std::uint64_t> all_gather(std::uint64_t value) override {
     std::vector<std::uint64_t> all(static_cast<std::size_t>(size_));
+    sent_ += sizeof value;
     check(MPI_Allgather(&value, 1, MPI_UINT64_T, all.data(), 1, MPI_UINT64_T, MPI_COMM_WORLD), "all_gather");
     return all;
   }
@@ -47,6 +49,7 @@ class MpiWorld final : public Communicator {
     std::uint64_t n = bytes.size();
     check(MPI_Bcast(&n, 1, MPI_UINT64_T, root, MPI_COMM_WORLD), "broadcast");
     std::string out = rank_ == root ? bytes : std::string(std::size_t(n), '\0');
+    if (rank_ == root) sent_ += sizeof n + n;
     // Bytes beyond 2^31 in pieces (MPI counts are int).
     for (std::uint64_t at = 0; at < n;) {
       const int piece = int(std::min<std::uint64_t>(n - at, std::uint64_t(1) << 30));
@@ -58,6 +61,7 @@ class MpiWorld final : public Communicator {
   std::vector<std::string> gather(const std::string& bytes, int root) override {
     // Small messages (summaries, paths): one count, then one Gatherv.
     const int n = int(bytes.size());
+    sent_ += sizeof n + bytes.size();
     std::vector<int> counts(static_cast<std::size_t>(size_)), displs(static_cast<std::size_t>(size_));
     check(MPI_Gather(&n, 1, MPI_INT, counts.data(), 1, MPI_INT, root, MPI_COMM_WORLD), "gather");
     std::string all;
@@ -75,9 +79,11 @@ class MpiWorld final : public Communicator {
         out.push_back(all.substr(std::size_t(displs[std::size_t(r)]), std::size_t(counts[std::size_t(r)])));
     return out;
   }
+  std::uint64_t bytes_sent() const override { return sent_; }
 
  private:
   int rank_ = 0, size_ = 1;
+  std::uint64_t sent_ = 0;
 };
 
 std::optional<MpiWorld>& the_world() {

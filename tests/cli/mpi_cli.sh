@@ -57,6 +57,13 @@ assert all(r["tets"] > 0 for r in ranks), ranks  # every rank wrote some
 assert sum(r["tets"] for r in ranks) == s["tets"], (ranks, s["tets"])
 assert ranks[0]["labels"][0] == 0 and ranks[-1]["labels"][1] == s["points"]
 assert all(a["labels"][1] == b["labels"][0] for a, b in zip(ranks, ranks[1:])), ranks
+# Ranks tell each other summaries only (the points and tets go through files): every
+# rank sent something, a few kilobytes; rank 0 also the sorted file's description,
+# whose hull labels (written as decimal text) grow with the hull.
+assert s["seconds"]["index"] == max(r["seconds"]["index"] for r in ranks), s["seconds"]
+sent = [r["message_bytes"] for r in ranks]
+assert all(0 < b < 64 * 1024 for b in sent[1:]), sent
+assert 0 < sent[0] < 64 * 1024 + 24 * s["hull_vertices"], (sent, s["hull_vertices"])
 PY
     fi
   done

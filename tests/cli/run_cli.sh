@@ -123,4 +123,14 @@ no_leftovers
 # Without a checkpoint, Ctrl-C leaves nothing behind.
 interrupt_run big2.tets --no-checkpoint
 no_leftovers
+# More threads than the cores the process may use (as under mpirun's default binding):
+# one warning that says so and how to fix it; the job goes on.
+if command -v taskset >/dev/null; then
+  taskset -c 0 "$T" -q --threads 2 run points.f64 -o bound.tets --memory 64M --no-checkpoint 2>bound.err ||
+    fail "a run bound to one core: exit $?"
+  grep -q "may run on 1 core" bound.err || fail "no warning for --threads 2 on one core: $(cat bound.err)"
+  "$T" -q --threads 1 run points.f64 -o unbound.tets --memory 64M --no-checkpoint 2>unbound.err
+  [ ! -s unbound.err ] || fail "a warning for --threads 1: $(cat unbound.err)"
+  cmp bound.tets unbound.tets || fail "one core and two threads wrote other bytes"
+fi
 echo "run_cli: all checks passed"
