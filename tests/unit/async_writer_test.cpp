@@ -10,7 +10,7 @@
 #include "io/tet_writer.hpp"
 #include "pipeline/async_tet_writer.hpp"
 #include "pipeline/bounded_queue.hpp"
-#include "pipeline/temp_files.hpp"
+#include "scratch_dir.hpp"
 
 #include <gtest/gtest.h>
 
@@ -39,11 +39,19 @@ namespace {
 // ---------------------------------------------------------------- fixtures
 
 // A hang (a lost wake-up, a join that never returns) kills the test after a minute.
-class Watchdog : public ::testing::Test {
+// Its files go in a scratch directory of the test's own, removed with all it holds
+// (pipeline::TempDir would remove only the names a job makes, and left these behind).
+class Watchdog : public testing_util::ScratchDirTest {
  protected:
-  void SetUp() override { ::alarm(60); }
-  void TearDown() override { ::alarm(0); }
-  pipeline::TempDir tmp{fs::temp_directory_path().string(), "tetstream-async-writer"};
+  Watchdog() : ScratchDirTest("async-writer") {}
+  void SetUp() override {
+    ScratchDirTest::SetUp();
+    ::alarm(60);
+  }
+  void TearDown() override {
+    ::alarm(0);
+    ScratchDirTest::TearDown();
+  }
 };
 using KeepPartial = Watchdog;
 using BoundedQueueTest = Watchdog;
@@ -167,7 +175,7 @@ void record(Outcome& out, F&& call) {
 // ---------------------------------------------------------------- keep_partial
 
 TEST_F(KeepPartial, OutputFileRemovesThePartialFileUnlessKept) {
-  const std::string path = tmp.path("plain.bin");
+  const std::string path = this->path("plain.bin");
   {
     io::OutputFile f(path);
     f.write("abc");
@@ -208,7 +216,7 @@ TEST_F(KeepPartial, OutputFileRemovesThePartialFileUnlessKept) {
 
 TEST_F(KeepPartial, TetWriterKeepsThePartialFileForAResume) {
   const Job job = make_job(2000, {700, 500, 900, 400}, 1);
-  const std::string whole = tmp.path("whole.tets"), path = tmp.path("job.tets");
+  const std::string whole = this->path("whole.tets"), path = this->path("job.tets");
   io::TetWriterOptions o = small_frames();
   write_directly(whole, job, o);
 
@@ -346,7 +354,7 @@ TEST_F(AsyncTetWriterTest, WritesTheSameBytesAsTheWriter) {
   // Odd sizes, an empty batch, batches below and above the frame size.
   const Job job = make_job(3000, {1000, 1, 0, 299, 300, 301, 2500, 17, 1200, 640, 0, 333}, 2);
   const io::TetWriterOptions o = small_frames();
-  const std::string direct = tmp.path("direct.tets");
+  const std::string direct = this->path("direct.tets");
   std::uint64_t direct_checkpoint = 0;
   {
     auto w = open_writer(direct, job, o);
@@ -357,7 +365,7 @@ TEST_F(AsyncTetWriterTest, WritesTheSameBytesAsTheWriter) {
     w->finish();
   }
   for (const std::size_t capacity : {1, 3}) {
-    const std::string path = tmp.path("async-" + std::to_string(capacity) + ".tets");
+    const std::string path = this->path("async-" + std::to_string(capacity) + ".tets");
     auto w = open_writer(path, job, o);
     AsyncTetWriter out(*w, capacity);
     for (std::size_t i = 0; i < job.batches.size(); ++i) {
@@ -391,7 +399,7 @@ TEST_F(AsyncTetWriterTest, GatheredBatchesAndQueuedCheckpointsWriteTheSameBytes)
   // checkpoint reports the bytes the direct writer had at that point.
   const Job job = make_job(3000, {1000, 1, 0, 299, 300, 301, 2500, 17, 1200, 640, 0, 333}, 4);
   io::TetWriterOptions o = small_frames();
-  const std::string direct = tmp.path("direct-gather.tets");
+  const std::string direct = this->path("direct-gather.tets");
   std::vector<std::uint64_t> direct_checkpoints;
   {
     auto w = open_writer(direct, job, o);
@@ -403,7 +411,7 @@ TEST_F(AsyncTetWriterTest, GatheredBatchesAndQueuedCheckpointsWriteTheSameBytes)
   }
   o.threads = 3;
   for (const std::size_t gather : {1, 2, 3, 5}) {
-    const std::string path = tmp.path("gather-" + std::to_string(gather) + ".tets");
+    const std::string path = this->path("gather-" + std::to_string(gather) + ".tets");
     auto w = open_writer(path, job, o);
     AsyncTetWriter out(*w, 4, gather);
     std::vector<std::uint64_t> seen;  // written by the writer's thread, read after drain()
@@ -420,7 +428,7 @@ TEST_F(AsyncTetWriterTest, GatheredBatchesAndQueuedCheckpointsWriteTheSameBytes)
 
 TEST_F(AsyncTetWriterTest, AFailingCheckpointIsReportedOnce) {
   const Job job = make_job(1000, {400, 400, 400}, 5);
-  auto w = open_writer(tmp.path("failing-checkpoint.tets"), job, small_frames());
+  auto w = open_writer(this->path("failing-checkpoint.tets"), job, small_frames());
   AsyncTetWriter out(*w, 2, 2);
   Outcome outcome;
   record(outcome, [&] { out.add_tets(std::span<const std::uint64_t>(job.batches[0])); });
@@ -435,7 +443,7 @@ TEST_F(AsyncTetWriterTest, AFailingCheckpointIsReportedOnce) {
 
 TEST_F(AsyncTetWriterTest, RecyclesItsBuffers) {
   const Job job = make_job(1000, {400, 400, 400, 400, 400, 400}, 3);
-  auto w = open_writer(tmp.path("recycle.tets"), job, small_frames());
+  auto w = open_writer(this->path("recycle.tets"), job, small_frames());
   AsyncTetWriter out(*w, 2);
   std::vector<const std::uint64_t*> handed;  // the buffers given away
   for (const auto& b : job.batches) {
@@ -462,7 +470,7 @@ TEST_F(AsyncTetWriterTest, RecyclesItsBuffers) {
 
 TEST_F(AsyncTetWriterTest, ReportsMisuseOnTheProducerSide) {
   const Job job = make_job(500, {100, 100}, 4);
-  auto w = open_writer(tmp.path("misuse.tets"), job, small_frames());
+  auto w = open_writer(this->path("misuse.tets"), job, small_frames());
   AsyncTetWriter out(*w, 2);
   // Checked at once, on the caller's thread: nothing is queued.
   EXPECT_THROW(out.add_tets(std::vector<std::uint64_t>{1, 2, 3, 4, 5}), std::invalid_argument);
@@ -483,7 +491,7 @@ TEST_F(AsyncTetWriterTest, ReportsMisuseOnTheProducerSide) {
 
 TEST_F(AsyncTetWriterTest, DestroyedWithoutFinishStopsAndLeavesNoFile) {
   const Job job = make_job(2000, std::vector<std::size_t>(12, 1500), 5);
-  const std::string path = tmp.path("abandoned.tets");
+  const std::string path = this->path("abandoned.tets");
   {
     auto w = open_writer(path, job, small_frames());
     {
@@ -520,7 +528,7 @@ Outcome push_until_the_disk_is_full(const Job& job, io::TetWriter& w, std::size_
 
 TEST_F(AsyncTetWriterTest, DiskFullIsReportedOnceAndRemovesThePartialFile) {
   const Job job = make_job(50000, std::vector<std::size_t>(100, 2000), 6);
-  const std::string path = tmp.path("full.tets");
+  const std::string path = this->path("full.tets");
   io::TetWriterOptions o = small_frames();
   o.buffer_bytes = 4096;  // small, so writes reach the file batch by batch
   Outcome outcome;
@@ -541,7 +549,7 @@ TEST_F(AsyncTetWriterTest, DiskFullSurfacesInCheckpoint) {
   // One batch, which cannot fit: add_tets() returns (nothing has failed yet when it is
   // called), and the failure comes out of the drain in checkpoint().
   const Job job = make_job(50000, {2000}, 7);
-  const std::string path = tmp.path("drain.tets");
+  const std::string path = this->path("drain.tets");
   io::TetWriterOptions o = small_frames();
   o.buffer_bytes = 4096;
   auto w = open_writer(path, job, o);
@@ -558,7 +566,7 @@ TEST_F(AsyncTetWriterTest, DiskFullSurfacesInCheckpoint) {
 
 TEST_F(AsyncTetWriterTest, DiskFullWithKeepPartialCanBeResumed) {
   const Job job = make_job(50000, std::vector<std::size_t>(40, 2000), 8);
-  const std::string whole = tmp.path("whole.tets"), path = tmp.path("resumable.tets");
+  const std::string whole = this->path("whole.tets"), path = this->path("resumable.tets");
   io::TetWriterOptions o = small_frames();
   o.buffer_bytes = 4096;
   write_directly(whole, job, o);
