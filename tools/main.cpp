@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <new>
 #include <optional>
@@ -17,6 +18,7 @@
 #include <vector>
 #include <omp.h>
 #include <sched.h>
+#include <unistd.h>
 
 namespace tetstream::cli {
 
@@ -40,15 +42,34 @@ constexpr const char* kExitCodes =
 // A process allowed fewer cores than --threads asks for runs its threads in turn, at
 // the speed of fewer threads and with the memory of more. The usual cause: mpirun
 // binds each rank to one core by default (OpenMPI, for two ranks or fewer).
-void warn_if_fewer_cores_than_threads(int threads) {
+int cores_allowed() {
   cpu_set_t allowed;
   CPU_ZERO(&allowed);
-  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return;
-  const int cores = CPU_COUNT(&allowed);
+  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return 0;
+  return CPU_COUNT(&allowed);
+}
+
+void warn_if_fewer_cores_than_threads(int threads) {
+  const int cores = cores_allowed();
   if (cores > 0 && threads > cores)
     spdlog::warn("--threads {} but this process may run on {} core{} (its CPU affinity; under mpirun, add "
                  "--bind-to none, or give each rank its cores with --map-by ...:PE={}): the threads will take turns",
                  threads, cores, cores == 1 ? "" : "s", threads);
+}
+
+// Without --threads a rank takes the cores its affinity allows; with mpirun's default
+// binding that is one core a rank, however many the node has. Said (by rank 0) when
+// the ranks on this node may use fewer cores than it has.
+void warn_if_ranks_leave_cores_idle() {
+  const char* local = std::getenv("OMPI_COMM_WORLD_LOCAL_SIZE");
+  if (!local) local = std::getenv("MPI_LOCALNRANKS");
+  const int ranks_here = local ? std::atoi(local) : 0;
+  const int cores = cores_allowed();
+  const long online = ::sysconf(_SC_NPROCESSORS_ONLN);
+  if (ranks_here > 0 && cores > 0 && long(ranks_here) * cores < online)
+    spdlog::warn("each rank may use {} of this node's {} cores ({} rank{} here; mpirun binds ranks to cores): for "
+                 "more threads a rank, add --bind-to none, or --map-by ppr:R:node:PE=T with --threads T",
+                 cores, online, ranks_here, ranks_here == 1 ? "" : "s");
 }
 
 // Edit distance, for "unknown subcommand runn; did you mean run?".
@@ -162,6 +183,8 @@ int main(int argc, char** argv) {
     if (ctx.global.threads > 0) {
       omp_set_num_threads(ctx.global.threads);
       warn_if_fewer_cores_than_threads(ctx.global.threads);
+    } else {
+      warn_if_ranks_leave_cores_idle();  // only under a launcher (its environment says how many ranks)
     }
   });
 

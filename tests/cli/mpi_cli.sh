@@ -140,4 +140,15 @@ for cmd in "info uniform-f64-1p.tets" "verify uniform-f64-1p.tets"; do
   set -e
   [ "$rc" = 2 ] && [ "$(grep -c 'tetstream: error:' refused.err)" = 1 ] || { cat refused.err >&2; fail "'$cmd' under mpirun: exit $rc"; }
 done
+
+# A rank left on one core of several by mpirun's binding says so, once; unbound, or
+# with as many ranks as cores, it does not (2 cores or more; OpenMPI binds one or two
+# ranks to a core each by default).
+if [ "$(nproc)" -ge 2 ] && [ "$(nproc)" -le 64 ]; then
+  mpirun -q -n 1 "$T" -q run grid.f64 -o bound.tets --memory 32M --no-checkpoint 2>bound.err
+  grep -q "each rank may use 1 of this node's" bound.err || { cat bound.err >&2; fail "no warning for a rank bound to one core"; }
+  mpirun -q --bind-to none -n 1 "$T" -q run grid.f64 -o unbound.tets --memory 32M --no-checkpoint 2>unbound.err
+  [ ! -s unbound.err ] || { cat unbound.err >&2; fail "a warning for an unbound rank"; }
+  cmp bound.tets unbound.tets || fail "a bound rank wrote other bytes"
+fi
 echo "mpi_cli: OK"
