@@ -237,6 +237,18 @@ void OutputFile::write_at(std::uint64_t offset, const void* data, std::size_t n)
   if (!pwrite_exactly(fd_, data, n, offset)) fail("write failed", partial_);
 }
 
+void OutputFile::skip(std::uint64_t n) {
+  if (stream_) throw std::logic_error("OutputFile: standard output cannot skip");
+  flush();
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0) fail("stat failed", partial_);
+  if (std::uint64_t(st.st_size) < flushed_ + n)
+    throw IoError(partial_ + ": " + std::to_string(flushed_ + n) + " bytes expected, " + std::to_string(st.st_size) +
+                  " found (another process's part is missing)");
+  flushed_ += n;
+  if (::lseek(fd_, off_t(flushed_), SEEK_SET) < 0) fail("seek failed", partial_);
+}
+
 void OutputFile::read_at(std::uint64_t offset, void* data, std::size_t n) const {
   if (stream_) throw std::logic_error("OutputFile: standard output cannot be read back");
   if (!pread_exactly(fd_, data, n, offset)) fail("read back failed", partial_);

@@ -91,6 +91,10 @@ class OutputFile {
   // Overwrites `n` bytes already written at `offset` (offset + n <= offset()): headers
   // whose values are known only at the end. Flushes first. Not on standard output.
   void write_at(std::uint64_t offset, const void* data, std::size_t n);
+  // The next n bytes were written into PATH.partial by other processes (pwrite, from
+  // offset() on): flushes, checks that the file holds them, and goes on after them.
+  // Not on standard output.
+  void skip(std::uint64_t n);
   // Reads back `n` bytes at `offset` (< the flushed size), for a resumed writer's checks.
   void read_at(std::uint64_t offset, void* data, std::size_t n) const;
   // Flushes, syncs (if asked), closes and renames PATH.partial to PATH.

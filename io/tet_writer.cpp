@@ -189,34 +189,103 @@ std::unique_ptr<TetWriter> TetWriter::fragment(std::string path, TetFileHeader h
   return w;
 }
 
+namespace {
+
+// A file opened without following a link, closed on scope exit; a regular file only.
+struct OpenedRegular {
+  int fd = -1;
+  struct stat st {};
+  OpenedRegular(const std::string& path, int flags, const char* what) {
+    fd = ::open(path.c_str(), flags | O_NOFOLLOW | O_CLOEXEC);
+    if (fd < 0) throw IoError(path + ": cannot open " + what + ": " + std::strerror(errno));
+    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+      ::close(fd);
+      throw IoError(path + ": not a regular file");
+    }
+  }
+  ~OpenedRegular() { ::close(fd); }
+  OpenedRegular(const OpenedRegular&) = delete;
+  OpenedRegular& operator=(const OpenedRegular&) = delete;
+};
+
+// Walks the frames of a fragment file (it was made by this job, in its own directory:
+// a regular file, not through a link), checking each one's section, CRC and header;
+// `on_frame(at, len, section, header)` sees each, `section` holding its payload and CRC.
+template <class OnFrame>
+void for_each_fragment_frame(const std::string& path, std::uint64_t point_count, OnFrame&& on_frame) {
+  const OpenedRegular file(path, O_RDONLY, "a fragment");
+  const std::uint64_t end = std::uint64_t(file.st.st_size);
+  auto read = [&](std::uint64_t offset, void* data, std::size_t n) {
+    if (!pread_exactly(file.fd, data, n, offset)) throw IoError(path + ": read failed: " + std::strerror(errno));
+  };
+  std::vector<std::uint8_t> section;
+  std::size_t frame = 0;
+  for (std::uint64_t at = 0; at < end; ++frame) {
+    FrameHeader fh;
+    const std::uint64_t len = read_frame_section(read, path, at, end, frame, section, fh);
+    if (fh.max_label >= point_count)
+      throw InputError::at_byte(path, at, "label " + std::to_string(fh.max_label) + " is not below the point count");
+    on_frame(at, len, section, fh);
+    at += kSectionHeaderSize + len + kSectionTrailerSize;
+  }
+}
+
+}  // namespace
+
 void TetWriter::add_fragment(const std::string& path) {
   if (finished_ || fragment_) throw std::logic_error("TetWriter: add_fragment to a fragment or after finish");
   if (points_ != header_.point_count) throw std::logic_error("TetWriter: a fragment before all points");
-  // Not through a link, and only a regular file: the job made it, in its own directory.
-  const int fd = ::open(path.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
-  if (fd < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
-  struct Close {
-    int fd;
-    ~Close() { ::close(fd); }
-  } closer{fd};
-  struct stat st {};
-  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) throw IoError(path + ": not a regular file");
-  const std::uint64_t end = std::uint64_t(st.st_size);
-  auto read = [&](std::uint64_t offset, void* data, std::size_t n) {
-    if (!pread_exactly(fd, data, n, offset)) throw IoError(path + ": read failed: " + std::strerror(errno));
-  };
-  std::vector<std::uint8_t> section;
-  for (std::uint64_t at = 0; at < end;) {
-    FrameHeader fh;
-    const std::uint64_t len = read_frame_section(read, path, at, end, frames_.size(), section, fh);
-    if (fh.max_label >= header_.point_count)
-      throw InputError::at_byte(path, at, "label " + std::to_string(fh.max_label) + " is not below the point count");
-    frames_.push_back({out_->offset(), tets_, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
-    write_section_start(kTagFrame, len);
-    out_->write(section.data(), section.size());  // the payload and its CRC
-    tets_ += fh.tet_count;
-    at += kSectionHeaderSize + len + kSectionTrailerSize;
+  for_each_fragment_frame(path, header_.point_count,
+                          [&](std::uint64_t, std::uint64_t len, const std::vector<std::uint8_t>& section,
+                              const FrameHeader& fh) {
+                            frames_.push_back({out_->offset(), tets_, fh.tet_count, std::uint32_t(len),
+                                               fh.base_label, fh.max_label});
+                            write_section_start(kTagFrame, len);
+                            out_->write(section.data(), section.size());  // the payload and its CRC
+                            tets_ += fh.tet_count;
+                          });
+}
+
+std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::string& container_partial,
+                                       std::uint64_t at, std::uint64_t point_count,
+                                       std::pair<std::uint64_t, std::uint64_t> container_file) {
+  const OpenedRegular out(container_partial, O_WRONLY, "the container");
+  if (std::uint64_t(out.st.st_dev) != container_file.first || std::uint64_t(out.st.st_ino) != container_file.second)
+    throw IoError(container_partial + ": not the file this job is writing (it was replaced)");
+  std::vector<FrameEntry> placed;
+  std::uint64_t tets = 0, offset = at;
+  for_each_fragment_frame(fragment, point_count,
+                          [&](std::uint64_t, std::uint64_t len, const std::vector<std::uint8_t>& section,
+                              const FrameHeader& fh) {
+                            placed.push_back({offset, tets, fh.tet_count, std::uint32_t(len), fh.base_label,
+                                              fh.max_label});
+                            // The bytes TetWriter::add_fragment would write here.
+                            const auto h = section_header(kTagFrame, kSectionCritical, len);
+                            if (!pwrite_exactly(out.fd, h.data(), h.size(), offset) ||
+                                !pwrite_exactly(out.fd, section.data(), section.size(), offset + h.size()))
+                              throw IoError(container_partial + ": write failed: " + std::strerror(errno));
+                            offset += h.size() + section.size();
+                            tets += fh.tet_count;
+                          });
+  if (::fdatasync(out.fd) != 0) throw IoError(container_partial + ": fdatasync failed: " + std::strerror(errno));
+  return placed;
+}
+
+void TetWriter::adopt_placed_frames(std::span<const FrameEntry> frames, std::uint64_t bytes) {
+  if (finished_ || fragment_) throw std::logic_error("TetWriter: adopt_placed_frames to a fragment or after finish");
+  if (points_ != header_.point_count) throw std::logic_error("TetWriter: frames before all points");
+  out_->flush();
+  const std::uint64_t from = out_->offset();
+  std::uint64_t expected = from;
+  for (const FrameEntry& f : frames) {
+    if (f.offset != expected || f.max_label >= header_.point_count)
+      throw std::logic_error("TetWriter: placed frames out of order or out of range");
+    frames_.push_back({f.offset, tets_, f.tet_count, f.length, f.base_label, f.max_label});
+    tets_ += f.tet_count;
+    expected += kSectionHeaderSize + f.length + kSectionTrailerSize;
   }
+  if (expected != from + bytes) throw std::logic_error("TetWriter: placed frames do not fill the bytes given");
+  out_->skip(bytes);
 }
 
 TetWriter::~TetWriter() = default;  // out_'s destructor removes the partial file unless finished or kept

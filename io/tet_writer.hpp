@@ -64,6 +64,19 @@ struct TetWriterOptions {
 // follows them.
 std::vector<std::uint8_t> leading_bytes(const TetFileHeader& header);
 
+// Copies the frames of a finished fragment file (TetWriter::fragment()) into the
+// partial file of a container that another process is writing, from byte `at` on, with
+// pwrite; checks each frame's section, CRC and header as TetWriter::add_fragment does
+// (InputError naming the file and the offset), and syncs what it wrote. Neither file is
+// opened through a link; the container must be the regular file `container_file`
+// (st_dev, st_ino) names. Returns the frames as placed (absolute offsets; first_tet
+// counted from the fragment's first tet), for that writer's adopt_placed_frames(). So
+// the ranks of a job under MPI put their own frames in place side by side, and rank 0
+// copies nothing.
+std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::string& container_partial,
+                                       std::uint64_t at, std::uint64_t point_count,
+                                       std::pair<std::uint64_t, std::uint64_t> container_file);
+
 class TetWriter {
  public:
   // Creates PATH.partial and writes the preamble and HEAD. The header's widths are
@@ -112,6 +125,10 @@ class TetWriter {
   // link) as the next frames, checking each one's section, CRC and frame header
   // (InputError naming the file and the offset otherwise).
   void add_fragment(const std::string& path);
+  // The frames that place_fragment() put into this container's partial file after its
+  // last byte (`bytes` of them; `frames` in order, their offsets absolute): indexed as
+  // its next frames, as add_fragment() would have written them. Flushes first.
+  void adopt_placed_frames(std::span<const FrameEntry> frames, std::uint64_t bytes);
 
   // Flushes (and syncs, if options.sync) everything written so far and returns the
   // size of the partial file: the `committed` argument of resume(). Call it between

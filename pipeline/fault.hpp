@@ -3,7 +3,8 @@
 // (0-based) passage through SITE throw IoError, exactly as a real failure there would
 // (a full disk, a failing device). Sites: "sort-run" (a finished sort run),
 // "segment" (a worker triangulating segment N of the plan), "write" (the writer
-// taking segment N's tets). Unset, it costs one relaxed load per call.
+// taking segment N's tets), "place" (a rank of a job under mpirun copying its frames
+// into the output; N = 0). Unset, it costs one relaxed load per call.
 #include <cstdint>
 
 namespace tetstream::pipeline {

@@ -2,8 +2,10 @@
 
 #include "core/error.hpp"
 #include "io/output_file.hpp"
+#include "io/tet_writer.hpp"
 #include "io/point_format.hpp"
 #include "pipeline/disk_meter.hpp"
+#include "pipeline/fault.hpp"
 #include "pipeline/frame_cutter.hpp"
 #include "pipeline/memory_budget.hpp"
 #include "pipeline/progress.hpp"
@@ -17,9 +19,11 @@
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 
 #include <omp.h>
 
+#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -175,8 +179,9 @@ class RankJob {
     if (root)
       spdlog::info("{} ranks: blocks of {} labels, rank 0 from label {} to {}", size, block, mine.first_label,
                    mine.end_label);
-    // A rank whose fragment an earlier process finished (and rank 0 did not yet
-    // assemble) has nothing left to do: rank 0 checks its frames as it appends them.
+    // A rank whose fragment an earlier process finished (the job failed before it
+    // succeeded) has nothing left to triangulate: its frames are checked as it places
+    // them.
     const std::string fragment = context.dir + "/" + fragment_name(comm_.rank());
     const bool fragment_done = !root && state_.contains("output") && state_["output"].value("finishing", false) &&
                                std::filesystem::exists(fragment) && !std::filesystem::exists(fragment + ".partial");
@@ -211,16 +216,62 @@ class RankJob {
     // Up to this summary; the summaries and the last agreements add a few hundred bytes.
     mine.message_bytes = comm_.bytes_sent();
 
-    // ---- assemble: rank 0 appends the fragments, then the index and footer ----
     const std::vector<std::string> ranks = comm_.gather(rank_json(mine, work).dump(), 0);
+
+    // ---- place: every rank copies its own frames into the output, where the ranks
+    // before it end (rank 0's own frames are there already); rank 0 then indexes them
+    // and writes the index and footer. No rank's frames pass through another rank. A
+    // failure here leaves rank 0's record at its own frames: --resume places them
+    // again from the fragments, which stay until the job succeeds. ----
+    const auto place_start = StageClock::now();
+    const std::string partial = options_.output + ".partial";
+    std::string where;  // rank 0: its frames' end, and the output file's identity
+    std::uint64_t fragment_bytes = 0;
+    together(comm_, [&] {
+      if (root) {
+        const std::uint64_t at = write.fragments_offset();
+        struct stat st {};
+        if (::lstat(partial.c_str(), &st) != 0 || !S_ISREG(st.st_mode))
+          throw IoError(partial + ": the output being written is gone or not a regular file");
+        where = json::array({at, std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)}).dump();
+      } else {
+        fragment_bytes = std::filesystem::file_size(fragment);
+      }
+    });
+    const json place = json::parse(comm_.broadcast(where, 0));
+    const std::vector<std::uint64_t> sizes = comm_.all_gather(fragment_bytes);
+    std::string placed;  // this rank's frames as placed: FrameEntry fields, 5 words each
+    together(comm_, [&] {
+      if (root) return;
+      std::uint64_t at = place.at(0).get<std::uint64_t>();
+      for (int r = 1; r < comm_.rank(); ++r) at += sizes[std::size_t(r)];
+      maybe_inject_fault("place", 0);
+      const std::vector<io::FrameEntry> frames =
+          io::place_fragment(fragment, partial, at, sorted.count,
+                             {place.at(1).get<std::uint64_t>(), place.at(2).get<std::uint64_t>()});
+      for (const io::FrameEntry& f : frames) {
+        const std::uint64_t words[5] = {f.offset, f.tet_count, f.length, f.base_label, f.max_label};
+        placed.append(reinterpret_cast<const char*>(words), sizeof words);
+      }
+    });
+    const std::vector<std::string> all_placed = comm_.gather(placed, 0);
+    if (!root) mine.seconds_write += seconds_since(place_start);
     together(comm_, [&] {
       if (!root) return;
-      std::vector<std::string> fragments;
-      for (int r = 1; r < size; ++r) fragments.push_back(context.dir + "/" + fragment_name(r));
-      const auto t0 = StageClock::now();
-      write.add_fragments(std::move(fragments));
+      std::vector<io::FrameEntry> frames;
+      std::uint64_t bytes = 0;
+      for (int r = 1; r < size; ++r) {
+        bytes += sizes[std::size_t(r)];
+        const std::string& text = all_placed[std::size_t(r)];
+        for (std::size_t i = 0; i + 40 <= text.size(); i += 40) {
+          std::uint64_t w[5];
+          std::memcpy(w, text.data() + i, sizeof w);
+          frames.push_back({w[0], 0, std::uint32_t(w[1]), std::uint32_t(w[2]), w[3], w[4]});
+        }
+      }
+      write.adopt_fragments(std::move(frames), bytes);
       write.finish();
-      summary.seconds_write = seconds_since(t0);
+      summary.seconds_write = seconds_since(place_start);
       disk.sample();
       summary.disk_peak_bytes = std::max(disk.peak(), disk.sample());
       summary.output_bytes = write.bytes_written();

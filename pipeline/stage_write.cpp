@@ -257,10 +257,15 @@ void WriteStage::commit(std::uint64_t end_label) {
   seconds_ += seconds_since(t0);
 }
 
-void WriteStage::add_fragments(std::vector<std::string> paths) {
-  async_->add_task([paths = std::move(paths)](io::TetWriter& w) {
-    for (const std::string& p : paths) w.add_fragment(p);
-  });
+std::uint64_t WriteStage::fragments_offset() {
+  const auto t0 = StageClock::now();
+  const std::uint64_t at = async_->checkpoint();  // drains first
+  seconds_ += seconds_since(t0);
+  return at;
+}
+
+void WriteStage::adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes) {
+  async_->add_task([frames = std::move(frames), bytes](io::TetWriter& w) { w.adopt_placed_frames(frames, bytes); });
 }
 
 void WriteStage::finish() {

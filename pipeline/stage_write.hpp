@@ -89,9 +89,13 @@ class WriteStage final : public SegmentSink {
   // range) is in: the last frame, the last record (waiting for the writer), and the
   // mark that only the container's index, footer and rename are left.
   void commit(std::uint64_t end_label = ~std::uint64_t(0));
-  // After commit(): the frames of these fragment files, in order, follow this
-  // process's (the other ranks' label ranges, in label order).
-  void add_fragments(std::vector<std::string> paths);
+  // After commit(), on the process that writes the container: flushes (and syncs) its
+  // frames and returns the output's size, where the other ranks' frames go, their
+  // label ranges in label order (io::place_fragment), before adopt_fragments()
+  // indexes them.
+  std::uint64_t fragments_offset();
+  // The frames others placed after fragments_offset(), `bytes` of them, in order.
+  void adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes);
   // The index, footer and rename (a fragment: its rename). Nothing may follow it.
   void finish();
 

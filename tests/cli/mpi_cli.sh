@@ -75,9 +75,12 @@ done
 # every rank: exit 3, one error line, no output; the checkpoint is kept, a resume on
 # another number of ranks is refused (the split is part of it), and a resume on the
 # same number ends with the bytes of one process.
-run3() { mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M "$@" \
-  : -n 1 -x TETSTREAM_FAULT="${FAULT1:-}" "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M "$@" \
-  : -n 1 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M "$@"; }
+run3() {
+  local out=${OUT3:-failed.tets}
+  mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@" \
+    : -n 1 -x TETSTREAM_FAULT="${FAULT1:-}" "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@" \
+    : -n 1 "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@"
+}
 set +e
 FAULT1=segment:2 run3 2>failed.err
 rc=$?
@@ -95,6 +98,20 @@ set -e
 run3 --resume
 cmp uniform-f64-1p.tets failed.tets || fail "resumed after a failing rank: other bytes than one process"
 [ ! -e failed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
+
+# Rank 1 fails as it copies its frames into the output (every rank has triangulated;
+# ranks 1 and 2 write theirs side by side): the same exit and line, the output not
+# under its final name; --resume places the frames again from the kept fragments.
+set +e
+OUT3=placed.tets FAULT1=place:0 run3 2>placed.err
+rc=$?
+set -e
+[ "$rc" = 3 ] && [ "$(grep -c 'tetstream: error:' placed.err)" = 1 ] && grep -q "injected failure at place:0" placed.err ||
+  { cat placed.err >&2; fail "a rank failing as it places its frames: exit $rc"; }
+[ ! -e placed.tets ] && [ -f placed.tets.ckpt/rank-1.json ] || fail "a failed placement: output present or no checkpoint"
+OUT3=placed.tets run3 --resume
+cmp uniform-f64-1p.tets placed.tets || fail "resumed after a failed placement: other bytes than one process"
+[ ! -e placed.tets.ckpt ] || fail "the checkpoint is left after the resumed placement"
 
 # A rank killed with -9 mid-run (rank 2, once its checkpoint records a segment): mpirun
 # stops the others; --resume with the same ranks ends with the same bytes.

@@ -17,6 +17,7 @@
 #include "io/tet_writer.hpp"
 
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <array>
@@ -507,6 +508,19 @@ struct WrittenWhole {
   }();
   std::vector<std::uint32_t> labels = flatten<std::uint32_t>(m.tets);
   explicit WrittenWhole(const TempDir& tmp) { write_mesh(tmp / "whole.tets", m, h, o, 400); }
+  // The tets [cut1, cut2) and [cut2, end) as fragment files a.tets and b.tets, in
+  // batches of 400 (a batch's frames are cut as it alone would be).
+  void write_fragments(const TempDir& tmp, std::size_t cut1, std::size_t cut2) const {
+    const std::span<const std::uint32_t> all(labels);
+    const std::size_t t = m.tets.size();
+    ASSERT_GT(t, cut2);
+    for (const auto& [first, last, name] : {std::tuple{cut1, cut2, "a.tets"}, std::tuple{cut2, t, "b.tets"}}) {
+      auto f = TetWriter::fragment(tmp / name, h, o);
+      for (std::size_t i = first; i < last; i += 400) f->add_tets(all.subspan(4 * i, 4 * std::min<std::size_t>(400, last - i)));
+      f->finish();
+      EXPECT_FALSE(fs::exists(tmp / (std::string(name) + ".partial")));
+    }
+  }
 };
 
 TEST(Container, ResumeGivesTheSameBytes) {
@@ -557,15 +571,8 @@ TEST(Container, FragmentsAppendToTheSameBytes) {
   const TetFileHeader& h = whole.h;
   const TetWriterOptions& o = whole.o;
   const std::span<const std::uint32_t> all(whole.labels);
-  // Pieces of whole batches (a batch's frames are cut as it alone would be).
-  const std::size_t t = m.tets.size(), cut1 = 400, cut2 = 1200;
-  ASSERT_GT(t, cut2);
-  for (const auto& [first, last, name] : {std::tuple{cut1, cut2, "a.tets"}, std::tuple{cut2, t, "b.tets"}}) {
-    auto f = TetWriter::fragment(tmp / name, h, o);
-    for (std::size_t i = first; i < last; i += 400) f->add_tets(all.subspan(4 * i, 4 * std::min<std::size_t>(400, last - i)));
-    f->finish();
-    EXPECT_FALSE(fs::exists(tmp / (std::string(name) + ".partial")));
-  }
+  const std::size_t cut1 = 400, cut2 = 1200;
+  whole.write_fragments(tmp, cut1, cut2);
   auto assemble = [&](const std::string& out, const std::string& second) {
     TetWriter w(out, h, o);
     w.add_points(m.xyz.data(), m.ids.data(), m.ids.size());
@@ -589,6 +596,56 @@ TEST(Container, FragmentsAppendToTheSameBytes) {
   fs::create_symlink(tmp / "b.tets", tmp / "link.tets");
   EXPECT_THROW(assemble(tmp / "out.tets", tmp / "link.tets"), IoError);
   EXPECT_FALSE(fs::exists(tmp / "out.tets"));
+}
+
+// The same pieces placed side by side (each rank under MPI copies its own fragment
+// into the container with io::place_fragment, the container's writer then indexes
+// them): the bytes of one writer; a replaced container or a linked one is refused.
+TEST(Container, PlacedFragmentsGiveTheSameBytes) {
+  TempDir tmp;
+  const WrittenWhole whole(tmp);
+  whole.write_fragments(tmp, 400, 1200);
+  const auto& [m, h, o, labels] = whole;
+  const std::string out = tmp / "placed.tets", partial = out + ".partial";
+  auto identity = [](const std::string& path) {
+    struct stat st {};
+    EXPECT_EQ(::lstat(path.c_str(), &st), 0);
+    return std::pair<std::uint64_t, std::uint64_t>{std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)};
+  };
+  {
+    TetWriter w(out, h, o);
+    w.add_points(m.xyz.data(), m.ids.data(), m.ids.size());
+    w.add_tets(std::span<const std::uint32_t>(labels).subspan(0, 4 * 400));
+    const std::uint64_t at = w.checkpoint();
+    const std::uint64_t a_bytes = fs::file_size(tmp / "a.tets"), b_bytes = fs::file_size(tmp / "b.tets");
+    // The second piece first (the ranks place in any order), each at its offset.
+    std::vector<FrameEntry> b = place_fragment(tmp / "b.tets", partial, at + a_bytes, h.point_count, identity(partial));
+    std::vector<FrameEntry> frames = place_fragment(tmp / "a.tets", partial, at, h.point_count, identity(partial));
+    ASSERT_FALSE(frames.empty());
+    EXPECT_EQ(frames.front().offset, at);
+    EXPECT_EQ(b.front().offset, at + a_bytes);
+    frames.insert(frames.end(), b.begin(), b.end());
+    w.adopt_placed_frames(frames, a_bytes + b_bytes);
+    w.finish();
+  }
+  EXPECT_EQ(slurp(out), slurp(tmp / "whole.tets"));
+
+  // Not into another file than the one being written (it was replaced), nor through a link.
+  const std::string other = tmp / "other.tets.partial";
+  spit(other, std::vector<std::uint8_t>(16, 0));
+  EXPECT_THROW(place_fragment(tmp / "a.tets", other, 0, h.point_count, identity(out)), IoError);
+  fs::create_symlink(other, tmp / "linked.tets.partial");
+  EXPECT_THROW(place_fragment(tmp / "a.tets", tmp / "linked.tets.partial", 0, h.point_count, identity(other)), IoError);
+  EXPECT_EQ(fs::file_size(other), 16u);
+  // Frames the file does not hold are not adopted.
+  {
+    TetWriter w(tmp / "short.tets", h, o);
+    w.add_points(m.xyz.data(), m.ids.data(), m.ids.size());
+    const std::uint64_t at = w.checkpoint();
+    const std::vector<FrameEntry> frames = {{at, 0, 10, 100, 0, 5}};
+    EXPECT_THROW(w.adopt_placed_frames(frames, 100 + 16 + 4), IoError);
+  }
+  EXPECT_FALSE(fs::exists(tmp / "short.tets"));
 }
 
 // ---------------------------------------------------------------- damaged files
