@@ -213,10 +213,6 @@ class RankJob {
       mine.seconds_write = write.seconds();
     });
     mine.tets = work.stats.tets;
-    // Up to this summary; the summaries and the last agreements add a few hundred bytes.
-    mine.message_bytes = comm_.bytes_sent();
-
-    const std::vector<std::string> ranks = comm_.gather(rank_json(mine, work).dump(), 0);
 
     // ---- place: every rank copies its own frames into the output, where the ranks
     // before it end (rank 0's own frames are there already); rank 0 then indexes them
@@ -255,7 +251,10 @@ class RankJob {
       }
     });
     const std::vector<std::string> all_placed = comm_.gather(placed, 0);
-    if (!root) mine.seconds_write += seconds_since(place_start);
+    if (!root) mine.seconds_write += seconds_since(place_start);  // its frames placed
+    // Up to this summary; the summaries and the last agreements add a few hundred bytes.
+    mine.message_bytes = comm_.bytes_sent();
+    const std::vector<std::string> ranks = comm_.gather(rank_json(mine, work).dump(), 0);
     together(comm_, [&] {
       if (!root) return;
       std::vector<io::FrameEntry> frames;
@@ -263,8 +262,8 @@ class RankJob {
       for (int r = 1; r < size; ++r) {
         bytes += sizes[std::size_t(r)];
         const std::string& text = all_placed[std::size_t(r)];
-        for (std::size_t i = 0; i + 40 <= text.size(); i += 40) {
-          std::uint64_t w[5];
+        std::uint64_t w[5];
+        for (std::size_t i = 0; i + sizeof w <= text.size(); i += sizeof w) {
           std::memcpy(w, text.data() + i, sizeof w);
           frames.push_back({w[0], 0, std::uint32_t(w[1]), std::uint32_t(w[2]), w[3], w[4]});
         }
