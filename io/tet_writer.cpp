@@ -210,7 +210,7 @@ struct OpenedRegular {
 
 // Walks the frames of a fragment file (it was made by this job, in its own directory:
 // a regular file, not through a link), checking each one's section, CRC and header;
-// `on_frame(at, len, section, header)` sees each, `section` holding its payload and CRC.
+// `on_frame(len, section, header)` sees each, `section` holding its payload and CRC.
 template <class OnFrame>
 void for_each_fragment_frame(const std::string& path, std::uint64_t point_count, OnFrame&& on_frame) {
   const OpenedRegular file(path, O_RDONLY, "a fragment");
@@ -225,26 +225,12 @@ void for_each_fragment_frame(const std::string& path, std::uint64_t point_count,
     const std::uint64_t len = read_frame_section(read, path, at, end, frame, section, fh);
     if (fh.max_label >= point_count)
       throw InputError::at_byte(path, at, "label " + std::to_string(fh.max_label) + " is not below the point count");
-    on_frame(at, len, section, fh);
+    on_frame(len, section, fh);
     at += kSectionHeaderSize + len + kSectionTrailerSize;
   }
 }
 
 }  // namespace
-
-void TetWriter::add_fragment(const std::string& path) {
-  if (finished_ || fragment_) throw std::logic_error("TetWriter: add_fragment to a fragment or after finish");
-  if (points_ != header_.point_count) throw std::logic_error("TetWriter: a fragment before all points");
-  for_each_fragment_frame(path, header_.point_count,
-                          [&](std::uint64_t, std::uint64_t len, const std::vector<std::uint8_t>& section,
-                              const FrameHeader& fh) {
-                            frames_.push_back({out_->offset(), tets_, fh.tet_count, std::uint32_t(len),
-                                               fh.base_label, fh.max_label});
-                            write_section_start(kTagFrame, len);
-                            out_->write(section.data(), section.size());  // the payload and its CRC
-                            tets_ += fh.tet_count;
-                          });
-}
 
 std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::string& container_partial,
                                        std::uint64_t at, std::uint64_t point_count,
@@ -255,11 +241,10 @@ std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::s
   std::vector<FrameEntry> placed;
   std::uint64_t tets = 0, offset = at;
   for_each_fragment_frame(fragment, point_count,
-                          [&](std::uint64_t, std::uint64_t len, const std::vector<std::uint8_t>& section,
-                              const FrameHeader& fh) {
+                          [&](std::uint64_t len, const std::vector<std::uint8_t>& section, const FrameHeader& fh) {
                             placed.push_back({offset, tets, fh.tet_count, std::uint32_t(len), fh.base_label,
                                               fh.max_label});
-                            // The bytes TetWriter::add_fragment would write here.
+                            // The bytes the container's own writer would write here.
                             const auto h = section_header(kTagFrame, kSectionCritical, len);
                             if (!pwrite_exactly(out.fd, h.data(), h.size(), offset) ||
                                 !pwrite_exactly(out.fd, section.data(), section.size(), offset + h.size()))

@@ -66,8 +66,8 @@ std::vector<std::uint8_t> leading_bytes(const TetFileHeader& header);
 
 // Copies the frames of a finished fragment file (TetWriter::fragment()) into the
 // partial file of a container that another process is writing, from byte `at` on, with
-// pwrite; checks each frame's section, CRC and header as TetWriter::add_fragment does
-// (InputError naming the file and the offset), and syncs what it wrote. Neither file is
+// pwrite; checks each frame's section, CRC and frame header (InputError naming the
+// fragment and the offset otherwise), and syncs what it wrote. Neither file is
 // opened through a link; the container must be the regular file `container_file`
 // (st_dev, st_ino) names. Returns the frames as placed (absolute offsets; first_tet
 // counted from the fragment's first tet), for that writer's adopt_placed_frames(). So
@@ -91,8 +91,8 @@ class TetWriter {
   static std::unique_ptr<TetWriter> resume(std::string path, TetFileHeader header, std::uint64_t committed,
                                            TetWriterOptions options = {});
   // A fragment: PATH.partial holding frames only (TETF sections, no preamble, header,
-  // points, index or footer), the frames of a label range that another writer of the
-  // same container appends with add_fragment() (the ranks of a job under MPI). Its
+  // points, index or footer), the frames of a label range that place_fragment() puts
+  // into their place in the container (the ranks of a job under MPI). Its
   // frames are added as a container's are; finish() renames it to PATH.
   static std::unique_ptr<TetWriter> fragment(std::string path, TetFileHeader header, TetWriterOptions options = {});
   // Continues a fragment's PATH.partial after its first `committed` bytes (a value its
@@ -121,13 +121,10 @@ class TetWriter {
   void add_tets(std::span<const std::span<const std::uint64_t>> batches);
   // One frame from FrameEncoder, appended as the next frame.
   void add_frame(const EncodedFrame& frame);
-  // Appends the frames of a finished fragment file (a regular file, not through a
-  // link) as the next frames, checking each one's section, CRC and frame header
-  // (InputError naming the file and the offset otherwise).
-  void add_fragment(const std::string& path);
   // The frames that place_fragment() put into this container's partial file after its
   // last byte (`bytes` of them; `frames` in order, their offsets absolute): indexed as
-  // its next frames, as add_fragment() would have written them. Flushes first.
+  // its next frames, the container then holding the bytes of one writer that wrote
+  // them itself. Flushes first.
   void adopt_placed_frames(std::span<const FrameEntry> frames, std::uint64_t bytes);
 
   // Flushes (and syncs, if options.sync) everything written so far and returns the

@@ -23,7 +23,6 @@
 
 #include <omp.h>
 
-#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -236,7 +235,7 @@ class RankJob {
     });
     const json place = json::parse(comm_.broadcast(where, 0));
     const std::vector<std::uint64_t> sizes = comm_.all_gather(fragment_bytes);
-    std::string placed;  // this rank's frames as placed: FrameEntry fields, 5 words each
+    std::string placed;  // this rank's frames as placed, in the container index's encoding
     together(comm_, [&] {
       if (root) return;
       std::uint64_t at = place.at(0).get<std::uint64_t>();
@@ -245,10 +244,8 @@ class RankJob {
       const std::vector<io::FrameEntry> frames =
           io::place_fragment(fragment, partial, at, sorted.count,
                              {place.at(1).get<std::uint64_t>(), place.at(2).get<std::uint64_t>()});
-      for (const io::FrameEntry& f : frames) {
-        const std::uint64_t words[5] = {f.offset, f.tet_count, f.length, f.base_label, f.max_label};
-        placed.append(reinterpret_cast<const char*>(words), sizeof words);
-      }
+      const std::vector<std::uint8_t> bytes = io::serialize_index({}, frames);
+      placed.assign(bytes.begin(), bytes.end());
     });
     const std::vector<std::string> all_placed = comm_.gather(placed, 0);
     if (!root) mine.seconds_write += seconds_since(place_start);  // its frames placed
@@ -262,11 +259,13 @@ class RankJob {
       for (int r = 1; r < size; ++r) {
         bytes += sizes[std::size_t(r)];
         const std::string& text = all_placed[std::size_t(r)];
-        std::uint64_t w[5];
-        for (std::size_t i = 0; i + sizeof w <= text.size(); i += sizeof w) {
-          std::memcpy(w, text.data() + i, sizeof w);
-          frames.push_back({w[0], 0, std::uint32_t(w[1]), std::uint32_t(w[2]), w[3], w[4]});
-        }
+        std::vector<io::SectionEntry> none;
+        std::vector<io::FrameEntry> theirs;
+        if (const std::string problem = io::parse_index(
+                {reinterpret_cast<const std::uint8_t*>(text.data()), text.size()}, none, theirs);
+            !problem.empty())
+          throw IoError("rank " + std::to_string(r) + "'s placed frames: " + problem);
+        frames.insert(frames.end(), theirs.begin(), theirs.end());
       }
       write.adopt_fragments(std::move(frames), bytes);
       write.finish();

@@ -17,7 +17,6 @@
 #include <string>
 #include <vector>
 #include <omp.h>
-#include <sched.h>
 #include <unistd.h>
 
 namespace tetstream::cli {
@@ -42,15 +41,9 @@ constexpr const char* kExitCodes =
 // A process allowed fewer cores than --threads asks for runs its threads in turn, at
 // the speed of fewer threads and with the memory of more. The usual cause: mpirun
 // binds each rank to one core by default (OpenMPI, for two ranks or fewer).
-int cores_allowed() {
-  cpu_set_t allowed;
-  CPU_ZERO(&allowed);
-  if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return 0;
-  return CPU_COUNT(&allowed);
-}
-
+// (omp_get_num_procs: the cores the process's CPU affinity allows.)
 void warn_if_fewer_cores_than_threads(int threads) {
-  const int cores = cores_allowed();
+  const int cores = omp_get_num_procs();
   if (cores > 0 && threads > cores)
     spdlog::warn("--threads {} but this process may run on {} core{} (its CPU affinity; under mpirun, add "
                  "--bind-to none, or give each rank its cores with --map-by ...:PE={}): the threads will take turns",
@@ -64,7 +57,7 @@ void warn_if_ranks_leave_cores_idle() {
   const char* local = std::getenv("OMPI_COMM_WORLD_LOCAL_SIZE");
   if (!local) local = std::getenv("MPI_LOCALNRANKS");
   const int ranks_here = local ? std::atoi(local) : 0;
-  const int cores = cores_allowed();
+  const int cores = omp_get_num_procs();
   const long online = ::sysconf(_SC_NPROCESSORS_ONLN);
   if (ranks_here > 0 && cores > 0 && long(ranks_here) * cores < online)
     spdlog::warn("each rank may use {} of this node's {} cores ({} rank{} here; mpirun binds ranks to cores): for "

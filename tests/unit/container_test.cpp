@@ -561,46 +561,11 @@ TEST(Container, ResumeGivesTheSameBytes) {
   expect_input_error([&] { TetWriter::resume(path, other, committed, o); }, {"header differs"});
 }
 
-// A container assembled from frames written in pieces (the ranks of a job under MPI):
-// the first part by the container's writer, the others as fragment files appended in
-// order, gives the bytes of one writer; a damaged fragment or a link is refused.
-TEST(Container, FragmentsAppendToTheSameBytes) {
-  TempDir tmp;
-  const WrittenWhole whole(tmp);
-  const Mesh& m = whole.m;
-  const TetFileHeader& h = whole.h;
-  const TetWriterOptions& o = whole.o;
-  const std::span<const std::uint32_t> all(whole.labels);
-  const std::size_t cut1 = 400, cut2 = 1200;
-  whole.write_fragments(tmp, cut1, cut2);
-  auto assemble = [&](const std::string& out, const std::string& second) {
-    TetWriter w(out, h, o);
-    w.add_points(m.xyz.data(), m.ids.data(), m.ids.size());
-    w.add_tets(all.subspan(0, 4 * cut1));
-    w.add_fragment(tmp / "a.tets");
-    w.add_fragment(second);
-    w.finish();
-  };
-  assemble(tmp / "assembled.tets", tmp / "b.tets");
-  EXPECT_EQ(slurp(tmp / "assembled.tets"), slurp(tmp / "whole.tets"));
-
-  // A flipped byte in a frame of the fragment: its file, offset and frame are named,
-  // and no output is left.
-  std::vector<std::uint8_t> b = slurp(tmp / "b.tets");
-  b[b.size() / 2] ^= 0x40;
-  spit(tmp / "bad.tets", b);
-  expect_input_error([&] { assemble(tmp / "out.tets", tmp / "bad.tets"); }, {"bad.tets", "byte", "checksum"});
-  EXPECT_FALSE(fs::exists(tmp / "out.tets"));
-  EXPECT_FALSE(fs::exists(tmp / "out.tets.partial"));
-  // A fragment through a link is not followed.
-  fs::create_symlink(tmp / "b.tets", tmp / "link.tets");
-  EXPECT_THROW(assemble(tmp / "out.tets", tmp / "link.tets"), IoError);
-  EXPECT_FALSE(fs::exists(tmp / "out.tets"));
-}
-
-// The same pieces placed side by side (each rank under MPI copies its own fragment
-// into the container with io::place_fragment, the container's writer then indexes
-// them): the bytes of one writer; a replaced container or a linked one is refused.
+// A container written in pieces (the ranks of a job under MPI): the first part by the
+// container's writer, the others as fragment files that each rank copies into place
+// (io::place_fragment), side by side, the writer then indexing them: the bytes of one
+// writer. A damaged fragment, a fragment through a link, a replaced or linked
+// container are refused.
 TEST(Container, PlacedFragmentsGiveTheSameBytes) {
   TempDir tmp;
   const WrittenWhole whole(tmp);
@@ -637,6 +602,15 @@ TEST(Container, PlacedFragmentsGiveTheSameBytes) {
   fs::create_symlink(other, tmp / "linked.tets.partial");
   EXPECT_THROW(place_fragment(tmp / "a.tets", tmp / "linked.tets.partial", 0, h.point_count, identity(other)), IoError);
   EXPECT_EQ(fs::file_size(other), 16u);
+  // A flipped byte in a frame of the fragment: its file, offset and frame are named.
+  std::vector<std::uint8_t> damaged = slurp(tmp / "b.tets");
+  damaged[damaged.size() / 2] ^= 0x40;
+  spit(tmp / "bad.tets", damaged);
+  expect_input_error([&] { place_fragment(tmp / "bad.tets", other, 0, h.point_count, identity(other)); },
+                     {"bad.tets", "byte", "checksum"});
+  // A fragment through a link is not followed.
+  fs::create_symlink(tmp / "b.tets", tmp / "link.tets");
+  EXPECT_THROW(place_fragment(tmp / "link.tets", other, 0, h.point_count, identity(other)), IoError);
   // Frames the file does not hold are not adopted.
   {
     TetWriter w(tmp / "short.tets", h, o);
