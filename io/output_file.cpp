@@ -273,3 +273,33 @@ void OutputFile::commit(bool do_sync) {
 }
 
 }  // namespace tetstream::io
+
+namespace tetstream::io {
+
+OutputPart::OutputPart(const std::string& partial_path, Identity identity) : path_(partial_path) {
+  fd_ = ::open(path_.c_str(), O_RDWR | O_NOFOLLOW | O_CLOEXEC);
+  if (fd_ < 0) throw IoError(path_ + ": cannot open the output being written: " + std::strerror(errno));
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode) || Identity{std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)} != identity) {
+    ::close(fd_);
+    throw IoError(path_ + ": not the file this job is writing (it was replaced)");
+  }
+}
+
+OutputPart::~OutputPart() { ::close(fd_); }
+
+void OutputPart::write_at(const void* data, std::size_t n, std::uint64_t offset) {
+  if (!pwrite_exactly(fd_, data, n, offset)) throw IoError(path_ + ": write failed: " + std::strerror(errno));
+}
+
+void OutputPart::sync() {
+  if (::fdatasync(fd_) != 0) throw IoError(path_ + ": fdatasync failed: " + std::strerror(errno));
+}
+
+OutputPart::Identity OutputPart::identity_of(int fd) {
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) throw IoError(std::string("fstat failed: ") + std::strerror(errno));
+  return {std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)};
+}
+
+}  // namespace tetstream::io

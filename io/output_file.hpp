@@ -14,6 +14,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <utility>
 
 namespace tetstream::io {
 
@@ -48,6 +49,33 @@ class OutputClaim {
   std::string path_, partial_;
   int fd_ = -1;
   bool created_ = false;
+};
+
+// The partial output of a job as another process of the same job opens it to write
+// its own part with pwrite (a rank under MPI: its sorted points, its frames): opened
+// for reading and writing (a part may be moved in place) without following a link,
+// never created or truncated, and refused
+// (IoError) unless it is a regular file and the very file, by (st_dev, st_ino), that
+// the job's claim holds. Closed on destruction.
+class OutputPart {
+ public:
+  using Identity = std::pair<std::uint64_t, std::uint64_t>;  // (st_dev, st_ino)
+  OutputPart(const std::string& partial_path, Identity identity);
+  ~OutputPart();
+  OutputPart(const OutputPart&) = delete;
+  OutputPart& operator=(const OutputPart&) = delete;
+  int fd() const { return fd_; }
+  const std::string& path() const { return path_; }
+  // Writes n bytes at `offset`; IoError naming the file when it cannot.
+  void write_at(const void* data, std::size_t n, std::uint64_t offset);
+  // fdatasync; IoError when it fails.
+  void sync();
+  // The identity of the file behind an open descriptor (of the claim's, say).
+  static Identity identity_of(int fd);
+
+ private:
+  std::string path_;
+  int fd_ = -1;
 };
 
 // Reads exactly n bytes at `offset` of fd (retrying short reads and EINTR). False,

@@ -142,6 +142,16 @@ class BinaryPointReader final : public PointReader {
     return n;
   }
 
+  // With a known count the records ahead are whole (checked when the reader was
+  // made), so a seek passes them; the last rank's read still checks the tail.
+  std::uint64_t skip(std::uint64_t n) override {
+    if (!count_) return PointReader::skip(n);
+    const std::uint64_t k = std::min<std::uint64_t>(n, *count_ - points_read_);
+    if (src_->skip(k * layout_.stride) != k * layout_.stride) truncated(0, 0);
+    points_read_ += k;
+    return k;
+  }
+
   std::uint64_t bytes_read() const override { return src_->offset(); }
   std::optional<std::uint64_t> source_size() const override { return src_->size(); }
 

@@ -106,6 +106,18 @@ std::unique_ptr<PointReader> open_one(const std::string& path, const PointReadOp
 
 }  // namespace
 
+std::uint64_t PointReader::skip(std::uint64_t n) {
+  constexpr std::size_t kChunk = 1 << 14;
+  std::vector<double> scratch(3 * kChunk);
+  std::uint64_t done = 0;
+  while (done < n) {
+    const std::size_t got = read(scratch.data(), std::size_t(std::min<std::uint64_t>(kChunk, n - done)));
+    if (got == 0) break;
+    done += got;
+  }
+  return done;
+}
+
 void PointReadOptions::validate() const {
   const std::uint64_t w = type == ScalarType::kFloat32 ? 4 : 8;
   if (stride > kMaxRecordBytes) {

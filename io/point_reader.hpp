@@ -57,6 +57,11 @@ class PointReader {
   // Fills xyz[0 .. 3n) with the next n <= max_points points (x, y, z per point) and
   // returns n; returns 0 at the end of the input. Throws InputError on bad data.
   virtual std::size_t read(double* xyz, std::size_t max_points) = 0;
+  // Skips the next n points (fewer at the end of the input) and returns how many it
+  // skipped: binary records with a known count seek past them; other formats read them
+  // (and check them) and drop them. How a rank of a distributed job reaches its own
+  // range of the input (pipeline/point_sort_distributed.hpp).
+  virtual std::uint64_t skip(std::uint64_t n);
 
   // The number of points when the format says so up front (raw files from their size,
   // PLY and npy from the header); nullopt for text and raw stdin.

@@ -78,6 +78,38 @@ __attribute__((target("sse4.2"))) std::uint32_t crc32c_hw(const std::uint8_t* p,
 
 }  // namespace
 
+namespace {
+// Polynomials over GF(2) modulo the (reflected) Castagnoli polynomial, bit 31 the x^0
+// term: the CRC register as a polynomial. Appending n zero bytes to a message
+// multiplies its (pre- and post-conditioned) CRC's register by x^(8n) modulo P; the
+// CRCs of a and b then combine by that product and an exclusive or.
+constexpr std::uint32_t kCastagnoliReflected = 0x82F63B78;
+
+std::uint32_t multiply_mod_p(std::uint32_t a, std::uint32_t b) {
+  std::uint32_t product = 0;
+  for (std::uint32_t m = std::uint32_t(1) << 31; m != 0; m >>= 1) {
+    if (a & m) product ^= b;
+    b = (b & 1) ? (b >> 1) ^ kCastagnoliReflected : b >> 1;  // b *= x
+  }
+  return product;
+}
+
+// x^(8n) mod P, by squaring.
+std::uint32_t x_to_8n_mod_p(std::uint64_t n) {
+  std::uint32_t result = std::uint32_t(1) << 31;  // 1
+  std::uint32_t square = std::uint32_t(1) << 23;  // x^8
+  for (; n != 0; n >>= 1) {
+    if (n & 1) result = multiply_mod_p(square, result);
+    square = multiply_mod_p(square, square);
+  }
+  return result;
+}
+}  // namespace
+
+std::uint32_t crc32c_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint64_t n_b) {
+  return multiply_mod_p(x_to_8n_mod_p(n_b), crc_a) ^ crc_b;
+}
+
 std::uint32_t crc32c(const void* data, std::size_t n, std::uint32_t crc) {
   const auto* p = static_cast<const std::uint8_t*>(data);
   std::uint32_t c = ~crc;

@@ -98,6 +98,10 @@ std::string parse_index(std::span<const std::uint8_t> payload, std::vector<Secti
 // ---- §2 CRC32C (Castagnoli), hardware-accelerated where the CPU has SSE4.2 ----
 std::uint32_t crc32c(const void* data, std::size_t n, std::uint32_t crc = 0);
 // Incremental form: crc32c(ab) == crc32c(b, n_b, crc32c(a, n_a)).
+// The CRC of a byte string from the CRCs of its two pieces, without their bytes:
+// crc32c(ab) == crc32c_combine(crc32c(a), crc32c(b), n_b). How the ranks of a job that
+// wrote one section side by side agree on its checksum (pipeline/point_sort_distributed).
+std::uint32_t crc32c_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint64_t n_b);
 
 // ---- little-endian helpers ----
 inline void put_u16(std::uint8_t* p, std::uint16_t v) { p[0] = std::uint8_t(v), p[1] = std::uint8_t(v >> 8); }

@@ -235,9 +235,7 @@ void for_each_fragment_frame(const std::string& path, std::uint64_t point_count,
 std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::string& container_partial,
                                        std::uint64_t at, std::uint64_t point_count,
                                        std::pair<std::uint64_t, std::uint64_t> container_file) {
-  const OpenedRegular out(container_partial, O_WRONLY, "the container");
-  if (std::uint64_t(out.st.st_dev) != container_file.first || std::uint64_t(out.st.st_ino) != container_file.second)
-    throw IoError(container_partial + ": not the file this job is writing (it was replaced)");
+  OutputPart out(container_partial, container_file);
   std::vector<FrameEntry> placed;
   std::uint64_t tets = 0, offset = at;
   for_each_fragment_frame(fragment, point_count,
@@ -246,13 +244,12 @@ std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::s
                                               fh.max_label});
                             // The bytes the container's own writer would write here.
                             const auto h = section_header(kTagFrame, kSectionCritical, len);
-                            if (!pwrite_exactly(out.fd, h.data(), h.size(), offset) ||
-                                !pwrite_exactly(out.fd, section.data(), section.size(), offset + h.size()))
-                              throw IoError(container_partial + ": write failed: " + std::strerror(errno));
+                            out.write_at(h.data(), h.size(), offset);
+                            out.write_at(section.data(), section.size(), offset + h.size());
                             offset += h.size() + section.size();
                             tets += fh.tet_count;
                           });
-  if (::fdatasync(out.fd) != 0) throw IoError(container_partial + ": fdatasync failed: " + std::strerror(errno));
+  out.sync();
   return placed;
 }
 

@@ -1,6 +1,7 @@
 #include "pipeline/communicator.hpp"
 
 #include <cstdlib>
+#include <cstring>
 
 namespace tetstream::pipeline {
 
@@ -14,6 +15,11 @@ class SingleProcess final : public Communicator {
   std::vector<std::uint64_t> all_gather(std::uint64_t value) override { return {value}; }
   std::string broadcast(const std::string& bytes, int) override { return bytes; }
   std::vector<std::string> gather(const std::string& bytes, int) override { return {bytes}; }
+  std::vector<std::uint64_t> all_to_all(const std::vector<std::uint64_t>& to_each) override { return to_each; }
+  void exchange(const void* send, const std::vector<std::uint64_t>& send_counts, void* receive,
+                const std::vector<std::uint64_t>&, std::size_t record_bytes) override {
+    if (send_counts.at(0) != 0) std::memcpy(receive, send, send_counts[0] * record_bytes);
+  }
   std::uint64_t bytes_sent() const override { return 0; }
 };
 

@@ -40,6 +40,15 @@ class Communicator {
   virtual std::string broadcast(const std::string& bytes, int root) = 0;
   // Every rank's bytes, by rank, on `root` (empty elsewhere).
   virtual std::vector<std::string> gather(const std::string& bytes, int root) = 0;
+  // `to_each[r]` to rank r, from every rank: what each rank sent this one, by rank.
+  virtual std::vector<std::uint64_t> all_to_all(const std::vector<std::uint64_t>& to_each) = 0;
+  // Records of `record_bytes` each, from every rank to every rank (the sort's exchange):
+  // `send` holds send_counts[0] records for rank 0, then send_counts[1] for rank 1, ...;
+  // `receive` gets receive_counts[0] from rank 0, then rank 1's, ... (the counts an
+  // all_to_all of the send counts returned). A call's counts and their sums stay below
+  // 2^31 records (the caller's rounds keep them so; std::length_error otherwise).
+  virtual void exchange(const void* send, const std::vector<std::uint64_t>& send_counts, void* receive,
+                        const std::vector<std::uint64_t>& receive_counts, std::size_t record_bytes) = 0;
   // The bytes this rank has handed to the calls above as a sender (counts, codes,
   // payloads; a broadcast's payload counted once, at its root): what a job's ranks
   // tell each other, as opposed to what they share through files.

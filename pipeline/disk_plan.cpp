@@ -32,20 +32,28 @@ Filesystem examine(const std::string& dir) {
 
 }  // namespace
 
+std::uint64_t distributed_work_bytes_per_point(int ranks) {
+  const std::uint64_t k = std::uint64_t(std::max(ranks, 1));
+  return 8 + (kTetBytesPerPoint * (k - 1) + k - 1) / k;
+}
+
 std::vector<DiskNeed> plan_disk(std::uint64_t points, bool float32, const std::string& work_parent,
-                                const std::string& output_dir, bool output_to_stdout, bool checkpointed) {
+                                const std::string& output_dir, bool output_to_stdout, bool checkpointed,
+                                std::uint64_t more_work) {
   const std::uint64_t record = RecordLayout::for_input(float32, points).bytes();
   const std::uint64_t sorted = points * record;
   const std::uint64_t merge = sorted + sorted / 64 + kMergeSlack;  // runs given back as the merge reads them
   const std::uint64_t tets = points * kTetBytesPerPoint;
   const std::uint64_t pending =
       checkpointed ? 2 * 32 * std::min<std::uint64_t>(7 * points, (std::uint64_t(1) << 18) + 4096) + (1 << 20) : 0;
+  const std::uint64_t extra = points * more_work;  // held through the triangulation, beside the output
   const Filesystem work = examine(work_parent);
   // Standard output: the sorted points are a work file, the output takes no disk.
-  if (output_to_stdout) return {{work_parent, merge, work.available}};
+  if (output_to_stdout) return {{work_parent, merge + extra, work.available}};
   const Filesystem out = examine(output_dir);
-  if (out.device == work.device) return {{work_parent, std::max(merge, sorted + tets + pending), work.available}};
-  return {{work_parent, std::max(merge, pending), work.available}, {output_dir, sorted + tets, out.available}};
+  if (out.device == work.device)
+    return {{work_parent, std::max(merge, sorted + tets + pending + extra), work.available}};
+  return {{work_parent, std::max(merge, pending + extra), work.available}, {output_dir, sorted + tets, out.available}};
 }
 
 void check_disk(const std::vector<DiskNeed>& plan) {

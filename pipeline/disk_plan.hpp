@@ -25,6 +25,10 @@
 // the work directory needs the runs (r N + slack) and the checkpoint, the output's
 // r N + 28 N. Where the filesystem cannot punch holes (EOPNOTSUPP) the merge holds
 // 2 r N for a moment: not planned.
+// Under mpirun (pipeline/run_distributed.hpp) the work directory holds more, for the
+// whole triangulation: the shared point index (8 bytes a point) and the fragments of
+// ranks 1..K-1 (their tets, 28 (K - 1) / K bytes a point) until they are placed;
+// `more_work` is that, per point.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -42,7 +46,10 @@ struct DiskNeed {
 // directory cannot be examined.
 // `float32`: the input's coordinates are float32 (PointReader::float32_input).
 std::vector<DiskNeed> plan_disk(std::uint64_t points, bool float32, const std::string& work_parent,
-                                const std::string& output_dir, bool output_to_stdout, bool checkpointed);
+                                const std::string& output_dir, bool output_to_stdout, bool checkpointed,
+                                std::uint64_t more_work = 0);
+// The work directory's bytes a point beyond one process's under K ranks (above).
+std::uint64_t distributed_work_bytes_per_point(int ranks);
 // Throws IoError naming every filesystem that cannot hold its share:
 // "needs 41.2 GiB in /scratch, 38.0 GiB free; ...".
 void check_disk(const std::vector<DiskNeed>& plan);

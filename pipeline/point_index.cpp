@@ -2,8 +2,14 @@
 
 #include "pipeline/temp_files.hpp"
 
+#include "core/error.hpp"
+#include "io/output_file.hpp"
+
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <stdexcept>
 #include <limits>
 
 namespace tetstream::pipeline {
@@ -45,12 +51,13 @@ std::uint32_t PointIndex::block_points_for(std::uint64_t count, double axis_exte
 }
 
 template <class R>
-void PointIndex::build_block(const R* points, std::uint64_t b, std::uint64_t count, std::vector<Node>& nodes,
-                             double& block_scale_out, bool release_file_pages) {
+void PointIndex::build_block(const R* points, std::uint64_t b, std::uint64_t count, std::uint32_t* entries,
+                             std::uint16_t* fine, std::vector<Node>& nodes, double& block_scale_out,
+                             bool release_file_pages) {
   const double inf = std::numeric_limits<double>::infinity();
   const std::uint64_t base = b * block_points_;
   const std::uint32_t n = std::uint32_t(std::min<std::uint64_t>(block_points_, count - base));
-  std::uint32_t* o = &entries_[base];  // the offsets alone until a leaf adds the cells
+  std::uint32_t* o = entries;  // the offsets alone until a leaf adds the cells
   for (std::uint32_t i = 0; i < n; ++i) o[i] = i;
   double max_magnitude = 0;
   for (std::uint32_t i = 0; i < n; ++i)
@@ -89,7 +96,7 @@ void PointIndex::build_block(const R* points, std::uint64_t b, std::uint64_t cou
       double box_lo[3], box_hi[3];  // as the queries decode it, so that they find the same cells
       decode<true>(node.box, scale, box_lo, box_hi);
       const CellGrid grid(box_lo, box_hi, kSlices * kSlices);
-      std::uint16_t* f = &fine_[base];
+      std::uint16_t* f = fine;
       for (std::uint32_t j = begin; j < end; ++j) {
         double p[3];
         points[base + o[j]].xyz(p);
@@ -111,12 +118,26 @@ void PointIndex::build_block(const R* points, std::uint64_t b, std::uint64_t cou
 
 void PointIndex::build(const PointRecords& points, std::uint64_t count, int axis, std::uint32_t block_points,
                        bool release_file_pages) {
+  build_part(points, count, axis, block_points, 0, blocks_for(count, block_points), release_file_pages);
+  entries_ = own_entries_;
+  fine_ = own_fine_;
+  nodes_ = own_nodes_;
+  blocks_ = own_blocks_;
+}
+
+void PointIndex::build_part(const PointRecords& points, std::uint64_t count, int axis, std::uint32_t block_points,
+                            std::uint64_t first_block, std::uint64_t end_block, bool release_file_pages) {
   points_ = points;
   axis_ = axis;
   block_points_ = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
-  entries_.assign(count, 0);
-  fine_.assign(count, 0);
-  const std::uint64_t block_count = (count + block_points_ - 1) / block_points_;
+  count_ = count;
+  first_block_ = first_block;
+  end_block = std::min(end_block, blocks_for(count, block_points_));
+  const std::uint64_t first = std::min(count, first_block * block_points_);
+  const std::uint64_t end = std::min(count, end_block * block_points_);
+  own_entries_.assign(end - first, 0);
+  own_fine_.assign(end - first, 0);
+  const std::uint64_t block_count = end_block > first_block ? end_block - first_block : 0;
   // The blocks are independent: each is built into its own node list (ids local to
   // the block) on all threads, then the lists are laid end to end. On one thread it
   // was 2.8% of a 10^7-point run's perf samples, with the other core idle. The
@@ -125,26 +146,79 @@ void PointIndex::build(const PointRecords& points, std::uint64_t count, int axis
   std::vector<double> block_scales(block_count, 1.0);
   points.visit([&](const auto* records) {
 #pragma omp parallel for schedule(dynamic, 8)
-    for (std::int64_t b = 0; b < std::int64_t(block_count); ++b)
-      build_block(records, std::uint64_t(b), count, block_nodes[std::size_t(b)], block_scales[std::size_t(b)],
-                  release_file_pages);
+    for (std::int64_t i = 0; i < std::int64_t(block_count); ++i) {
+      const std::uint64_t b = first_block + std::uint64_t(i), at = b * block_points_ - first;
+      build_block(records, b, count, &own_entries_[at], &own_fine_[at], block_nodes[std::size_t(i)],
+                  block_scales[std::size_t(i)], release_file_pages);
+    }
   });
   std::size_t total = 0;
   for (const auto& nodes : block_nodes) total += nodes.size();
-  nodes_.clear();
-  nodes_.reserve(total);
-  blocks_.clear();
-  blocks_.reserve(block_count);
+  // Node numbers are 31-bit (Node::next): more nodes (about 3 10^10 points) cannot be linked.
+  if (total >= (std::size_t(1) << 31))
+    throw std::length_error("the point index would have " + std::to_string(total) + " nodes, more than 2^31");
+  own_nodes_.clear();
+  own_nodes_.reserve(total);
+  own_blocks_.clear();
+  own_blocks_.reserve(block_count);
   for (std::size_t b = 0; b < block_count; ++b) {
     std::vector<Node>& nodes = block_nodes[b];
-    const std::uint32_t first = std::uint32_t(nodes_.size());
+    const std::uint32_t first_node = std::uint32_t(own_nodes_.size());
     for (Node node : nodes) {
-      node.next += first;
-      nodes_.push_back(node);
+      node.next += first_node;
+      own_nodes_.push_back(node);
     }
-    blocks_.push_back(Block{first, std::uint32_t(nodes.size()), block_scales[b]});
+    own_blocks_.push_back(Block{first_node, std::uint32_t(nodes.size()), block_scales[b]});
     std::vector<Node>().swap(nodes);
   }
+}
+
+PointIndex::FileLayout PointIndex::file_layout(std::uint64_t count, std::uint64_t node_count,
+                                               std::uint64_t block_count) {
+  FileLayout l;
+  l.entries = 0;
+  l.fine = count * sizeof(std::uint32_t);
+  // Nodes and blocks at 8-byte boundaries: a block's scale is a double.
+  l.nodes = (l.fine + count * sizeof(std::uint16_t) + 7) / 8 * 8;
+  l.blocks = (l.nodes + node_count * sizeof(Node) + 7) / 8 * 8;
+  l.bytes = l.blocks + block_count * sizeof(Block);
+  return l;
+}
+
+void PointIndex::write_part(int fd, const std::string& path, std::uint64_t total_nodes, std::uint64_t first_node) {
+  // Node numbers are 31-bit (Node::next), as in build_part: the parts together too.
+  if (total_nodes >= (std::uint64_t(1) << 31))
+    throw std::length_error("the point index would have " + std::to_string(total_nodes) + " nodes, more than 2^31");
+  const FileLayout layout = file_layout(count_, total_nodes, blocks_for(count_, block_points_));
+  const std::uint64_t first_label = std::min(count_, first_block_ * block_points_);
+  for (Node& node : own_nodes_) node.next += std::uint32_t(first_node);
+  for (Block& block : own_blocks_) block.first_node += std::uint32_t(first_node);
+  auto put = [&](const void* data, std::size_t bytes, std::uint64_t offset) {
+    if (!io::pwrite_exactly(fd, data, bytes, offset)) throw IoError(path + ": write failed: " + std::strerror(errno));
+  };
+  put(own_entries_.data(), own_entries_.size() * sizeof(std::uint32_t), layout.entries + first_label * sizeof(std::uint32_t));
+  put(own_fine_.data(), own_fine_.size() * sizeof(std::uint16_t), layout.fine + first_label * sizeof(std::uint16_t));
+  put(own_nodes_.data(), own_nodes_.size() * sizeof(Node), layout.nodes + first_node * sizeof(Node));
+  put(own_blocks_.data(), own_blocks_.size() * sizeof(Block), layout.blocks + first_block_ * sizeof(Block));
+  std::vector<std::uint32_t>().swap(own_entries_);
+  std::vector<std::uint16_t>().swap(own_fine_);
+  std::vector<Node>().swap(own_nodes_);
+  std::vector<Block>().swap(own_blocks_);
+}
+
+void PointIndex::attach(const std::byte* mapping, const PointRecords& points, std::uint64_t count, int axis,
+                        std::uint32_t block_points, std::uint64_t total_nodes, std::uint64_t resident_bytes) {
+  points_ = points;
+  axis_ = axis;
+  block_points_ = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
+  count_ = count;
+  const std::uint64_t block_count = blocks_for(count, block_points_);
+  const FileLayout layout = file_layout(count, total_nodes, block_count);
+  entries_ = {reinterpret_cast<const std::uint32_t*>(mapping + layout.entries), std::size_t(count)};
+  fine_ = {reinterpret_cast<const std::uint16_t*>(mapping + layout.fine), std::size_t(count)};
+  nodes_ = {reinterpret_cast<const Node*>(mapping + layout.nodes), std::size_t(total_nodes)};
+  blocks_ = {reinterpret_cast<const Block*>(mapping + layout.blocks), std::size_t(block_count)};
+  resident_bytes_ = resident_bytes;
 }
 
 double PointIndex::leaf_spacing_quantile(double q, std::uint64_t first, std::uint64_t last) const {

@@ -44,6 +44,8 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <span>
+#include <string>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -84,6 +86,37 @@ class PointIndex {
   // whose pages MADV_DONTNEED would zero.
   void build(const PointRecords& points, std::uint64_t count, int axis, std::uint32_t block_points,
              bool release_file_pages = false);
+
+  // ---- one index built by the ranks of a job in parts, shared through one file ----
+  // The file: every point's entry (4 bytes) and then every point's fine cell (2 bytes),
+  // in label order; every node (36 bytes) in block order; every block (16 bytes). A
+  // rank builds the blocks [first_block, end_block) (build_part), writes them at their
+  // places with its nodes renumbered after the nodes of the parts before it
+  // (write_part), and every rank maps the whole file (attach): the same index as
+  // build() makes, node for node, held by the page cache rather than by each rank.
+  struct FileLayout {
+    std::uint64_t entries = 0, fine = 0, nodes = 0, blocks = 0, bytes = 0;  // offsets, and the file's size
+  };
+  static FileLayout file_layout(std::uint64_t count, std::uint64_t node_count, std::uint64_t block_count);
+  static std::uint64_t blocks_for(std::uint64_t count, std::uint32_t block_points) {
+    const std::uint64_t bp = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
+    return (count + bp - 1) / bp;
+  }
+  // Builds blocks [first_block, end_block) as build() would (release_file_pages as
+  // there); part_nodes() nodes, numbered from 0. The index cannot answer queries until
+  // attach().
+  void build_part(const PointRecords& points, std::uint64_t count, int axis, std::uint32_t block_points,
+                  std::uint64_t first_block, std::uint64_t end_block, bool release_file_pages = false);
+  std::uint64_t part_nodes() const { return own_nodes_.size(); }
+  // Writes the part with pwrite into `fd` (`path` for errors), laid out for
+  // `total_nodes` nodes, its nodes numbered from `first_node`; then frees the part.
+  void write_part(int fd, const std::string& path, std::uint64_t total_nodes, std::uint64_t first_node);
+  // The index from a mapping of the whole file (read-only; it outlives this index),
+  // for `count` points, `total_nodes` nodes. `resident_bytes`: what memory_bytes()
+  // reports, the share of the mapping the caller plans for (its pages are the page
+  // cache's; the caller hands them back, see stage_index.hpp).
+  void attach(const std::byte* mapping, const PointRecords& points, std::uint64_t count, int axis,
+              std::uint32_t block_points, std::uint64_t total_nodes, std::uint64_t resident_bytes);
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
   // closed ball (center, radius), except some inside `exclude`; points certainly
@@ -128,9 +161,8 @@ class PointIndex {
   double leaf_spacing_quantile(double q, std::uint64_t first = 0, std::uint64_t last = ~std::uint64_t(0)) const;
 
   std::size_t memory_bytes() const {
-    return entries_.capacity() * sizeof(std::uint32_t) + fine_.capacity() * sizeof(std::uint16_t) +
-           nodes_.capacity() * sizeof(Node) +
-           blocks_.capacity() * sizeof(Block);
+    return own_entries_.capacity() * sizeof(std::uint32_t) + own_fine_.capacity() * sizeof(std::uint16_t) +
+           own_nodes_.capacity() * sizeof(Node) + own_blocks_.capacity() * sizeof(Block) + resident_bytes_;
   }
 
   // Whether the box [lo, hi] meets the closed ball (c, r). Conservative: rounding may
@@ -289,17 +321,28 @@ class PointIndex {
     std::uint32_t mask;  // slices - 1
     double lo[3], step[3], first_hi[3], pad[3];
   };
-  // Builds block b (its entries, fine cells and nodes) over typed records.
+  // Builds block b (its entries, fine cells and nodes) over typed records; `entries`
+  // and `fine` point at the block's first point's.
   template <class R>
-  void build_block(const R* points, std::uint64_t b, std::uint64_t count, std::vector<Node>& nodes,
-                   double& block_scale_out, bool release_file_pages);
+  void build_block(const R* points, std::uint64_t b, std::uint64_t count, std::uint32_t* entries,
+                   std::uint16_t* fine, std::vector<Node>& nodes, double& block_scale_out, bool release_file_pages);
   PointRecords points_;
   int axis_ = 0;
   std::uint32_t block_points_ = kMinBlockPoints;
-  std::vector<std::uint32_t> entries_;  // per block: its points' entries, grouped by leaf
-  std::vector<std::uint16_t> fine_;     // per entry: the low bits of its fine cell
-  std::vector<Node> nodes_;
-  std::vector<Block> blocks_;
+  // What the queries read: the vectors below (build), or a shared file's mapping (attach).
+  std::span<const std::uint32_t> entries_;  // per block: its points' entries, grouped by leaf
+  std::span<const std::uint16_t> fine_;     // per entry: the low bits of its fine cell
+  std::span<const Node> nodes_;
+  std::span<const Block> blocks_;
+  // The index this process built (all of it, or its part until write_part), each
+  // with the labels of blocks [first_block_, ...) and the nodes numbered from 0.
+  std::vector<std::uint32_t> own_entries_;
+  std::vector<std::uint16_t> own_fine_;
+  std::vector<Node> own_nodes_;
+  std::vector<Block> own_blocks_;
+  std::uint64_t count_ = 0;  // the points the whole index covers
+  std::uint64_t first_block_ = 0;
+  std::uint64_t resident_bytes_ = 0;  // an attached index's share (attach)
 };
 
 }  // namespace tetstream::pipeline

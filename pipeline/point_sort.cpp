@@ -6,11 +6,8 @@
 
 #include "core/error.hpp"
 #include "pipeline/checkpoint.hpp"
-#include "pipeline/external_sort.hpp"
 #include "pipeline/fault.hpp"
-#include "pipeline/hull.hpp"
-#include "pipeline/interrupt.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/point_sort_detail.hpp"
 #include "pipeline/temp_files.hpp"
 
 #include <spdlog/spdlog.h>
@@ -28,35 +25,7 @@ namespace tetstream::pipeline {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
-
-constexpr std::size_t kReadChunk = 1 << 16;  // points per read() call
-
-
-// A sorted run of SortedPoint converted, in place, into the file's records (never
-// larger: record i is written at or before where point i was read, after it was).
-template <class R>
-std::span<R> compact_in_place(std::vector<SortedPoint>& run) {
-  static_assert(sizeof(R) <= sizeof(SortedPoint));
-  std::byte* out = reinterpret_cast<std::byte*>(run.data());
-  for (std::size_t i = 0; i < run.size(); ++i) {
-    R r;
-    r.set(run[i].xyz, run[i].original);
-    std::memcpy(out + i * sizeof(R), &r, sizeof r);
-  }
-  return {reinterpret_cast<R*>(out), run.size()};
-}
-
-// The sort's state between pass 2 and the merge, for records R.
-template <class R>
-struct RecordSort {
-  struct Less {
-    int axis;
-    bool operator()(const R& a, const R& b) const { return record_before(a, b, axis); }
-  };
-  using Sorter = ExternalSorter<R, Less>;
-};
+using namespace sort_detail;  // the pieces both sorts share
 
 // Pass 2: the input read again into runs, each sorted, its hull vertex candidates
 // found (their original indices into hull_originals), written in records R.
@@ -67,10 +36,7 @@ void write_runs(typename RecordSort<R>::Sorter& sorter, const std::string& sourc
                 std::unordered_set<std::uint64_t>& hull_originals) {
   const bool resumable = options.resume != nullptr;
   const int axis = result.axis;
-  const auto before = [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); };
   const std::size_t run_points = options.run_points ? options.run_points : shares.run_points;
-  const std::size_t hull_piece = shares.hull_piece_points;
-  const int hull_threads = shares.hull_threads;
   // Runs an earlier process finished: adopted as they are, their points skipped below.
   std::uint64_t skip = 0;
   for (const SortRunFile& r : done.runs) {
@@ -91,32 +57,9 @@ void write_runs(typename RecordSort<R>::Sorter& sorter, const std::string& sourc
   std::vector<std::uint64_t> run_hull;
   auto flush_run = [&] {
     if (run.empty()) return;
-    parallel_sort(run.data(), run.data() + run.size(), before);
-    run_xyz.resize(3 * run.size());
-    for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
-    // Hull candidates piece by piece, so the kernels' memory stays a fraction of
-    // the budget even when most points are on the hull (a thin shell); the pieces
-    // are independent and run on all threads, their results joined in order.
-    run_hull.clear();
-    const std::size_t pieces = (run.size() + hull_piece - 1) / hull_piece;
-    std::vector<std::vector<std::uint32_t>> piece_hull(pieces);
-    std::exception_ptr failure;  // (out of memory) rethrown after the join, never out of the region
-#pragma omp parallel for schedule(dynamic, 1) num_threads(hull_threads)
-    for (std::size_t p = 0; p < pieces; ++p) {
-      const std::size_t first = p * hull_piece, n = std::min(hull_piece, run.size() - first);
-      try {
-        piece_hull[p] = hull_vertex_candidates(&run_xyz[3 * first], n);
-      } catch (...) {
-#pragma omp critical(tetstream_hull_failure)
-        if (!failure) failure = std::current_exception();
-      }
-    }
-    if (failure) std::rethrow_exception(failure);
-    for (std::size_t p = 0; p < pieces; ++p)
-      for (std::uint32_t i : piece_hull[p]) run_hull.push_back(run[p * hull_piece + i].original);
-    hull_originals.insert(run_hull.begin(), run_hull.end());
+    sort_detail::sort_run_and_find_hull(run, axis, shares, run_xyz, run_hull, hull_originals);
     maybe_inject_fault("sort-run", result.runs);
-    sorter.push_sorted_run(compact_in_place<R>(run));
+    sort_detail::push_run<R>(sorter, run);
     ++result.runs;
     if (resumable) {
       SortRunFile r;
@@ -174,46 +117,6 @@ class FileSink final : public SortedSink {
   BinaryFile out_;
 };
 
-template <class R>
-void merge_runs_into(typename RecordSort<R>::Sorter& sorter, const std::unordered_set<std::uint64_t>& hull_originals,
-                     SortedSink& out, bool sync, bool progress_on, SortedPoints& result) {
-  std::vector<R> block;
-  block.reserve(std::size_t(1) << 15);
-  R last{};
-  bool have_last = false;
-  std::vector<std::uint64_t> hull_labels;
-  Progress progress("merging", "points", result.input_count, progress_on);
-  sorter.merge([&](std::span<const R> batch) {
-    check_interrupted();
-    for (const R& p : batch) {
-      const bool candidate = hull_originals.count(p.original()) != 0;
-      // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
-      if (have_last && p.coord(0) == last.coord(0) && p.coord(1) == last.coord(1) && p.coord(2) == last.coord(2)) {
-        ++result.duplicates;  // the first occurrence (smallest original index) stays
-        if (candidate) hull_labels.push_back(result.count - 1);
-        continue;
-      }
-      if (candidate) hull_labels.push_back(result.count);
-      block.push_back(p);
-      last = p;
-      have_last = true;
-      ++result.count;
-      if (block.size() == block.capacity()) {
-        out.write(block.data(), sizeof(R) * block.size());
-        block.clear();
-      }
-    }
-    // Counted as read from the runs, duplicates included: the total is the input count.
-    progress.add(batch.size());
-  });
-  out.write(block.data(), sizeof(R) * block.size());
-  progress.finish();
-  std::sort(hull_labels.begin(), hull_labels.end());
-  hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
-  result.hull_labels = std::move(hull_labels);
-  out.finish(result, sync);
-}
-
 // Pass 2 and the merge, in records R (the sort's shares taken from the ledger first).
 template <class R>
 void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& source_options,
@@ -249,7 +152,8 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
   sorter.set_give_back_runs(true);
   const std::unique_ptr<SortedSink> sink =
       options.open_sink ? options.open_sink(result) : std::make_unique<FileSink>(dir + "/sorted.points");
-  merge_runs_into<R>(sorter, hull_originals, *sink, /*sync=*/options.resume != nullptr, options.progress, result);
+  sort_detail::merge_runs_into<R>(sorter, hull_originals, *sink, /*sync=*/options.resume != nullptr, options.progress,
+                                  result.input_count, result);
   result.seconds_merge = since(t0);
 }
 }  // namespace

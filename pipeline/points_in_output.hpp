@@ -33,6 +33,41 @@ namespace tetstream::pipeline {
 // a crash midway leaves bytes that fail the recorded CRC, and the job sorts again.
 void rewrite_points_header(int fd, SortedPoints& points, const io::TetFileHeader& header, bool sync);
 
+// The bytes before the points' payload (preamble, HEAD, the PNTS section's header) for
+// `header(points)`, resolved.
+std::vector<std::uint8_t> points_lead(const std::function<io::TetFileHeader(const SortedPoints&)>& header,
+                                      const SortedPoints& points);
+// Where the merge starts writing the payload: after the lead of the header as laid out
+// before the merge (the count a placeholder, no duplicate merged); the real lead is at
+// least as long (OutputPointsSink::finish moves the records when it is longer).
+std::uint64_t payload_offset_before_merge(const std::function<io::TetFileHeader(const SortedPoints&)>& header,
+                                          const SortedPoints& before);
+// Moves n bytes of the file from offset `from` to `to`, in place (overlap allowed);
+// IoError naming `path` when it cannot.
+void move_file_bytes(int fd, const std::string& path, std::uint64_t from, std::uint64_t to, std::uint64_t n);
+
+// Records written with pwrite into a file from byte `offset` on, through a 1 MiB
+// buffer, with the CRC32C of their bytes: the merge's output into a points section
+// (one process's, or a rank's part of it: pipeline/point_sort_distributed.cpp).
+class PayloadWriter {
+ public:
+  PayloadWriter(int fd, std::string path, std::uint64_t offset);
+  void write(const void* data, std::size_t bytes);
+  void flush();  // IoError naming the file when it cannot write
+  std::uint64_t offset() const { return offset_; }
+  std::uint64_t written() const { return written_; }  // flushed or buffered
+  std::uint32_t crc() const { return crc_; }
+  int fd() const { return fd_; }
+  const std::string& path() const { return path_; }
+
+ private:
+  int fd_;
+  std::string path_;
+  std::uint64_t offset_, written_ = 0;
+  std::uint32_t crc_ = 0;
+  std::vector<char> buffer_;
+};
+
 class OutputPointsSink final : public SortedSink {
  public:
   // `header(points)`: the container's header for the sorted points as the merge
@@ -44,15 +79,8 @@ class OutputPointsSink final : public SortedSink {
   void finish(SortedPoints& result, bool sync) override;
 
  private:
-  void flush();
-
-  int fd_;
-  std::string path_;
   std::function<io::TetFileHeader(const SortedPoints&)> header_;
-  std::uint64_t offset_ = 0;    // of the payload, as laid out before the merge
-  std::uint64_t written_ = 0;   // payload bytes written (flushed or buffered)
-  std::uint32_t crc_ = 0;
-  std::vector<char> buffer_;
+  PayloadWriter payload_;  // from the payload's offset as laid out before the merge
 };
 
 }  // namespace tetstream::pipeline

@@ -234,14 +234,16 @@ std::uint64_t physical_memory_bytes() {
 // The disk the job needs, from the input's point count (a header or the file's size;
 // unknown for text and stdin, then not planned), checked before any work: IoError
 // with the figures when a filesystem cannot hold its share.
-std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_parent, bool checkpointed) {
+std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_parent, bool checkpointed, int ranks) {
   if (io::is_std_stream(o.input)) return 0;
   const auto reader = io::open_points(o.input, o.read);
   const std::optional<std::uint64_t> points = reader->count();
   if (!points) return 0;
   std::string out_dir = io::is_std_stream(o.output) ? "" : std::filesystem::path(o.output).parent_path().string();
   if (out_dir.empty()) out_dir = ".";
-  const std::vector<DiskNeed> plan = plan_disk(*points, reader->float32_input(), work_parent, out_dir, io::is_std_stream(o.output), checkpointed);
+  const std::vector<DiskNeed> plan =
+      plan_disk(*points, reader->float32_input(), work_parent, out_dir, io::is_std_stream(o.output), checkpointed,
+                ranks > 1 ? distributed_work_bytes_per_point(ranks) : 0);
   std::uint64_t need = 0;
   for (const DiskNeed& d : plan) {
     need += d.need;
@@ -329,7 +331,8 @@ RunSummary run_job(const RunOptions& requested) {
 
 namespace detail {
 
-OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoint, const io::OutputClaim& claim) {
+OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoint, const io::OutputClaim& claim,
+                                int ranks) {
   OpenedJob opened;
   json& state = opened.state;
   const json identity = job_identity(options);
@@ -375,7 +378,7 @@ OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoin
   if (!state.contains("job")) {
     const std::string parent = std::filesystem::path(checkpoint.dir()).parent_path().string();
     try {
-      opened.disk = plan_and_check_disk(options, parent.empty() ? "." : parent, true);
+      opened.disk = plan_and_check_disk(options, parent.empty() ? "." : parent, true, ranks);
     } catch (...) {
       checkpoint.remove();  // made just now, and empty: nothing to resume
       throw;

@@ -8,6 +8,7 @@
 #include "pipeline/fault.hpp"
 #include "pipeline/frame_cutter.hpp"
 #include "pipeline/memory_budget.hpp"
+#include "pipeline/point_sort_distributed.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/run_internal.hpp"
 #include "pipeline/stage.hpp"
@@ -133,20 +134,57 @@ class RankJob {
     const StageContext context{options_, dir_, checkpoint_, state_, root ? &disk : nullptr};
     summary.resumed = state_.contains("sort") || state_.contains("sorted") || state_.contains("output");
 
-    // ---- sort, on rank 0; the others wait for the sorted points ----
+    // ---- sort: spread over the ranks (each reads, sorts and writes its part), or on
+    // rank 0 alone for an input without a count up front (text) ----
     std::optional<SortStage> sort;
-    std::string sorted_text;
+    std::string sorted_text, how;
     together(comm_, [&] {
       if (!root) return;
       sort.emplace(context, budget_, threads_, claim_);
       sort->prepare();
-      const SortedPoints& s = sort->run();
-      sort->commit();
+      how = sort->recorded() ? "recorded" : sorts_by_ranges(options_.input, options_.read) ? "ranks" : "root";
+    });
+    how = comm_.broadcast(how, 0);
+    if (how == "ranks") {
+      DistributedSortTarget target;
+      target.partial = options_.output + ".partial";
+      std::string identity;
+      if (root) {
+        target.header = sort->points_header();
+        const io::OutputPart::Identity id = io::OutputPart::identity_of(claim_->fd());
+        identity = json::array({id.first, id.second}).dump();
+      }
+      const json id = json::parse(comm_.broadcast(identity, 0));
+      target.identity = {id.at(0).get<std::uint64_t>(), id.at(1).get<std::uint64_t>()};
+      PointSortOptions sort_options;
+      sort_options.memory_bytes = std::size_t(options_.memory_bytes);
+      sort_options.budget = &budget_;
+      sort_options.run_points = std::size_t(options_.sort_run_points);
+      sort_options.progress = options_.progress;
+      sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, options_, threads_); };
+      SortedPoints made;
+      {
+        const ScopedThreads threads(threads_);
+        // This rank's runs: rank-R-points-K.run in the work directory (the sorter
+        // removes them; a stopped job's are work files its directory's owner clears).
+        made = sort_points_distributed(comm_, options_.input, options_.read, sort_options, dir_,
+                                       rank_prefix(comm_.rank()) + "-points", target);
+      }
+      together(comm_, [&] {
+        if (!root) return;
+        sort->adopt(std::move(made));
+        sort->commit();
+      });
+    }
+    together(comm_, [&] {
+      if (!root) return;
+      const SortedPoints& s = how == "root" ? sort->run() : sort->result();
+      if (how == "root") sort->commit();
       if (s.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
       sorted_text = sorted_json(s).dump();
       summary.seconds_sort = seconds_since(start_);
-      spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs, {:.1f}s", s.count, s.duplicates,
-                   "xyz"[s.axis], s.runs, summary.seconds_sort);
+      spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs{}, {:.1f}s", s.count, s.duplicates,
+                   "xyz"[s.axis], s.runs, how == "ranks" ? " on every rank" : "", summary.seconds_sort);
     });
     sorted_text = comm_.broadcast(sorted_text, 0);
     const SortedPoints sorted = root ? sort->result() : sorted_from_json(json::parse(sorted_text));
@@ -156,14 +194,32 @@ class RankJob {
     summary.axis = sorted.axis;
 
     // ---- index and plan, on every rank: the same plan everywhere ----
+    // Each rank builds a K-th of the index's blocks into one file, which every rank
+    // then maps (pipeline/stage_index.hpp): the build is shared, and the index is held
+    // by the page cache, not once a rank.
     IndexStage index(sorted, threads_);
     std::optional<TriangulatePlan> plan;
     RunSummary::Rank mine;
+    const std::string index_path = dir_ + "/index.shared";
+    const auto index_start = StageClock::now();
+    std::uint64_t my_nodes = 0;
     together(comm_, [&] {
-      const auto t0 = StageClock::now();
       index.prepare();
-      index.run();
-      mine.seconds_index = seconds_since(t0);
+      my_nodes = index.build_shared_part(comm_.rank(), size);
+    });
+    const std::vector<std::uint64_t> nodes = comm_.all_gather(my_nodes);
+    std::uint64_t total_nodes = 0, first_node = 0;
+    for (int r = 0; r < size; ++r) {
+      if (r < comm_.rank()) first_node += nodes[std::size_t(r)];
+      total_nodes += nodes[std::size_t(r)];
+    }
+    together(comm_, [&] {
+      if (root) index.create_shared_file(index_path, total_nodes);
+    });
+    together(comm_, [&] { index.write_shared_part(index_path, total_nodes, first_node); });
+    together(comm_, [&] {
+      index.attach_shared(index_path, total_nodes, size);
+      mine.seconds_index = seconds_since(index_start);
       budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
       plan = plan_triangulation(index, options_, budget_, threads_);
     });
@@ -345,7 +401,7 @@ RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) 
     claim.emplace(options.output);
     if (options.checkpoint) {
       checkpoint.emplace(checkpoint_directory(options));
-      opened = detail::open_checkpointed_job(options, *checkpoint, *claim);
+      opened = detail::open_checkpointed_job(options, *checkpoint, *claim, comm.size());
       dir = checkpoint->dir();
       // The split into ranks is part of the checkpoint (each rank's fragment holds its
       // labels' frames): a resume keeps it, checked before any rank writes.
@@ -361,7 +417,7 @@ RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) 
       }
     } else {
       detail::remove_stale_temporary_dirs(detail::work_parent(options));
-      opened.disk = detail::plan_and_check_disk(options, detail::work_parent(options), false);
+      opened.disk = detail::plan_and_check_disk(options, detail::work_parent(options), false, comm.size());
       tmp.emplace(detail::work_parent(options), "tetstream-run");
       dir = tmp->dir();
     }

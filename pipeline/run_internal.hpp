@@ -21,7 +21,9 @@ std::string work_parent(const RunOptions& options);
 // The disk the job needs, planned from the input's point count and checked against
 // each filesystem's free space before any work (IoError with the figures); 0 when the
 // count is unknown (text, stdin).
-std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_parent, bool checkpointed);
+// `ranks`: the job's processes (the work directory holds more under mpirun: disk_plan.hpp).
+std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_parent, bool checkpointed,
+                                  int ranks = 1);
 // Removes the temporary directories that killed jobs left in `parent`.
 void remove_stale_temporary_dirs(const std::string& parent);
 
@@ -54,7 +56,9 @@ struct OpenedJob {
   std::uint64_t disk = 0;
   std::optional<RunSummary> finished;
 };
-OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoint, const io::OutputClaim& claim);
+// `ranks`: the job's processes (the disk plan: disk_plan.hpp).
+OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoint, const io::OutputClaim& claim,
+                                int ranks = 1);
 
 // In a catch block: rethrows the job's failure, after removing the checkpoint and the
 // partial output when nothing is worth resuming (bad input, a budget refused before

@@ -139,6 +139,24 @@ void SortStage::renew_header_budget() {
   context_.save();
 }
 
+std::function<io::TetFileHeader(const SortedPoints&)> SortStage::points_header() const {
+  const std::uint64_t memory = context_.state.value("header_memory", context_.options.memory_bytes);
+  return [&options = context_.options, memory](const SortedPoints& s) { return container_header(options, memory, s); };
+}
+
+const SortedPoints& SortStage::adopt(SortedPoints sorted) {
+  sorted_ = std::move(sorted);
+  sorted_.header_memory = context_.state.value("header_memory", context_.options.memory_bytes);
+  check_sorted_again();
+  return sorted_;
+}
+
+void SortStage::check_sorted_again() const {
+  if (expected_crc_ && sorted_.crc32c != *expected_crc_)
+    throw DamagedCheckpoint(sorted_.path + ": sorted again after a checksum failure, the points differ from the "
+                            "checkpoint's (damaged checkpoint, or the input changed)");
+}
+
 const SortedPoints& SortStage::run() {
   if (done_) return sorted_;
   const RunOptions& options = context_.options;
@@ -155,11 +173,8 @@ const SortedPoints& SortStage::run() {
   const std::uint64_t memory = context_.state.value("header_memory", options.memory_bytes);
   if (claim_) {
     // The merge writes straight into the output's points section (no second copy).
-    sort_options.open_sink = [this, memory](const SortedPoints& before) -> std::unique_ptr<SortedSink> {
-      auto header = [&options = context_.options, memory](const SortedPoints& s) {
-        return container_header(options, memory, s);
-      };
-      return std::make_unique<OutputPointsSink>(claim_->fd(), claim_->path() + ".partial", header, before);
+    sort_options.open_sink = [this](const SortedPoints& before) -> std::unique_ptr<SortedSink> {
+      return std::make_unique<OutputPointsSink>(claim_->fd(), claim_->path() + ".partial", points_header(), before);
     };
   }
   if (context_.checkpoint) {
@@ -174,9 +189,7 @@ const SortedPoints& SortStage::run() {
     sorted_ = sort_points(options.input, options.read, sort_options, context_.dir);
   }
   if (sorted_.offset != 0) sorted_.header_memory = memory;
-  if (expected_crc_ && sorted_.crc32c != *expected_crc_)
-    throw DamagedCheckpoint(sorted_.path + ": sorted again after a checksum failure, the points differ from the "
-                            "checkpoint's (damaged checkpoint, or the input changed)");
+  check_sorted_again();
   return sorted_;
 }
 

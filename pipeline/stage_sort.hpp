@@ -8,11 +8,13 @@
 // once the runs are merged, when "sort" and the run files go. A file that a record
 // names and that fails its checksum is made again, never trusted.
 #include "io/output_file.hpp"
+#include "io/tet_container.hpp"
 #include "pipeline/memory_budget.hpp"
 #include "pipeline/point_sort.hpp"
 #include "pipeline/stage.hpp"
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 
 namespace tetstream::pipeline {
@@ -43,8 +45,19 @@ class SortStage {
 
   const SortedPoints& result() const { return sorted_; }
 
+  // Whether prepare() found the sort recorded and intact (run() then does nothing).
+  bool recorded() const { return done_; }
+  // The container header the points section is written with, for given sorted points
+  // (the budget it names: the writer's record when it started, else this process's).
+  std::function<io::TetFileHeader(const SortedPoints&)> points_header() const;
+  // In place of run(): the sorted points that the ranks of a distributed job wrote
+  // into the claimed output's points section (pipeline/point_sort_distributed.hpp),
+  // with run()'s check of a sort made again after a checksum failure.
+  const SortedPoints& adopt(SortedPoints sorted);
+
  private:
   void renew_header_budget();
+  void check_sorted_again() const;  // DamagedCheckpoint when a sort made again differs
   StageContext context_;
   MemoryBudget& budget_;
   const int threads_;

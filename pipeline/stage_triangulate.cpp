@@ -127,7 +127,7 @@ void TriangulateStage::run(SegmentSink& out) {
         }
       }
       tets = ZoneTets{};
-      release_mapped_pages(indexed_.mapped_data(), indexed_.mapped_bytes());
+      indexed_.release_pages();
       malloc_trim(0);  // hand any freed heap back, so resident memory tracks the windows
     }
   }

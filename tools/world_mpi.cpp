@@ -5,6 +5,8 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <cstdint>
+#include <stdexcept>
 #include <optional>
 #include <string>
 
@@ -79,6 +81,40 @@ class MpiWorld final : public Communicator {
       for (int r = 0; r < size_; ++r)
         out.push_back(all.substr(std::size_t(displs[std::size_t(r)]), std::size_t(counts[std::size_t(r)])));
     return out;
+  }
+  std::vector<std::uint64_t> all_to_all(const std::vector<std::uint64_t>& to_each) override {
+    std::vector<std::uint64_t> from_each(static_cast<std::size_t>(size_));
+    sent_ += to_each.size() * sizeof(std::uint64_t);
+    check(MPI_Alltoall(to_each.data(), 1, MPI_UINT64_T, from_each.data(), 1, MPI_UINT64_T, MPI_COMM_WORLD),
+          "all_to_all");
+    return from_each;
+  }
+  void exchange(const void* send, const std::vector<std::uint64_t>& send_counts, void* receive,
+                const std::vector<std::uint64_t>& receive_counts, std::size_t record_bytes) override {
+    // Counts in records of a contiguous type, so that a round's displacements (ints)
+    // count records, not bytes.
+    auto as_ints = [](const std::vector<std::uint64_t>& counts, std::vector<int>& n, std::vector<int>& displs) {
+      std::uint64_t total = 0;
+      for (std::size_t r = 0; r < counts.size(); ++r) {
+        if (counts[r] > std::uint64_t(INT32_MAX) || total > std::uint64_t(INT32_MAX) - counts[r])
+          throw std::length_error("exchange: a round of more than 2^31 records");
+        n[r] = int(counts[r]), displs[r] = int(total);
+        total += counts[r];
+      }
+      return total;
+    };
+    const std::size_t k = static_cast<std::size_t>(size_);
+    std::vector<int> sn(k), sd(k), rn(k), rd(k);
+    // What leaves this rank: its records for the others.
+    sent_ += (as_ints(send_counts, sn, sd) - send_counts[std::size_t(rank_)]) * record_bytes;
+    as_ints(receive_counts, rn, rd);
+    MPI_Datatype record;
+    check(MPI_Type_contiguous(int(record_bytes), MPI_BYTE, &record), "exchange");
+    check(MPI_Type_commit(&record), "exchange");
+    const int rc = MPI_Alltoallv(send, sn.data(), sd.data(), record, receive, rn.data(), rd.data(), record,
+                                 MPI_COMM_WORLD);
+    MPI_Type_free(&record);
+    check(rc, "exchange");
   }
   std::uint64_t bytes_sent() const override { return sent_; }
 

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # `mpirun -n K tetstream run` (issue #20): K = 1, 2, 3 ranks on this machine write the
 # bytes of one process with the same --memory, on uniform (float64 and float32),
-# clustered and degenerate (grid) points with several blocks a rank; a failing rank
+# clustered and degenerate (grid) points with several blocks a rank, inputs with exact
+# duplicates and a text input; the points are sorted by every rank together (each
+# reads, sends and writes its part); a failing rank
 # stops the job with one error line and the single process's exit code; a failed or
 # killed job resumed on the same ranks ends with the same bytes; what does not run
 # distributed yet is refused with one line.
@@ -57,13 +59,20 @@ assert all(r["tets"] > 0 for r in ranks), ranks  # every rank wrote some
 assert sum(r["tets"] for r in ranks) == s["tets"], (ranks, s["tets"])
 assert ranks[0]["labels"][0] == 0 and ranks[-1]["labels"][1] == s["points"]
 assert all(a["labels"][1] == b["labels"][0] for a, b in zip(ranks, ranks[1:])), ranks
-# Ranks tell each other summaries only (the points and tets go through files): every
-# rank sent something, a few kilobytes; rank 0 also the sorted file's description,
-# whose hull labels (written as decimal text) grow with the hull.
+# Ranks hand each other the points of the sort's exchange (at most their own range of
+# the input, 32 bytes a point, less what stays on the rank), their hull candidates'
+# labels (8 bytes, at most one a point) and summaries (the tets go through files);
+# rank 0 also the sorted file's description, whose hull labels (decimal text) grow
+# with the hull.
 assert s["seconds"]["index"] == max(r["seconds"]["index"] for r in ranks), s["seconds"]
 sent = [r["message_bytes"] for r in ranks]
-assert all(0 < b < 64 * 1024 for b in sent[1:]), sent
-assert 0 < sent[0] < 64 * 1024 + 24 * s["hull_vertices"], (sent, s["hull_vertices"])
+share = (s["input_points"] + n - 1) // n
+assert all(0 < b < 64 * 1024 + 40 * share for b in sent[1:]), (sent, share)
+assert 0 < sent[0] < 64 * 1024 + 40 * share + 24 * s["hull_vertices"], (sent, s["hull_vertices"])
+# The points went through the exchange, not through rank 0: about (n - 1) / n of a
+# rank's records belong to other ranks' ranges (the inputs are in random or grid
+# order); at least half of that is asked.
+assert all(b > 16 * share * (n - 1) // n for b in sent), (sent, share)
 PY
     fi
   done
@@ -113,6 +122,35 @@ OUT3=placed.tets run3 --resume
 cmp uniform-f64-1p.tets placed.tets || fail "resumed after a failed placement: other bytes than one process"
 [ ! -e placed.tets.ckpt ] || fail "the checkpoint is left after the resumed placement"
 
+# Rank 1 fails in the sort every rank takes part in (its first sorted run, --sort-run-points
+# forcing several): the same exit and line, the output not under its final name, the
+# checkpoint kept; --resume sorts again and ends with the same bytes.
+"$T" -q --threads 1 run uniform.f64 -o sorted-1p.tets --memory 32M --sort-run-points 20000 --no-checkpoint
+cmp uniform-f64-1p.tets sorted-1p.tets || fail "--sort-run-points changed the bytes"
+set +e
+OUT3=sortfail.tets FAULT1=sort-run:0 run3 --sort-run-points 20000 2>sortfail.err
+rc=$?
+set -e
+[ "$rc" = 3 ] && [ "$(grep -c 'tetstream: error:' sortfail.err)" = 1 ] && grep -q "injected failure at sort-run:0" sortfail.err ||
+  { cat sortfail.err >&2; fail "a rank failing in the sort: exit $rc"; }
+[ ! -e sortfail.tets ] && [ -f sortfail.tets.ckpt/state.json ] || fail "a failed sort: output present or no checkpoint"
+OUT3=sortfail.tets run3 --sort-run-points 20000 --resume
+cmp uniform-f64-1p.tets sortfail.tets || fail "resumed after a failed sort: other bytes than one process"
+[ ! -e sortfail.tets.ckpt ] || fail "the checkpoint is left after the resumed sort"
+
+# Exact duplicates, many of them and across the ranks' ranges (their first copies
+# kept, the ranks' parts moved into place), and a text input (no count up front: rank 0
+# sorts it alone): the bytes of one process.
+"$T" -q gen --dist uniform --n 60000 --seed 5 --duplicates 0.3 -o dups.f64
+"$T" -q gen --dist uniform --n 20000 --seed 6 -o small.xyz
+for input in dups.f64 small.xyz; do
+  "$T" -q --threads 1 run "$input" -o "$input-1p.tets" --memory 32M --sort-run-points 9000 --no-checkpoint
+  for n in 2 3; do
+    mpi "$n" "$T" -q --threads 1 run "$input" -o "$input-$n.tets" --memory 32M --sort-run-points 9000 --no-checkpoint
+    cmp "$input-1p.tets" "$input-$n.tets" || fail "$input: $n ranks wrote other bytes than one process"
+  done
+done
+
 # A rank killed with -9 mid-run (rank 2, once its checkpoint records a segment): mpirun
 # stops the others; --resume with the same ranks ends with the same bytes.
 rank_pid() {  # the pid of rank $1 of this test's job
@@ -138,7 +176,24 @@ cmp uniform-f64-1p.tets killed.tets || fail "resumed after rank 2 was killed: ot
 [ ! -e killed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
 ls | grep -q '^tetstream-run-' && fail "a work directory was left behind"
 
-# Bad input (rank 0 sorts it): exit 1, one line naming the file and the offset.
+# Bad input found by the last rank as it reads its range: the line one process
+# prints (the first bad point in input order), exit 1, no output.
+cp uniform.f64 nan.f64
+printf '\x00\x00\x00\x00\x00\x00\xf8\x7f' | dd of=nan.f64 bs=1 seek=$((24 * 190000 + 8)) conv=notrunc status=none
+set +e
+"$T" -q run nan.f64 -o nan-1p.tets --memory 32M 2>nan-1p.err
+rc1=$?
+mpi 3 "$T" -q run nan.f64 -o nan.tets --memory 32M 2>nan.err
+rc=$?
+set -e
+[ "$rc1" = 1 ] && [ "$rc" = 1 ] || fail "a NaN: exit $rc1 (one process), $rc (3 ranks), expected 1"
+grep 'tetstream: error:' nan-1p.err >nan-1p.line
+grep 'tetstream: error:' nan.err >nan.line
+cmp nan-1p.line nan.line || { cat nan-1p.err nan.err >&2; fail "a NaN: 3 ranks report another line than one process"; }
+grep -q "byte $((24 * 190000 + 8))" nan.line || fail "a NaN: the line does not name its byte"
+[ ! -e nan.tets ] && [ ! -e nan.tets.partial ] || fail "a NaN left an output"
+
+# Bad input (every rank sees it at the start): exit 1, one line naming the file and the offset.
 head -c 1000 uniform.f64 >truncated.f64
 set +e
 mpi 3 "$T" -q run truncated.f64 -o bad.tets --memory 32M 2>bad.err

@@ -254,6 +254,29 @@ TEST(Crc32c, KnownVectorsAndIncremental) {
   EXPECT_EQ(crc32c(data.data() + 333, 667, crc32c(data.data(), 333)), whole);
 }
 
+// Two pieces' CRCs give the whole one's, for every split (empty pieces included), and
+// chained over many pieces as the ranks of a job combine theirs.
+TEST(Crc32c, CombineGivesTheWholeStringsCrc) {
+  std::vector<std::uint8_t> data(2053);
+  std::uint32_t x = 12345;
+  for (std::uint8_t& b : data) b = std::uint8_t((x = x * 1103515245u + 12345u) >> 16);
+  const std::uint32_t whole = crc32c(data.data(), data.size());
+  for (std::size_t cut = 0; cut <= data.size(); cut += 1 + cut / 3) {
+    const std::uint32_t a = crc32c(data.data(), cut), b = crc32c(data.data() + cut, data.size() - cut);
+    EXPECT_EQ(crc32c_combine(a, b, data.size() - cut), whole) << "cut at " << cut;
+  }
+  std::uint32_t chained = crc32c(nullptr, 0);
+  for (std::size_t at = 0, piece = 1; at < data.size(); at += piece, piece = piece * 2 + 1) {
+    const std::size_t n = std::min(piece, data.size() - at);
+    chained = crc32c_combine(chained, crc32c(data.data() + at, n), n);
+  }
+  EXPECT_EQ(chained, whole);
+  // Long pieces (1 MiB of zeros, twice): the combine's powers of x past small counts.
+  std::vector<std::uint8_t> zeros(std::size_t(1) << 20, 0);
+  std::uint32_t z = crc32c(zeros.data(), zeros.size());
+  EXPECT_EQ(crc32c_combine(z, z, zeros.size()), crc32c(zeros.data(), zeros.size(), z));
+}
+
 // ---------------------------------------------------------------- codec
 
 TEST(FrameCodec, RoundTripIsTheCanonicalStoredOrder) {

@@ -50,6 +50,9 @@ class ScriptedRanks final : public Communicator {
   }
   std::string broadcast(const std::string& bytes, int) override { return bytes; }
   std::vector<std::string> gather(const std::string& bytes, int) override { return {bytes}; }
+  std::vector<std::uint64_t> all_to_all(const std::vector<std::uint64_t>& to_each) override { return to_each; }
+  void exchange(const void*, const std::vector<std::uint64_t>&, void*, const std::vector<std::uint64_t>&,
+                std::size_t) override {}
   std::uint64_t bytes_sent() const override { return 0; }
 
  private:

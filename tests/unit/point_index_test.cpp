@@ -4,7 +4,13 @@
 #include "pipeline/point_index.hpp"
 #include "pipeline/segment.hpp"
 
+#include "scratch_dir.hpp"
+
 #include <gtest/gtest.h>
+
+#include <boost/iostreams/device/mapped_file.hpp>
+#include <fcntl.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -80,6 +86,60 @@ TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
         }
       }
     }
+  }
+}
+
+// The index built in parts (the ranks of a job, each its blocks), written into one file
+// and mapped, answers every query as the index built whole: the same labels in the same
+// order, whatever the parts (one block, uneven parts, an empty part).
+class SharedIndex : public testing_util::ScratchDirTest {
+ protected:
+  SharedIndex() : ScratchDirTest("shared-index") {}
+};
+
+TEST_F(SharedIndex, PartsInOneFileAnswerAsTheWholeIndex) {
+  const int axis = 0;
+  const std::vector<SortedPoint> p = sorted_points(30000, axis, false, 11);
+  const std::uint32_t block = 2500;  // 12 blocks
+  PointIndex whole;
+  whole.build(records_of(p.data()), p.size(), axis, block);
+  const std::uint64_t blocks = PointIndex::blocks_for(p.size(), block);
+  ASSERT_EQ(blocks, 12u);
+  for (const std::vector<std::uint64_t>& cuts : std::vector<std::vector<std::uint64_t>>{
+           {0, 12}, {0, 5, 12}, {0, 1, 7, 7, 12}, {0, 4, 8, 11, 12}}) {
+    std::vector<PointIndex> parts(cuts.size() - 1);
+    std::vector<std::uint64_t> first_node(parts.size() + 1, 0);
+    for (std::size_t r = 0; r < parts.size(); ++r) {
+      parts[r].build_part(records_of(p.data()), p.size(), axis, block, cuts[r], cuts[r + 1]);
+      first_node[r + 1] = first_node[r] + parts[r].part_nodes();
+    }
+    const std::string file = path("index");
+    const PointIndex::FileLayout layout = PointIndex::file_layout(p.size(), first_node.back(), blocks);
+    const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644);
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::ftruncate(fd, off_t(layout.bytes)), 0);
+    for (std::size_t r = parts.size(); r-- > 0;)  // in any order
+      parts[r].write_part(fd, file, first_node.back(), first_node[r]);
+    ::close(fd);
+    boost::iostreams::mapped_file_source mapping(file);
+    PointIndex shared;
+    shared.attach(reinterpret_cast<const std::byte*>(mapping.data()), records_of(p.data()), p.size(), axis, block,
+                  first_node.back(), 1234);
+    EXPECT_EQ(shared.memory_bytes(), 1234u);
+    std::mt19937_64 rng(cuts.size());
+    std::uniform_real_distribution<double> u(-1.2, 1.2);
+    std::uniform_int_distribution<std::uint64_t> label(0, p.size());
+    for (int q = 0; q < 200; ++q) {
+      const double c[3] = {u(rng), 3 * u(rng), u(rng)};
+      const double r = q % 10 == 0 ? 2.0 : 0.05 + 0.3 * std::abs(u(rng));
+      std::uint64_t first = label(rng), last = label(rng);
+      if (first > last) std::swap(first, last);
+      std::vector<std::uint64_t> a, b;
+      whole.for_each_candidate(c, r, first, last, [&](std::uint64_t l) { a.push_back(l); }, [] { return false; });
+      shared.for_each_candidate(c, r, first, last, [&](std::uint64_t l) { b.push_back(l); }, [] { return false; });
+      ASSERT_EQ(a, b) << "query " << q << ", " << parts.size() << " parts";
+    }
+    EXPECT_EQ(whole.leaf_spacing_quantile(0.5), shared.leaf_spacing_quantile(0.5));
   }
 }
 
