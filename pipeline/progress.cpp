@@ -2,8 +2,11 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <fcntl.h>
 #include <sys/ioctl.h>
 #include <unistd.h>
 
@@ -13,6 +16,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr std::int64_t kTtyIntervalNs = 200'000'000;       // redraw 5 times a second
 constexpr std::int64_t kLogIntervalNs = 10'000'000'000LL;  // one log line every 10 s
+constexpr std::int64_t kShareIntervalNs = 1'000'000'000;    // a rank's shared count, once a second
 // Columns of the terminal on stderr; 0 when it says none.
 std::size_t terminal_columns() {
   struct winsize w {};
@@ -53,7 +57,54 @@ Progress::Progress(std::string what, std::string unit, std::uint64_t total, bool
   next_report_ns_ = tty_ ? kTtyIntervalNs : kLogIntervalNs;
 }
 
-Progress::~Progress() { finish(); }
+Progress::~Progress() {
+  finish();
+  if (share_fd_ >= 0) ::close(share_fd_);
+}
+
+void Progress::share_to(const std::string& path, std::uint64_t base) {
+  // A file of the job's own work directory, never through a link.
+  share_fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_NOFOLLOW | O_CLOEXEC, 0600);
+  if (share_fd_ < 0) {
+    spdlog::debug("{}: cannot share progress: {}", path, std::strerror(errno));
+    return;
+  }
+  share_path_ = path;
+  share_base_ = base;
+  share(false);
+}
+
+void Progress::add_shared(std::vector<std::string> paths) { peers_ = std::move(paths); }
+
+std::uint64_t Progress::counted() { return done_.load(std::memory_order_relaxed) + (peers_.empty() ? 0 : peers_done()); }
+
+std::uint64_t Progress::done_with_shared() {
+  std::lock_guard lock(print_mutex_);
+  return counted();
+}
+
+// Progress is advice: a write that fails is dropped, never an error of the job.
+void Progress::share(bool final) {
+  const std::uint64_t done = done_.load(std::memory_order_relaxed);
+  const std::uint64_t n = done > share_base_ ? done - share_base_ : 0;
+  if (::pwrite(share_fd_, &n, sizeof n, 0) != ssize_t(sizeof n) && final)
+    spdlog::debug("{}: cannot share progress: {}", share_path_, std::strerror(errno));
+}
+
+std::uint64_t Progress::peers_done() {
+  const std::int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start_).count();
+  if (peers_read_ns_ >= 0 && now - peers_read_ns_ < kShareIntervalNs) return peers_done_;
+  peers_read_ns_ = now;
+  std::uint64_t sum = 0;
+  for (const std::string& p : peers_) {
+    const int fd = ::open(p.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+    if (fd < 0) continue;  // that rank has not started yet
+    std::uint64_t n = 0;
+    if (::pread(fd, &n, sizeof n, 0) == ssize_t(sizeof n)) sum += n;
+    ::close(fd);
+  }
+  return peers_done_ = sum;
+}
 
 double Progress::seconds() const {
   return std::chrono::duration<double>(Clock::now() - start_).count();
@@ -61,9 +112,13 @@ double Progress::seconds() const {
 
 void Progress::add(std::uint64_t n) {
   done_.fetch_add(n, std::memory_order_relaxed);
-  if (!enabled_) return;
   const std::int64_t now =
       std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start_).count();
+  if (share_fd_ >= 0) {
+    std::int64_t due_share = next_share_ns_.load(std::memory_order_relaxed);
+    if (now >= due_share && next_share_ns_.compare_exchange_strong(due_share, now + kShareIntervalNs)) share(false);
+  }
+  if (!enabled_) return;
   std::int64_t due = next_report_ns_.load(std::memory_order_relaxed);
   if (now < due) return;
   const std::int64_t step = tty_ ? kTtyIntervalNs : kLogIntervalNs;
@@ -74,7 +129,7 @@ void Progress::add(std::uint64_t n) {
 void Progress::report(bool final) {
   std::lock_guard lock(print_mutex_);
   const double t = seconds();
-  const double done = double(done_.load(std::memory_order_relaxed));
+  const double done = double(counted());
   const double rate = t > 0 ? done / t : 0.0;
   std::string line = what_ + ": " + human_count(done);
   if (total_ > 0) {
@@ -106,6 +161,7 @@ void Progress::report(bool final) {
 void Progress::finish() {
   if (finished_) return;
   finished_ = true;
+  if (share_fd_ >= 0) share(true);
   if (enabled_) report(true);
 }
 

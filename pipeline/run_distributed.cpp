@@ -107,6 +107,7 @@ RunSummary::Rank rank_from(const json& j) {
 
 std::string rank_prefix(int rank) { return "rank-" + std::to_string(rank); }
 std::string fragment_name(int rank) { return rank_prefix(rank) + ".tets"; }
+std::string progress_file(const std::string& dir, int rank) { return dir + "/" + rank_prefix(rank) + ".progress"; }
 
 // One rank's part of the job, from the sort to its frames written. Rank 0 owns the
 // output's claim, the work directory and the sort; every collective step is inside
@@ -227,6 +228,8 @@ class RankJob {
 
     // ---- triangulate this rank's blocks of labels; its frames to the output (rank
     // 0) or to its fragment ----
+    // Whether rank 0 prints progress (the others are quiet, and share their counts).
+    const bool job_progress = comm_.broadcast(options_.progress ? "yes" : "", 0) == "yes";
     const std::uint64_t block = frame_block_labels(budget_.frame_tets());
     const std::vector<std::uint64_t> bounds = rank_label_bounds(sorted.count, block, size);
     mine.first_label = bounds[std::size_t(comm_.rank())];
@@ -256,6 +259,17 @@ class RankJob {
       const std::uint64_t from = std::max(mine.first_label, write.first_label());
       triangulate.emplace(options_, index, plan->zones, plan->shares.query_page_bytes, threads_);
       triangulate->prepare(from, write.segments_done(), mine.end_label);
+      if (job_progress) {
+        // One progress line for the job, rank 0's, counting every rank's labels.
+        TriangulateStage::SharedProgress shared;
+        shared.total = sorted.count;
+        shared.base = mine.first_label;
+        if (root)
+          for (int r = 1; r < size; ++r) shared.peers.push_back(progress_file(dir_, r));
+        else
+          shared.own = progress_file(dir_, comm_.rank());
+        triangulate->share_progress(std::move(shared));
+      }
       budget_.plan_triangulate(plan->shares.index_bytes, triangulate->window_bytes());
       triangulate->run(write);
       write.commit(mine.end_label);

@@ -81,8 +81,13 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
 // zones finished or started since.
 void TriangulateStage::run(SegmentSink& out) {
   const SortedView& view = indexed_.view();
-  Progress progress("triangulating", "points", end_label_, options_.progress);
+  Progress progress("triangulating", "points", shared_progress_ ? shared_progress_->total : end_label_,
+                    options_.progress);
   progress.add(first_label_);
+  if (shared_progress_) {
+    if (!shared_progress_->own.empty()) progress.share_to(shared_progress_->own, shared_progress_->base);
+    progress.add_shared(shared_progress_->peers);
+  }
   std::exception_ptr failure;
   std::atomic<bool> cancelled{false};
   const auto stage_start = StageClock::now();

@@ -13,6 +13,9 @@
 #include "pipeline/zone_plan.hpp"
 
 #include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -60,6 +63,17 @@ class TriangulateStage {
   // depend on the plan) to `end_label` (a rank's range; by default the last) and cuts
   // each into its zones.
   void prepare(std::uint64_t first_label, std::uint64_t first_segment, std::uint64_t end_label = ~std::uint64_t(0));
+
+  // Under mpirun (pipeline/progress.hpp, share_to / add_shared): this rank's count
+  // shared through the file `own` (counted from label `base`), and the line that prints
+  // (rank 0's) adding the files `peers` and counting `total` labels: one line for the job.
+  struct SharedProgress {
+    std::string own;
+    std::uint64_t base = 0;
+    std::vector<std::string> peers;
+    std::uint64_t total = 0;
+  };
+  void share_progress(SharedProgress shared) { shared_progress_ = std::move(shared); }
   // Triangulates every zone and hands each segment's tets to `out` once its last zone
   // is done. The first failure stops the others and is rethrown after the join.
   void run(SegmentSink& out);
@@ -85,6 +99,7 @@ class TriangulateStage {
   const int threads_;
   MappedRegions query_regions_;
   std::uint64_t first_label_ = 0, first_segment_ = 0, end_label_ = 0;
+  std::optional<SharedProgress> shared_progress_;
   std::vector<SegmentPlan> plans_;
   std::vector<Unit> units_;  // every zone of every segment, in plan order
   // Filled by collect, in plan order: the current segment's zones' tets and work.

@@ -56,7 +56,7 @@ void write_marker(const std::string& dir) {
 
 bool is_work_file_name(const std::string& name) {
   static const std::regex kNames(
-      R"((state\.json|rank-[0-9]+\.json|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?)");
+      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?)");
   return std::regex_match(name, kNames);
 }
 

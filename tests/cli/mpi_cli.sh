@@ -151,6 +151,14 @@ for input in dups.f64 small.xyz; do
   done
 done
 
+# One progress line for the job (rank 0's, not -q): it counts every rank's labels, out
+# of all of them (200.00 k), not rank 0's third; the other ranks print nothing.
+mpi 3 "$T" --threads 1 run uniform.f64 -o progress.tets --memory 32M --no-checkpoint 2>progress.err
+grep -q "triangulating: .* / 200.00 k points" progress.err || { cat progress.err >&2; fail "no progress line counting the whole job"; }
+[ "$(grep -c 'triangulating: .*, [0-9.]*s$' progress.err)" = 1 ] || { cat progress.err >&2; fail "not one final progress line"; }
+cmp uniform-f64-1p.tets progress.tets || fail "progress: other bytes than one process"
+ls progress.tets.* tetstream-run-* 2>/dev/null && fail "a progress file or work directory was left behind"
+
 # A rank killed with -9 mid-run (rank 2, once its checkpoint records a segment): mpirun
 # stops the others; --resume with the same ranks ends with the same bytes.
 rank_pid() {  # the pid of rank $1 of this test's job

@@ -3,11 +3,18 @@
 // pipeline/run_distributed.hpp). The job itself is tested under mpirun by
 // tests/cli/mpi_cli.sh.
 #include "pipeline/communicator.hpp"
+#include "pipeline/progress.hpp"
 #include "pipeline/run_distributed.hpp"
+
+#include "scratch_dir.hpp"
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+
+#include <chrono>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <vector>
 
@@ -96,6 +103,34 @@ TEST(Together, TheLowestFailingRankSpeaksAndEveryRankStopsWithItsCode) {
   } catch (const PeerFailed& e) {
     EXPECT_EQ(e.code(), ExitCode::kIoFailure);
   }
+}
+
+// One progress line for a job: each rank's count goes through its file (from its first
+// label on), and rank 0's line adds them to its own; a rank not started yet (no file)
+// counts nothing.
+class SharedProgress : public testing_util::ScratchDirTest {
+ protected:
+  SharedProgress() : ScratchDirTest("shared-progress") {}
+};
+
+TEST_F(SharedProgress, RankZeroCountsEveryRanksWork) {
+  Progress rank1("triangulating", "points", 3000, false), rank2("triangulating", "points", 3000, false);
+  rank1.add(1000);  // its first label: not its work
+  rank1.share_to(path("rank-1.progress"), 1000);
+  rank1.add(400);
+  rank1.finish();  // the final count is always written
+  Progress rank0("triangulating", "points", 3000, false);
+  rank0.add(250);
+  rank0.add_shared({path("rank-1.progress"), path("rank-2.progress")});
+  EXPECT_EQ(rank0.done_with_shared(), 250u + 400u);
+  EXPECT_EQ(rank0.done(), 250u);  // its own count is its own
+  rank2.add(2000);
+  rank2.share_to(path("rank-2.progress"), 2000);  // shares at once (0 done since its base)
+  rank2.add(300);
+  rank2.finish();
+  // Read at most once a second: the next line sees rank 2's count.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  EXPECT_EQ(rank0.done_with_shared(), 250u + 400u + 300u);
 }
 
 }  // namespace
