@@ -26,6 +26,7 @@
 
 #include <filesystem>
 #include <optional>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -33,11 +34,18 @@ namespace tetstream::pipeline {
 
 using nlohmann::json;
 
-std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks) {
+std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks,
+                                             std::uint64_t rank0_done) {
   const std::uint64_t k = std::uint64_t(std::max(ranks, 1));
   const std::uint64_t blocks = block ? (count + block - 1) / block : 0;
   std::vector<std::uint64_t> bounds(k + 1);
   for (std::uint64_t r = 0; r <= k; ++r) bounds[r] = std::min(count, blocks * r / k * block);
+  if (k == 1 || rank0_done <= bounds[1]) return bounds;
+  // Rank 0 keeps its blocks up to the one that holds the end of its frames; the others
+  // share the blocks after it.
+  const std::uint64_t first = std::min(blocks, (rank0_done + block - 1) / block), rest = blocks - first;
+  bounds[1] = std::min(count, first * block);
+  for (std::uint64_t r = 1; r <= k; ++r) bounds[r] = std::min(count, (first + rest * (r - 1) / (k - 1)) * block);
   return bounds;
 }
 
@@ -108,6 +116,21 @@ RunSummary::Rank rank_from(const json& j) {
 std::string rank_prefix(int rank) { return "rank-" + std::to_string(rank); }
 std::string fragment_name(int rank) { return rank_prefix(rank) + ".tets"; }
 std::string progress_file(const std::string& dir, int rank) { return dir + "/" + rank_prefix(rank) + ".progress"; }
+
+// The files of ranks 1 and up in the job's checkpoint directory (their records,
+// pending frames, fragments, progress counts), by their names; never a directory,
+// never through a link (unlink removes the link itself).
+void remove_other_ranks_files(const std::string& dir) {
+  static const std::regex kTheirs(R"(rank-([0-9]+)(\.json|\.tets|\.tets\.partial|-pending-[0-9]+\.tets|\.progress)(\.tmp)?)");
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    const std::string name = entry.path().filename().string();
+    std::smatch m;
+    if (std::regex_match(name, m, kTheirs) && m[1] != "0" && !std::filesystem::is_directory(entry.symlink_status()))
+      names.push_back(name);
+  }
+  for (const std::string& name : names) remove_file(dir + "/" + name);
+}
 
 // One rank's part of the job, from the sort to its frames written. Rank 0 owns the
 // output's claim, the work directory and the sort; every collective step is inside
@@ -231,7 +254,12 @@ class RankJob {
     // Whether rank 0 prints progress (the others are quiet, and share their counts).
     const bool job_progress = comm_.broadcast(options_.progress ? "yes" : "", 0) == "yes";
     const std::uint64_t block = frame_block_labels(budget_.frame_tets());
-    const std::vector<std::uint64_t> bounds = rank_label_bounds(sorted.count, block, size);
+    // Rank 0's frames so far (an earlier process's record, maybe on another number of
+    // ranks) stay in its range.
+    std::string written;
+    if (root) written = std::to_string(state_.contains("output") ? state_["output"].at("next_label").get<std::uint64_t>() : 0);
+    const std::vector<std::uint64_t> bounds =
+        rank_label_bounds(sorted.count, block, size, std::stoull(comm_.broadcast(written, 0)));
     mine.first_label = bounds[std::size_t(comm_.rank())];
     mine.end_label = bounds[std::size_t(comm_.rank()) + 1];
     if (root)
@@ -422,10 +450,14 @@ RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) 
       json& state = opened.state;
       if (!opened.finished) {
         const std::uint64_t recorded = state.value("ranks", std::uint64_t(comm.size()));
-        if (recorded != std::uint64_t(comm.size()))
-          throw UsageError("the job was started on " + std::to_string(recorded) +
-                           " ranks: resume it with mpirun -n " + std::to_string(recorded) + " (" +
-                           checkpoint->dir() + " is kept)");
+        if (recorded != std::uint64_t(comm.size())) {
+          // The sort and rank 0's frames do not depend on the number of ranks; the
+          // other ranks' records and fragments do (each held its rank's labels).
+          spdlog::warn("the job was started on {} ranks and goes on on {}: the sort and rank 0's frames are kept, "
+                       "the other ranks' labels are triangulated again",
+                       recorded, comm.size());
+          remove_other_ranks_files(checkpoint->dir());
+        }
         state["ranks"] = comm.size();
         checkpoint->save(state);
       }

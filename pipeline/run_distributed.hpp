@@ -3,19 +3,22 @@
 // processes (ranks) that share a filesystem, writing the same bytes as one process
 // with the same --memory (M is each rank's budget). docs/scaling.md describes it.
 //
-//   sort         rank 0 (the others wait): the sorted points go into OUT.partial's
-//                points section, as in one process;
-//   index        every rank maps the sorted points of OUT.partial and builds the
-//                indexes over all of them (its emptiness queries reach anywhere);
-//   plan         every rank computes the same zone plan from the same indexes;
+//   sort         every rank: each reads a K-th of the input and sorts its key range
+//                into its place in OUT.partial's points section
+//                (pipeline/point_sort_distributed.hpp); text input: rank 0 alone;
+//   index        each rank builds a K-th of the point index's blocks into one file of
+//                the work directory, and every rank maps all of it (its emptiness
+//                queries reach anywhere);
+//   plan         every rank computes the zone plan from the same indexes;
 //   triangulate  the labels are cut into blocks of frame_block_labels() labels
 //                (pipeline/frame_cutter.hpp), and rank r takes a contiguous run of
 //                blocks, about a K-th of the points: its segments and zones on its
 //                threads, its frames cut as one process cuts them (a frame never spans
 //                two blocks), rank 0's into OUT.partial after the points, rank r's
-//                into a fragment file in the job's work directory;
-//   assemble     rank 0 appends the fragments in rank order (each frame's section,
-//                CRC and header checked), writes the index and footer, renames.
+//                into a fragment file in the job's work directory; one progress line
+//                (rank 0's) counts every rank's labels;
+//   place        each rank copies its fragment into its place in OUT.partial; rank 0
+//                indexes the placed frames, writes the index and footer, renames.
 //
 // Every phase ends with the ranks agreeing (pipeline/communicator.hpp): a rank that
 // fails stops every rank with its error line and exit code.
@@ -25,12 +28,13 @@
 // (rank-R.json), its pending frame and its fragment in the same directory, which rank
 // 0 locks, clears (--force) and removes (on success) with every rank's files in it.
 // `--resume` under the same number of ranks continues every rank from its record and
-// ends with the same bytes (another number is refused before any rank writes: each
-// fragment holds its rank's labels). Without a checkpoint (--no-checkpoint) the files
-// go in a temporary directory, and a failure leaves nothing.
+// ends with the same bytes. Under another number of ranks it keeps what does not
+// depend on it, the sort and rank 0's frames (rank 0's range then reaches at least
+// their end), and the other ranks triangulate the rest again (each fragment held its
+// old rank's labels): the same bytes too. Without a checkpoint (--no-checkpoint) the
+// files go in a temporary directory, and a failure leaves nothing.
 //
-// Not distributed yet: the sort (rank 0 alone, the others wait), the indexes (every
-// rank builds all of them), verify.
+// Not distributed yet: verify.
 #include "pipeline/communicator.hpp"
 #include "pipeline/run.hpp"
 
@@ -42,7 +46,11 @@ RunSummary run_job_distributed(const RunOptions& options, Communicator& comm);
 
 // The label ranges of `ranks` ranks over `count` labels: contiguous runs of whole
 // blocks of `block` labels, balanced by points; bounds[r] to bounds[r + 1] is rank
-// r's (empty when there are fewer blocks than ranks).
-std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks);
+// r's (empty when there are fewer blocks than ranks). `rank0_done`: the labels rank 0
+// has written already (a resumed job's record, maybe from another number of ranks):
+// when they reach past its share, its range ends at the block that holds their end and
+// the other ranks share the rest.
+std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks,
+                                             std::uint64_t rank0_done = 0);
 
 }  // namespace tetstream::pipeline

@@ -99,14 +99,27 @@ set -e
 grep -q "injected failure at segment:2" failed.err || fail "a failing rank: not its error"
 [ ! -e failed.tets ] || fail "a failing rank left an output under its final name"
 [ -f failed.tets.ckpt/state.json ] && [ -f failed.tets.ckpt/rank-1.json ] || fail "a failing rank: no checkpoint kept"
+# Resumed on 2 ranks: the sort and rank 0's frames are kept, ranks 1 and 2's labels
+# triangulated again by rank 1: the same bytes, and their files gone.
+mpi 2 "$T" --log-level warn --threads 1 run uniform.f64 -o failed.tets --memory 32M --resume 2>other.err ||
+  { cat other.err >&2; fail "a 3-rank job resumed on 2 ranks failed"; }
+grep -q "started on 3 ranks and goes on on 2" other.err || { cat other.err >&2; fail "no word of the new number of ranks"; }
+cmp uniform-f64-1p.tets failed.tets || fail "resumed on 2 ranks after a failing rank: other bytes than one process"
+[ ! -e failed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
+
+# A 2-rank job whose rank 1 fails: rank 0 has written its half (more than a third)
+# before the job stops. Resumed on 3 ranks, rank 0's range reaches the end of its
+# frames and ranks 1 and 2 share the rest: the same bytes.
 set +e
-mpi 2 "$T" -q --threads 1 run uniform.f64 -o failed.tets --memory 32M --resume 2>other.err
+mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M \
+  : -n 1 -x TETSTREAM_FAULT=segment:1 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M 2>grown.err
 rc=$?
 set -e
-[ "$rc" = 2 ] && grep -q "started on 3 ranks" other.err || { cat other.err >&2; fail "a resume on 2 ranks of a 3-rank job: exit $rc"; }
-run3 --resume
-cmp uniform-f64-1p.tets failed.tets || fail "resumed after a failing rank: other bytes than one process"
-[ ! -e failed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
+[ "$rc" = 3 ] || { cat grown.err >&2; fail "a failing rank of 2: exit $rc, expected 3"; }
+mpi 3 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M --resume ||
+  fail "a 2-rank job resumed on 3 ranks failed"
+cmp uniform-f64-1p.tets grown.tets || fail "resumed on 3 ranks: other bytes than one process"
+[ ! -e grown.tets.ckpt ] || fail "the checkpoint is left after the job resumed on 3 ranks"
 
 # Rank 1 fails as it copies its frames into the output (every rank has triangulated;
 # ranks 1 and 2 write theirs side by side): the same exit and line, the output not

@@ -42,6 +42,26 @@ TEST(RankLabelBounds, WholeBlocksBalancedAndCoveringEveryLabel) {
   }
 }
 
+// A resumed job's rank 0 keeps the frames it wrote (on another number of ranks, maybe
+// past its share): its range ends at the block holding their end, the other ranks
+// share the rest in whole blocks; frames within its share change nothing.
+TEST(RankLabelBounds, RankZerosWrittenLabelsStayItsOwn) {
+  const std::uint64_t count = 1000000, block = 32768;  // 31 blocks
+  EXPECT_EQ(rank_label_bounds(count, block, 3, 100000), rank_label_bounds(count, block, 3));
+  const std::vector<std::uint64_t> b = rank_label_bounds(count, block, 3, 500000);  // past a third
+  ASSERT_EQ(b.size(), 4u);
+  EXPECT_EQ(b[0], 0u);
+  EXPECT_EQ(b[1], 16 * block);  // 500000 is in block 15: rank 0 ends after it
+  EXPECT_EQ(b[2] % block, 0u);
+  EXPECT_GT(b[2], b[1]);
+  EXPECT_LT(b[2], b[3]);
+  EXPECT_EQ(b[3], count);
+  // Everything written: rank 0 takes every label, the others none.
+  const std::vector<std::uint64_t> all = rank_label_bounds(count, block, 2, count);
+  EXPECT_EQ(all, (std::vector<std::uint64_t>{0, count, count}));
+  EXPECT_EQ(rank_label_bounds(count, block, 1, 500000), (std::vector<std::uint64_t>{0, count}));
+}
+
 // A job of `codes.size()` ranks seen from `rank`: all_gather hands back every rank's
 // code as given (the others' as if they had reached the same step).
 class ScriptedRanks final : public Communicator {
