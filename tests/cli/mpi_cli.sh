@@ -121,6 +121,18 @@ mpi 3 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M --resume ||
 cmp uniform-f64-1p.tets grown.tets || fail "resumed on 3 ranks: other bytes than one process"
 [ ! -e grown.tets.ckpt ] || fail "the checkpoint is left after the job resumed on 3 ranks"
 
+# The same failure resumed by one process (no mpirun): the same bytes, and every
+# rank's files removed with the checkpoint.
+set +e
+mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o alone.tets --memory 32M \
+  : -n 1 -x TETSTREAM_FAULT=segment:1 "$T" -q --threads 1 run uniform.f64 -o alone.tets --memory 32M 2>alone.err
+rc=$?
+set -e
+[ "$rc" = 3 ] || { cat alone.err >&2; fail "a failing rank of 2 (alone): exit $rc, expected 3"; }
+"$T" -q --threads 1 run uniform.f64 -o alone.tets --memory 32M --resume || fail "one process resuming a 2-rank job failed"
+cmp uniform-f64-1p.tets alone.tets || fail "one process resuming a 2-rank job: other bytes"
+[ ! -e alone.tets.ckpt ] || fail "the checkpoint is left after one process resumed a 2-rank job"
+
 # Rank 1 fails as it copies its frames into the output (every rank has triangulated;
 # ranks 1 and 2 write theirs side by side): the same exit and line, the output not
 # under its final name; --resume places the frames again from the kept fragments.
