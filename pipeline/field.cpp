@@ -187,8 +187,8 @@ FieldSummary compute_fields(const FieldOptions& options) {
   AccumulateSinks sinks;
   sinks.voronoi = options.voronoi;
   // The hull flag matters to the files of the density and the grid; alone, the
-  // neighbours need it only for `hull_points`, which the rows give without angles.
-  sinks.angles = !volumes_only(options);
+  // neighbours need it only for `hull_points`, which the rows give without hull terms.
+  sinks.hull_terms = !volumes_only(options);
   sinks.point = [&](const FinalPoint& p) {
     volume4 += p.volume;
     summary.hull_points += p.hull;

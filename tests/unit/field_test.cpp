@@ -531,22 +531,43 @@ TEST_F(FieldTest, PerturbedLocationIsExclusive) {
   EXPECT_LE(int(pipeline::tet_contains(a, b, c, up, vertex)) + int(pipeline::tet_contains(a, c, b, dn, vertex)), 1);
 }
 
-TEST(FieldGeometry, FastAtan2) {
-  double worst = 0;
-  for (int i = 0; i <= 200000; ++i) {
-    const double t = 3.141592653589793 * i / 200000;  // directions over the upper half plane
-    const double y = std::sin(t), x = std::cos(t);
-    worst = std::max(worst, std::fabs(pipeline::fast_atan2(std::fabs(y), x) - std::atan2(std::fabs(y), x)));
-  }
-  EXPECT_LT(worst, 2e-6);
-  EXPECT_EQ(pipeline::fast_atan2(0.0, 0.0), 0.0);
-  // The solid angles of a tet's vertices against the formula's own reference values.
-  const double a[3] = {0, 0, 0}, b[3] = {1, 0, 0}, c[3] = {0, 1, 0}, d[3] = {0, 0, 1};
-  const double* p[4] = {a, b, c, d};
-  const auto t = pipeline::tet_contribution(p);
-  EXPECT_NEAR(t.angle[0], 3.141592653589793 / 2, 4e-6);  // an octant
-  EXPECT_NEAR(t.volume, 1.0 / 6, 1e-15);
-  EXPECT_NEAR(t.voronoi[0] + t.voronoi[1] + t.voronoi[2] + t.voronoi[3], 1.0 / 6, 1e-15);
+TEST(FieldGeometry, HullTermsCancelAroundAnInteriorPoint) {
+  // The octahedron around label 0 (the origin), cut into its 8 octant tets, each
+  // positively oriented (its vertices swapped where the octant's orientation is
+  // negative): the centre's terms cancel, every other vertex lies on the hull.
+  const double xyz[7][3] = {{0, 0, 0}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  std::uint64_t sum[7] = {};
+  double volume = 0;
+  for (int sx = 0; sx < 2; ++sx)
+    for (int sy = 0; sy < 2; ++sy)
+      for (int sz = 0; sz < 2; ++sz) {
+        std::uint64_t q[4] = {0, std::uint64_t(1 + sx), std::uint64_t(3 + sy), std::uint64_t(5 + sz)};
+        if ((sx + sy + sz) % 2 == 1) std::swap(q[2], q[3]);
+        const double* p[4] = {xyz[q[0]], xyz[q[1]], xyz[q[2]], xyz[q[3]]};
+        const auto t = pipeline::tet_contribution(p);
+        ASSERT_GT(t.volume, 0);
+        volume += t.volume;
+        EXPECT_NEAR(t.voronoi[0] + t.voronoi[1] + t.voronoi[2] + t.voronoi[3], t.volume, 1e-15);
+        std::uint64_t terms[4];
+        pipeline::tet_hull_terms(q, terms);
+        for (int v = 0; v < 4; ++v) sum[q[v]] += terms[v];
+      }
+  EXPECT_NEAR(volume, 8.0 / 6, 1e-15);
+  EXPECT_EQ(sum[0], 0u);
+  for (int v = 1; v < 7; ++v) EXPECT_NE(sum[v], 0u) << v;
+  // A tet's terms do not depend on where its vertices start (an even permutation keeps
+  // the orientation), and the other orientation negates them.
+  const std::uint64_t q[4] = {10, 20, 30, 40}, even[4] = {20, 10, 40, 30}, odd[4] = {20, 10, 30, 40};
+  std::uint64_t a[4], b[4], c[4];
+  pipeline::tet_hull_terms(q, a);
+  pipeline::tet_hull_terms(even, b);
+  pipeline::tet_hull_terms(odd, c);
+  EXPECT_EQ(a[0], b[1]);
+  EXPECT_EQ(a[1], b[0]);
+  EXPECT_EQ(a[2], b[3]);
+  EXPECT_EQ(a[3], b[2]);
+  EXPECT_EQ(a[0], std::uint64_t(0) - c[1]);
+  EXPECT_EQ(a[2], std::uint64_t(0) - c[2]);
 }
 
 TEST_F(FieldTest, BadOptionsAndInput) {
