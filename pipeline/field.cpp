@@ -167,9 +167,13 @@ FieldSummary compute_fields(const FieldOptions& options) {
     so.name = name;
     return so;
   };
-  std::unique_ptr<ExternalSorter<PointRecord, ByOriginal>> points;
+  std::unique_ptr<PointOrder> points;
   std::unique_ptr<NeighbourRows> neighbours;
-  if (need_points) points = std::make_unique<ExternalSorter<PointRecord, ByOriginal>>(sort_options("points"));
+  if (need_points) {
+    const ExternalSortOptions so = sort_options("points");
+    points = std::make_unique<PointOrder>(options, std::max(h.input_count, n),
+                                          options.point_memory ? options.point_memory : so.memory_bytes, so);
+  }
   if (options.neighbours) {
     // Entries = twice the edges; a triangulated ball has V + T + F_hull / 2 - 1 edges
     // and F_hull <= 2 V, so 2 (2 N + T) bounds them (it only plans the buckets).
@@ -194,7 +198,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
     summary.hull_points += p.hull;
     if (!p.hull) summary.interior_voronoi += p.voronoi;
     summary.voronoi_total += p.voronoi;
-    if (points) points->push({p.original, p.label, p.volume, p.voronoi, p.hull ? 1u : 0u});
+    if (points) points->add(p);
     if (rho_file) {
       const double rho = dtfe_density(1.0, p.volume, p.hull, options.hull);
       rho_file->write(&rho, sizeof rho, 1);
@@ -209,6 +213,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
     spdlog::debug("field: {} edge keys sorted, {} unique in their batches", acc.batch_edge_keys, acc.batch_edges);
 
   if (points) {
+    spdlog::debug("field: points {} by original index", points->placed() ? "placed" : "sorted");
     // With masses, the grid's densities come back to label order through another sort.
     std::unique_ptr<ExternalSorter<GridDensity, ByLabel>> by_label;
     std::function<void(std::uint64_t, double)> sink;

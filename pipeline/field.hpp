@@ -45,6 +45,7 @@ struct FieldOptions {
   std::uint64_t batch_tets = 0;  // 0: from the budget (tests force small batches)
   std::uint64_t ring_labels = 0; // a power of two; 0: from the budget (tests force far labels)
   std::uint64_t neighbour_memory = 0;  // bytes for the neighbour rows; 0: from the budget (tests force spills)
+  std::uint64_t point_memory = 0;  // bytes for placing the points by original index; 0: from the budget (tests force the sort)
 
   bool grid_wanted() const { return grid[0] > 0; }
   void validate() const;  // throws UsageError

@@ -168,8 +168,14 @@ class FieldTest : public testing_util::ScratchDirTest {
 
   // gen -> run (out of core, several zones) -> the container rewritten with small
   // frames, so a field job has many frames and batches to combine.
-  std::string container(io::Distribution dist, std::uint64_t n, std::uint64_t seed, std::uint32_t frame_tets = 3000) {
-    testing_util::write_points_file(path("points.f64"), testing_util::generated_points(dist, n, seed));
+  // duplicate_every k > 0: every k-th point is a copy of the one before it (`run` merges
+  // it: the container's original indices have gaps).
+  std::string container(io::Distribution dist, std::uint64_t n, std::uint64_t seed, std::uint32_t frame_tets = 3000,
+                        std::uint64_t duplicate_every = 0) {
+    std::vector<double> points = testing_util::generated_points(dist, n, seed);
+    for (std::size_t i = duplicate_every; duplicate_every && i < n; i += duplicate_every)
+      std::copy_n(&points[3 * (i - 1)], 3, &points[3 * i]);
+    testing_util::write_points_file(path("points.f64"), points);
     pipeline::RunOptions o;
     o.input = path("points.f64");
     o.output = path("run.tets");
@@ -436,6 +442,38 @@ TEST_F(FieldTest, SameBytesForThreadsAndMemory) {
     EXPECT_EQ(a, file_bytes(path(std::string("b.") + what + ".npy"))) << what << ": threads";
     EXPECT_EQ(a, file_bytes(path(std::string("c.") + what + ".npy"))) << what << ": memory";
   }
+}
+
+// The points go back to input order placed by original index when their columns fit
+// their share, through the external sort otherwise: the same bytes, with merged
+// duplicates (gaps in the original indices) and the grid's densities with --mass (the
+// way back to label order) included.
+TEST_F(FieldTest, PointsPlacedOrSortedSameBytes) {
+  const std::uint64_t n = 8000;
+  const std::string tets = container(io::Distribution::kClusters, n, 41, 1500, 9);
+  const std::uint64_t kept = io::TetReader(tets).point_count();
+  EXPECT_EQ(kept, n - (n - 1) / 9);
+  std::vector<double> mass(n);
+  for (std::size_t i = 0; i < n; ++i) mass[i] = 1.0 + double(i % 7) / 8;
+  std::ofstream(path("mass.f64"), std::ios::binary).write(reinterpret_cast<const char*>(mass.data()), std::streamsize(8 * n));
+  for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {  // 0: from the budget (placed); 1: sorted
+    pipeline::FieldOptions o;
+    o.input = tets;
+    o.output = path(share ? "sorted" : "placed");
+    o.density = o.voronoi = true;
+    o.grid = {16, 12, 8};
+    o.mass = path("mass.f64");
+    o.point_memory = share;
+    o.progress = false;
+    o.tmpdir = dir_.string();
+    pipeline::compute_fields(o);
+  }
+  for (const char* what : {"density", "voronoi", "grid"}) {
+    const auto placed = file_bytes(path(std::string("placed.") + what + ".npy"));
+    EXPECT_FALSE(placed.empty()) << what;
+    EXPECT_EQ(placed, file_bytes(path(std::string("sorted.") + what + ".npy"))) << what;
+  }
+  EXPECT_EQ(load_npy<double>(path("placed.density.npy")).size(), kept);
 }
 
 // Neighbour rows that outgrow their share spill to the scratch file in buckets by
