@@ -1,5 +1,6 @@
 #include "pipeline/field_accumulate.hpp"
 
+#include "core/compiler.hpp"
 #include "core/error.hpp"
 #include "core/page_array.hpp"
 #include "pipeline/external_sort.hpp"
@@ -72,6 +73,10 @@ class Accumulator {
     contrib_.resize(n);
 #pragma omp parallel for schedule(static, 4096)
     for (std::int64_t t = 0; t < nn; ++t) {
+      if (t + kAhead < nn) {
+        const std::uint64_t* ahead = batch_.tet(std::size_t(t + kAhead));
+        for (int v = 0; v < 4; ++v) points_.prefetch(ahead[v]);
+      }
       const std::uint64_t* q = batch_.tet(std::size_t(t));
       const double* p[4] = {points_.xyz(q[0]), points_.xyz(q[1]), points_.xyz(q[2]), points_.xyz(q[3])};
       TetTerms& c = contrib_[std::size_t(t)];
@@ -99,6 +104,8 @@ class Accumulator {
     for (std::size_t f = 0; f < batch_.frames(); ++f) {
       const std::vector<std::uint64_t>& labels = batch_.frame(f);
       for (std::size_t i = 0; i < labels.size(); i += 4, ++t) {
+        for (std::size_t v = i + 4 * kAhead; v < std::min(labels.size(), i + 4 * kAhead + 4); ++v)
+          if (points_.dense(labels[v])) TS_PREFETCH(&acc_[labels[v]]);
         const TetTerms& c = contrib_[t];
         for (int v = 0; v < 4; ++v) {
           const std::uint64_t l = labels[i + std::size_t(v)];
@@ -278,6 +285,10 @@ class Accumulator {
   std::vector<double> volumes_;  // without hull terms: the tets' volumes
   core::PageArray<std::uint64_t> edges_;  // the batch's packed edges (its capacity: 6 a tet)
   std::vector<std::uint64_t> radix_tmp_, long_;
+  // Tets ahead whose vertices' slots are prefetched: a tet's four labels are spread
+  // over the window, so nearly every slot is a cache miss, and the loops would
+  // otherwise wait for each in turn.
+  static constexpr std::int64_t kAhead = 8;
   static constexpr std::size_t kBlock = 4096;  // tets a block of the edge packing
   static constexpr int kSeenBits = 14;         // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;
