@@ -123,12 +123,15 @@ FieldSummary compute_fields(const FieldOptions& options) {
   std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
                                                            std::uint64_t(1) << 32);
   std::uint64_t max_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
-  // Scratch reused, not re-faulted. The neighbours alone go to 2^20: fewer batches are
-  // fewer parallel regions (on a loaded machine an idle OpenMP thread spins through every
-  // serial step between them), fewer re-sorts of the pending entries, and several frames
-  // a batch to decode in parallel (10^6 uniform points, 1G: 23 batches of ~1 frame at
-  // 2^19, 9 at 2^20; 2.4-2.5 s of CPU against 3.1-3.9 s).
-  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << (volumes_only(options) ? 20 : 19));
+  // Scratch reused, not re-faulted; at most 2^20 tets: fewer batches are fewer parallel
+  // regions (on a loaded machine an idle OpenMP thread spins through every serial step
+  // between them), fewer re-sorts of the pending entries, and several frames a batch to
+  // decode in parallel. `run`'s frames hold a little over 2^18 tets, so at 2^19 nearly
+  // every batch was one frame, decoded by one thread while the others waited (10^6
+  // uniform points, 1G, --neighbours alone: 23 batches at 2^19, 9 at 2^20, 2.4-2.5 s of
+  // CPU against 3.1-3.9 s; 10^7, --density: 226 batches -> 77, 8.4-8.6 -> 7.6 s; 2^21
+  // 7.1-7.4 s but 200 MB more resident).
+  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << 20);
   if (options.batch_tets) max_tets = options.batch_tets;
   if (options.ring_labels) {
     if (!std::has_single_bit(options.ring_labels)) throw UsageError("field: ring_labels must be a power of two");
