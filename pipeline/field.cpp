@@ -196,16 +196,18 @@ FieldSummary compute_fields(const FieldOptions& options) {
   // The hull flag matters to the files of the density and the grid; alone, the
   // neighbours need it only for `hull_points`, which the rows give without hull terms.
   sinks.hull_terms = !volumes_only(options);
-  sinks.point = [&](const FinalPoint& p) {
-    volume4 += p.volume;
-    summary.hull_points += p.hull;
-    if (!p.hull) summary.interior_voronoi += p.voronoi;
-    summary.voronoi_total += p.voronoi;
-    if (points) points->add(p);
-    if (rho_file) {
-      const double rho = dtfe_density(1.0, p.volume, p.hull, options.hull);
-      rho_file->write(&rho, sizeof rho, 1);
+  sinks.points = [&](std::span<const FinalPoint> retired) {
+    for (const FinalPoint& p : retired) {
+      volume4 += p.volume;
+      summary.hull_points += p.hull;
+      if (!p.hull) summary.interior_voronoi += p.voronoi;
+      summary.voronoi_total += p.voronoi;
+      if (rho_file) {
+        const double rho = dtfe_density(1.0, p.volume, p.hull, options.hull);
+        rho_file->write(&rho, sizeof rho, 1);
+      }
     }
+    if (points) points->add(retired);
   };
   if (neighbours)  // every point gets a row, even one in no edge (not in a valid container)
     sinks.row = [&](std::uint64_t original, std::span<const std::uint64_t> row) { neighbours->add(original, row); };

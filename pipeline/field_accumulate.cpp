@@ -255,8 +255,9 @@ class Accumulator {
   }
 
   void retire(std::uint64_t below) {
+    final_.resize(std::size_t(below - retired_));
     for (std::uint64_t l = retired_; l < below; ++l) {
-      FinalPoint p;
+      FinalPoint& p = final_[std::size_t(l - retired_)];
       p.label = l;
       p.original = points_.original(l);
       const double* x = points_.xyz(l);
@@ -266,9 +267,8 @@ class Accumulator {
       p.voronoi = a.voronoi;
       // Without hull terms the rows of [retired_, below) were just cut (gather_rows): T != 2 d - 4.
       p.hull = terms_ ? a.hull != 0 : a.tets + 4 != 2 * row_length_[std::size_t(l - retired_)];
-      if (sinks_.point) sinks_.point(p);
-
     }
+    if (sinks_.points) sinks_.points(final_);
     retired_ = below;
   }
 
@@ -282,6 +282,7 @@ class Accumulator {
   std::unordered_map<std::uint64_t, Accum> far_acc_;  // sums of the far labels
   DecodedBatch batch_;
   std::vector<TetTerms> contrib_;
+  std::vector<FinalPoint> final_;  // the points a batch retires
   std::vector<double> volumes_;  // without hull terms: the tets' volumes
   core::PageArray<std::uint64_t> edges_;  // the batch's packed edges (its capacity: 6 a tet)
   std::vector<std::uint64_t> radix_tmp_, long_;

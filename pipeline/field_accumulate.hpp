@@ -42,7 +42,8 @@ struct AccumulateSinks {
   // hull, so T = 2 d - 2 - b < 2 d - 4. `--neighbours` alone then computes only the
   // volumes (for `hull_volume`), in the edges' loop.
   bool hull_terms = true;
-  std::function<void(const FinalPoint&)> point;
+  // The points a batch retires, in label order (the span is valid during the call only).
+  std::function<void(std::span<const FinalPoint>)> points;
   // Set to collect neighbours: called once per point, in label order, when it retires,
   // with its original index and its Delaunay neighbours' original indices (increasing,
   // no repeats; the span is valid during the call only).

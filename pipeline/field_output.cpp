@@ -1,5 +1,6 @@
 #include "pipeline/field_output.hpp"
 
+#include "core/compiler.hpp"
 #include "pipeline/temp_files.hpp"
 
 #include <cmath>
@@ -65,16 +66,27 @@ PointOrder::PointOrder(const FieldOptions& options, std::uint64_t original_end, 
   if (label) label_.assign(std::size_t(original_end), 0);
 }
 
-void PointOrder::add(const FinalPoint& p) {
+void PointOrder::add(std::span<const FinalPoint> points) {
   if (sorter_) {
-    sorter_->push({p.original, p.label, p.volume, p.voronoi, p.hull ? 1u : 0u});
+    for (const FinalPoint& p : points) sorter_->push({p.original, p.label, p.volume, p.voronoi, p.hull ? 1u : 0u});
     return;
   }
-  const std::size_t i = std::size_t(p.original);
-  flags_[i] = std::uint8_t(kPresent | (p.hull ? kHull : 0));
-  if (!volume_.empty()) volume_[i] = p.volume;
-  if (!voronoi_.empty()) voronoi_[i] = p.voronoi;
-  if (!label_.empty()) label_[i] = p.label;
+  // Label order is not input order: every slot is a cache miss, asked for ahead.
+  constexpr std::size_t kAhead = 16;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (k + kAhead < points.size()) {
+      const std::size_t j = std::size_t(points[k + kAhead].original);
+      TS_PREFETCH(&flags_[j]);
+      if (!volume_.empty()) TS_PREFETCH(&volume_[j]);
+      if (!voronoi_.empty()) TS_PREFETCH(&voronoi_[j]);
+    }
+    const FinalPoint& p = points[k];
+    const std::size_t i = std::size_t(p.original);
+    flags_[i] = std::uint8_t(kPresent | (p.hull ? kHull : 0));
+    if (!volume_.empty()) volume_[i] = p.volume;
+    if (!voronoi_.empty()) voronoi_[i] = p.voronoi;
+    if (!label_.empty()) label_[i] = p.label;
+  }
 }
 
 void PointOrder::merge(const std::function<void(std::span<const PointRecord>)>& visit) {

@@ -40,7 +40,7 @@ class PointOrder {
   // the budget; sort: the external sort's options, used only when the columns do not fit.
   PointOrder(const FieldOptions& options, std::uint64_t original_end, std::uint64_t memory_bytes,
              ExternalSortOptions sort);
-  void add(const FinalPoint& p);  // any order, each point once
+  void add(std::span<const FinalPoint> points);  // any order, each point once
   bool placed() const { return !sorter_; }
   // Ends the input and calls visit(std::span<const PointRecord>) with consecutive
   // batches of the records in original order. Call once.
