@@ -62,15 +62,19 @@ void tet_hull_terms(const std::uint64_t q[4], std::uint64_t out[4]) {
   // d[q0 q1 q2 q3] = sum_f (-1)^f [the others]); sorting its labels flips the sign once
   // a swap. Its signed hash goes to its three vertices, that is to all but vertex f:
   // out[i] = total - (signed hash of face i).
+  // A face's hash is mix(m_a + 3 m_b + 5 m_c) over its labels a < b < c, with m = mix
+  // of a label (four a tet, not twelve): two faces' sums before the last mix coincide
+  // only by chance, 1 in 2^63 (the odd weights keep the order of the labels).
   static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  const std::uint64_t m[4] = {mix(q[0]), mix(q[1]), mix(q[2]), mix(q[3])};
   std::uint64_t face[4], total = 0;
   for (int f = 0; f < 4; ++f) {
-    std::uint64_t a = q[kFace[f][0]], b = q[kFace[f][1]], c = q[kFace[f][2]];
+    int a = kFace[f][0], b = kFace[f][1], c = kFace[f][2];
     bool odd = f & 1;
-    if (a > b) std::swap(a, b), odd = !odd;
-    if (b > c) std::swap(b, c), odd = !odd;
-    if (a > b) std::swap(a, b), odd = !odd;
-    const std::uint64_t h = mix(a ^ mix(b ^ mix(c)));
+    if (q[a] > q[b]) std::swap(a, b), odd = !odd;
+    if (q[b] > q[c]) std::swap(b, c), odd = !odd;
+    if (q[a] > q[b]) std::swap(a, b), odd = !odd;
+    const std::uint64_t h = mix(m[a] + 3 * m[b] + 5 * m[c]);
     face[f] = odd ? std::uint64_t(0) - h : h;
     total += face[f];
   }
