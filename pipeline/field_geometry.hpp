@@ -7,17 +7,17 @@
 //
 //   volume        V(t) = det[b-a, c-a, d-a] / 6 (> 0: the container's tets are positive).
 //                 DTFE: rho_i = (d+1) m_i / sum_t V(t) = 4 m_i / sum_t V(t).
-//   hull term    for each face f of t, opposite vertex f, its three labels' hash H_f
-//                 signed by the face's orientation as t's boundary sees it,
+//   hull term     for each face f of t (opposite vertex f), a hash H_f of its three
+//                 labels signed by the face's orientation as t's boundary sees it,
 //                 s_f = (-1)^f * (the parity of sorting its labels); a vertex gets the
 //                 sum over the three faces through it. Two tets sharing a face see it
-//                 with opposite orientations, so at an interior point, whose faces are
-//                 each shared by two tets of its star, the terms cancel exactly (sums
-//                 mod 2^64); at a point on the hull's boundary (a vertex of the hull
-//                 facets that leave uncancelled terms, at least three of them) they
-//                 cancel only if 64-bit hashes do, which they do not in practice (1 in
-//                 2^64 for each hull point). The test is combinatorial, like the rows'
-//                 T = 2 d - 4 (field_accumulate.hpp): no coordinates, no rounding.
+//                 with opposite orientations. At an interior point every face through
+//                 it is shared by two tets of its star, so its terms cancel exactly
+//                 (sums mod 2^64, in any order). A point on the hull's boundary is a
+//                 vertex of at least three boundary faces (faces of one tet), whose
+//                 terms cancel only if 64-bit hashes do: 1 in 2^64 for each hull point.
+//                 Combinatorial, like the rows' T = 2 d - 4 (field_accumulate.hpp): no
+//                 coordinates, no rounding.
 //   Voronoi       the cell of an interior point p is the union over its Delaunay edges
 //                 pq of the pyramids (apex p) over the Voronoi facets of pq; a facet is
 //                 cut into triangles (M_pq, F_f, C_t), one per tet t around pq and face
