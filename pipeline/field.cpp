@@ -123,12 +123,15 @@ FieldSummary compute_fields(const FieldOptions& options) {
   std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
                                                            std::uint64_t(1) << 32);
   std::uint64_t max_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
-  // Scratch reused, not re-faulted. The neighbours alone go to 2^20: fewer batches are
-  // fewer parallel regions (on a loaded machine an idle OpenMP thread spins through every
-  // serial step between them), fewer re-sorts of the pending entries, and several frames
-  // a batch to decode in parallel (10^6 uniform points, 1G: 23 batches of ~1 frame at
-  // 2^19, 9 at 2^20; 2.4-2.5 s of CPU against 3.1-3.9 s).
-  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << (volumes_only(options) ? 20 : 19));
+  // Scratch reused, not re-faulted; at most 2^20 tets: fewer batches are fewer parallel
+  // regions (on a loaded machine an idle OpenMP thread spins through every serial step
+  // between them), fewer re-sorts of the pending entries, and several frames a batch to
+  // decode in parallel. `run`'s frames hold a little over 2^18 tets, so at 2^19 nearly
+  // every batch was one frame, decoded by one thread while the others waited (10^6
+  // uniform points, 1G, --neighbours alone: 23 batches at 2^19, 9 at 2^20, 2.4-2.5 s of
+  // CPU against 3.1-3.9 s; 10^7, --density: 226 batches -> 77, 8.4-8.6 -> 7.6 s; 2^21
+  // 7.1-7.4 s but 200 MB more resident).
+  max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << 20);
   if (options.batch_tets) max_tets = options.batch_tets;
   if (options.ring_labels) {
     if (!std::has_single_bit(options.ring_labels)) throw UsageError("field: ring_labels must be a power of two");
@@ -167,9 +170,13 @@ FieldSummary compute_fields(const FieldOptions& options) {
     so.name = name;
     return so;
   };
-  std::unique_ptr<ExternalSorter<PointRecord, ByOriginal>> points;
+  std::unique_ptr<PointOrder> points;
   std::unique_ptr<NeighbourRows> neighbours;
-  if (need_points) points = std::make_unique<ExternalSorter<PointRecord, ByOriginal>>(sort_options("points"));
+  if (need_points) {
+    const ExternalSortOptions so = sort_options("points");
+    points = std::make_unique<PointOrder>(options, std::max(h.input_count, n),
+                                          options.point_memory ? options.point_memory : so.memory_bytes, so);
+  }
   if (options.neighbours) {
     // Entries = twice the edges; a triangulated ball has V + T + F_hull / 2 - 1 edges
     // and F_hull <= 2 V, so 2 (2 N + T) bounds them (it only plans the buckets).
@@ -187,18 +194,20 @@ FieldSummary compute_fields(const FieldOptions& options) {
   AccumulateSinks sinks;
   sinks.voronoi = options.voronoi;
   // The hull flag matters to the files of the density and the grid; alone, the
-  // neighbours need it only for `hull_points`, which the rows give without angles.
-  sinks.angles = !volumes_only(options);
-  sinks.point = [&](const FinalPoint& p) {
-    volume4 += p.volume;
-    summary.hull_points += p.hull;
-    if (!p.hull) summary.interior_voronoi += p.voronoi;
-    summary.voronoi_total += p.voronoi;
-    if (points) points->push({p.original, p.label, p.volume, p.voronoi, p.hull ? 1u : 0u});
-    if (rho_file) {
-      const double rho = dtfe_density(1.0, p.volume, p.hull, options.hull);
-      rho_file->write(&rho, sizeof rho, 1);
+  // neighbours need it only for `hull_points`, which the rows give without hull terms.
+  sinks.hull_terms = !volumes_only(options);
+  sinks.points = [&](std::span<const FinalPoint> retired) {
+    for (const FinalPoint& p : retired) {
+      volume4 += p.volume;
+      summary.hull_points += p.hull;
+      if (!p.hull) summary.interior_voronoi += p.voronoi;
+      summary.voronoi_total += p.voronoi;
+      if (rho_file) {
+        const double rho = dtfe_density(1.0, p.volume, p.hull, options.hull);
+        rho_file->write(&rho, sizeof rho, 1);
+      }
     }
+    if (points) points->add(retired);
   };
   if (neighbours)  // every point gets a row, even one in no edge (not in a valid container)
     sinks.row = [&](std::uint64_t original, std::span<const std::uint64_t> row) { neighbours->add(original, row); };
@@ -209,6 +218,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
     spdlog::debug("field: {} edge keys sorted, {} unique in their batches", acc.batch_edge_keys, acc.batch_edges);
 
   if (points) {
+    spdlog::debug("field: points {} by original index", points->placed() ? "placed" : "sorted");
     // With masses, the grid's densities come back to label order through another sort.
     std::unique_ptr<ExternalSorter<GridDensity, ByLabel>> by_label;
     std::function<void(std::uint64_t, double)> sink;

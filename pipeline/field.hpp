@@ -11,7 +11,7 @@
 //   field_points      the window's coordinates and original indices (a ring)
 //   field_geometry    what one tet adds to its vertices; exact point location
 //   field_accumulate  pass 1: per-point sums, retired in label order
-//   field_output      the retire-to-input-order step (external sort by original index)
+//   field_output      the retire-to-input-order step (placed by original index, or sorted)
 //   field_neighbours  the neighbour rows back in input order (buckets by original index)
 //   field_grid        pass 2 (with --grid): the density on a grid, slab by slab
 // Outputs are in the input's order: entry i belongs to the container point with the
@@ -45,6 +45,7 @@ struct FieldOptions {
   std::uint64_t batch_tets = 0;  // 0: from the budget (tests force small batches)
   std::uint64_t ring_labels = 0; // a power of two; 0: from the budget (tests force far labels)
   std::uint64_t neighbour_memory = 0;  // bytes for the neighbour rows; 0: from the budget (tests force spills)
+  std::uint64_t point_memory = 0;  // bytes for placing the points by original index; 0: from the budget (tests force the sort)
 
   bool grid_wanted() const { return grid[0] > 0; }
   void validate() const;  // throws UsageError

@@ -1,5 +1,6 @@
 #include "pipeline/field_accumulate.hpp"
 
+#include "core/compiler.hpp"
 #include "core/error.hpp"
 #include "core/page_array.hpp"
 #include "pipeline/external_sort.hpp"
@@ -20,15 +21,22 @@ namespace tetstream::pipeline {
 namespace {
 
 struct Accum {
-  double volume = 0.0, voronoi = 0.0, angle = 0.0;
-  std::uint64_t tets = 0;  // incident tets (the combinatorial hull flag)
+  double volume = 0.0, voronoi = 0.0;
+  std::uint64_t hull = 0;  // the hull terms' sum: 0 exactly when interior (field_geometry.hpp)
+  std::uint64_t tets = 0;  // incident tets (the hull flag from the rows)
+};
+
+// A tet's contribution and its vertices' hull terms, computed on all threads.
+struct TetTerms {
+  TetContribution geometry;
+  std::uint64_t hull[4];
 };
 
 class Accumulator {
  public:
   Accumulator(const io::TetReader& reader, const BatchPlan& plan, const AccumulateSinks& sinks, Progress* progress)
       : reader_(reader), plan_(plan), sinks_(sinks), progress_(progress), voronoi_(sinks.voronoi),
-        angles_(sinks.angles || !sinks.row),
+        terms_(sinks.hull_terms || !sinks.row),
         points_(reader, plan.ring_labels), acc_(plan.ring_labels) {}
 
   AccumulateStats run() {
@@ -44,10 +52,10 @@ class Accumulator {
       points_.fetch_far(batch_);
       stats_.peak_far = std::max<std::uint64_t>(stats_.peak_far, points_.far_count());
       contributions();
-      // Without angles the volumes come from the edges' loop (one pass over the tets).
-      if (angles_) combine();
+      // Without hull terms the volumes come from the edges' loop (one pass over the tets).
+      if (terms_) combine();
       if (sinks_.row) gather_rows(b);
-      if (!angles_) combine();
+      if (!terms_) combine();
       retire(b.retire_below);
       for (std::size_t k = b.first_frame; k < b.end_frame; ++k) reader_.release_frame_pages(k);
       stats_.tets += b.tets;
@@ -61,20 +69,26 @@ class Accumulator {
   void contributions() {
     const std::size_t n = batch_.tets();
     const std::int64_t nn = std::int64_t(n);
-    if (!angles_) return;  // gather_rows computes the volumes
+    if (!terms_) return;  // gather_rows computes the volumes
     contrib_.resize(n);
 #pragma omp parallel for schedule(static, 4096)
     for (std::int64_t t = 0; t < nn; ++t) {
+      if (t + kAhead < nn) {
+        const std::uint64_t* ahead = batch_.tet(std::size_t(t + kAhead));
+        for (int v = 0; v < 4; ++v) points_.prefetch(ahead[v]);
+      }
       const std::uint64_t* q = batch_.tet(std::size_t(t));
       const double* p[4] = {points_.xyz(q[0]), points_.xyz(q[1]), points_.xyz(q[2]), points_.xyz(q[3])};
-      contrib_[std::size_t(t)] = tet_contribution(p, voronoi_);
+      TetTerms& c = contrib_[std::size_t(t)];
+      c.geometry = tet_contribution(p, voronoi_);
+      tet_hull_terms(q, c.hull);
     }
   }
 
   // One thread, fixed order: the bits of every sum do not depend on the threads.
   void combine() {
     std::size_t t = 0;
-    if (!angles_) {
+    if (!terms_) {
       for (std::size_t f = 0; f < batch_.frames(); ++f) {
         const std::vector<std::uint64_t>& labels = batch_.frame(f);
         for (std::size_t i = 0; i < labels.size(); i += 4, ++t)
@@ -90,13 +104,15 @@ class Accumulator {
     for (std::size_t f = 0; f < batch_.frames(); ++f) {
       const std::vector<std::uint64_t>& labels = batch_.frame(f);
       for (std::size_t i = 0; i < labels.size(); i += 4, ++t) {
-        const TetContribution& c = contrib_[t];
+        for (std::size_t v = i + 4 * kAhead; v < std::min(labels.size(), i + 4 * kAhead + 4); ++v)
+          if (points_.dense(labels[v])) TS_PREFETCH(&acc_[labels[v]]);
+        const TetTerms& c = contrib_[t];
         for (int v = 0; v < 4; ++v) {
           const std::uint64_t l = labels[i + std::size_t(v)];
           Accum& a = points_.dense(l) ? acc_[l] : far_acc_[l];
-          a.volume += c.volume;
-          a.voronoi += c.voronoi[v];
-          a.angle += c.angle[v];
+          a.volume += c.geometry.volume;
+          a.voronoi += c.geometry.voronoi[v];
+          a.hull += c.hull[v];  // mod 2^64: the order does not matter, only the sum
         }
       }
     }
@@ -133,7 +149,7 @@ class Accumulator {
     block_long_.assign(blocks, 0);
     const int threads = omp_get_max_threads();
     if (seen_.size() < std::size_t(threads) * kSeen) seen_.assign(std::size_t(threads) * kSeen, 0);
-    if (!angles_) volumes_.resize(n);
+    if (!terms_) volumes_.resize(n);
     std::uint64_t top = 0;
 #pragma omp parallel reduction(max : top)
     {
@@ -151,7 +167,7 @@ class Accumulator {
         std::size_t ns = 0, nl = 0;
         for (std::size_t t = kBlock * k; t < std::min(n, kBlock * (k + 1)); ++t) {
           const std::uint64_t* q = batch_.tet(t);
-          if (!angles_) {
+          if (!terms_) {
             const double* p[4] = {points_.xyz(q[0]), points_.xyz(q[1]), points_.xyz(q[2]), points_.xyz(q[3])};
             volumes_[t] = tet_volume(p);
           }
@@ -239,8 +255,9 @@ class Accumulator {
   }
 
   void retire(std::uint64_t below) {
+    final_.resize(std::size_t(below - retired_));
     for (std::uint64_t l = retired_; l < below; ++l) {
-      FinalPoint p;
+      FinalPoint& p = final_[std::size_t(l - retired_)];
       p.label = l;
       p.original = points_.original(l);
       const double* x = points_.xyz(l);
@@ -248,11 +265,10 @@ class Accumulator {
       const Accum& a = acc_[l];
       p.volume = a.volume;
       p.voronoi = a.voronoi;
-      // Without angles the rows of [retired_, below) were just cut (gather_rows): T != 2 d - 4.
-      p.hull = angles_ ? a.angle < kHullAngleThreshold : a.tets + 4 != 2 * row_length_[std::size_t(l - retired_)];
-      if (sinks_.point) sinks_.point(p);
-
+      // Without hull terms the rows of [retired_, below) were just cut (gather_rows): T != 2 d - 4.
+      p.hull = terms_ ? a.hull != 0 : a.tets + 4 != 2 * row_length_[std::size_t(l - retired_)];
     }
+    if (sinks_.points) sinks_.points(final_);
     retired_ = below;
   }
 
@@ -260,15 +276,20 @@ class Accumulator {
   const BatchPlan& plan_;
   const AccumulateSinks& sinks_;
   Progress* progress_;
-  bool voronoi_, angles_;
+  bool voronoi_, terms_;
   WindowPoints points_;
   LabelRing<Accum> acc_;
   std::unordered_map<std::uint64_t, Accum> far_acc_;  // sums of the far labels
   DecodedBatch batch_;
-  std::vector<TetContribution> contrib_;
-  std::vector<double> volumes_;  // without angles: the tets' volumes
+  std::vector<TetTerms> contrib_;
+  std::vector<FinalPoint> final_;  // the points a batch retires
+  std::vector<double> volumes_;  // without hull terms: the tets' volumes
   core::PageArray<std::uint64_t> edges_;  // the batch's packed edges (its capacity: 6 a tet)
   std::vector<std::uint64_t> radix_tmp_, long_;
+  // Tets ahead whose vertices' slots are prefetched: a tet's four labels are spread
+  // over the window, so nearly every slot is a cache miss, and the loops would
+  // otherwise wait for each in turn.
+  static constexpr std::int64_t kAhead = 8;
   static constexpr std::size_t kBlock = 4096;  // tets a block of the edge packing
   static constexpr int kSeenBits = 14;         // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;

@@ -30,19 +30,20 @@ struct FinalPoint {
   double xyz[3];
   double volume = 0.0;   // sum of the incident tets' volumes
   double voronoi = 0.0;  // sum of the Voronoi pieces (the cell's volume when interior)
-  bool hull = false;     // on the convex hull (solid angles sum below 3 pi)
+  bool hull = false;     // on the convex hull's boundary (its hull terms do not cancel)
 };
 
 struct AccumulateSinks {
   bool voronoi = true;  // compute the Voronoi sums (FinalPoint::voronoi is 0 otherwise)
-  // false (only with `row`): no solid angles; the hull flag comes from the rows instead,
-  // combinatorially. A point's link (the triangles opposite it in its T tets, on its d
-  // neighbours) is a triangulated sphere when the point is interior, so T = 2 d - 4
+  // false (only with `row`): no hull terms (field_geometry.hpp); the hull flag comes
+  // from the rows instead. A point's link (the triangles opposite it in its T tets, on
+  // its d neighbours) is a triangulated sphere when the point is interior, so T = 2 d - 4
   // (Euler: d - 3T/2 + T = 2), and a disk with b >= 3 boundary edges when it is on the
-  // hull, so T = 2 d - 2 - b < 2 d - 4. Exact, where the angle sum is exact in practice;
-  // `--neighbours` alone then computes only the volumes (for `hull_volume`).
-  bool angles = true;
-  std::function<void(const FinalPoint&)> point;
+  // hull, so T = 2 d - 2 - b < 2 d - 4. `--neighbours` alone then computes only the
+  // volumes (for `hull_volume`), in the edges' loop.
+  bool hull_terms = true;
+  // The points a batch retires, in label order (the span is valid during the call only).
+  std::function<void(std::span<const FinalPoint>)> points;
   // Set to collect neighbours: called once per point, in label order, when it retires,
   // with its original index and its Delaunay neighbours' original indices (increasing,
   // no repeats; the span is valid during the call only).
@@ -58,8 +59,5 @@ struct AccumulateStats {
 
 AccumulateStats accumulate_fields(const io::TetReader& reader, const BatchPlan& plan, const AccumulateSinks& sinks,
                                   Progress* progress);
-
-// The solid-angle sum below which a point is on the hull (see field_geometry.hpp).
-inline constexpr double kHullAngleThreshold = 3.0 * 3.14159265358979323846;
 
 }  // namespace tetstream::pipeline

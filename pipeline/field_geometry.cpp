@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <utility>
 
 namespace tetstream::pipeline {
 namespace {
@@ -19,7 +21,6 @@ inline V3 cross(const V3& a, const V3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 inline double det3(const V3& a, const V3& b, const V3& c) { return dot(a, cross(b, c)); }
-inline double norm(const V3& a) { return std::sqrt(dot(a, a)); }
 
 // Circumcentre of the triangle (0, u, v), relative to its first vertex.
 V3 face_circumcentre(const V3& u, const V3& v) {
@@ -29,21 +30,6 @@ V3 face_circumcentre(const V3& u, const V3& v) {
 }
 
 }  // namespace
-
-// atan(y / x) for y >= 0 in [0, pi], by range reduction to [0, 1] and a polynomial of
-// degree 11 (absolute error below 2e-6 rad, checked against std::atan2 in
-// tests/unit/field_test.cpp; a solid angle is twice it: 4e-6). The hull test has a
-// margin of pi on a sum of these, so a star would need over 7 * 10^5 tets before the
-// approximation could matter; libm's atan2 was a quarter of a density job's time.
-double fast_atan2(double y, double x) {
-  const double ax = std::fabs(x);
-  const bool steep = y > ax;
-  const double a = steep ? ax / y : (ax > 0 ? y / ax : 0.0);
-  const double s = a * a;
-  double r = a * (0.99997726 + s * (-0.33262347 + s * (0.19354346 + s * (-0.11643287 + s * (0.05265332 + s * -0.01172120)))));
-  if (steep) r = 1.5707963267948966 - r;
-  return x < 0 ? 3.141592653589793 - r : r;
-}
 
 namespace {
 
@@ -61,7 +47,39 @@ constexpr int parity(int i, int j, int k, int l) {
 // Face index by the vertex it omits: face f holds the three vertices other than f.
 constexpr int face_without(int i, int j, int k) { return 6 - i - j - k; }
 
+// splitmix64's finaliser: a bijection of 64-bit words that mixes every input bit into
+// every output bit (the faces' hashes of the hull test).
+inline std::uint64_t mix(std::uint64_t x) {
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
 }  // namespace
+
+void tet_hull_terms(const std::uint64_t q[4], std::uint64_t out[4]) {
+  // Face f holds the vertices other than f, in index order (the boundary operator:
+  // d[q0 q1 q2 q3] = sum_f (-1)^f [the others]); sorting its labels flips the sign once
+  // a swap. Its signed hash goes to its three vertices, that is to all but vertex f:
+  // out[i] = total - (signed hash of face i).
+  // A face's hash is mix(m_a + 3 m_b + 5 m_c) over its labels a < b < c, with m = mix
+  // of a label (four a tet, not twelve): two faces' sums before the last mix coincide
+  // only by chance, 1 in 2^63 (the odd weights keep the order of the labels).
+  static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+  const std::uint64_t m[4] = {mix(q[0]), mix(q[1]), mix(q[2]), mix(q[3])};
+  std::uint64_t face[4], total = 0;
+  for (int f = 0; f < 4; ++f) {
+    int a = kFace[f][0], b = kFace[f][1], c = kFace[f][2];
+    bool odd = f & 1;
+    if (q[a] > q[b]) std::swap(a, b), odd = !odd;
+    if (q[b] > q[c]) std::swap(b, c), odd = !odd;
+    if (q[a] > q[b]) std::swap(a, b), odd = !odd;
+    const std::uint64_t h = mix(m[a] + 3 * m[b] + 5 * m[c]);
+    face[f] = odd ? std::uint64_t(0) - h : h;
+    total += face[f];
+  }
+  for (int i = 0; i < 4; ++i) out[i] = total - face[i];
+}
 
 double tet_volume(const double* const p[4]) {
   V3 v[4];
@@ -76,28 +94,16 @@ TetContribution tet_contribution(const double* const p[4], bool voronoi) {
   TetContribution out;
   const double d6 = det3(v[1], v[2], v[3]);
   out.volume = d6 / 6.0;
-  // Solid angles (Van Oosterom & Strackee 1983): at vertex i with edges a, b, c to the
-  // others, tan(Omega / 2) = |det[a, b, c]| / (|a||b||c| + (a.b)|c| + (a.c)|b| + (b.c)|a|);
-  // |det| is 6 V at every vertex, and the six edge lengths are shared.
-  V3 e[4][4];
-  double len[4][4];
-  for (int i = 0; i < 4; ++i)
-    for (int j = i + 1; j < 4; ++j) {
-      e[i][j] = sub(v[j], v[i]);
-      e[j][i] = scale(e[i][j], -1.0);
-      len[i][j] = len[j][i] = norm(e[i][j]);
-    }
-  const double num = std::fabs(d6);
-  for (int i = 0; i < 4; ++i) {
-    const int a = i == 0 ? 1 : 0, b = i <= 1 ? 2 : 1, c = i <= 2 ? 3 : 2;
-    const double den = len[i][a] * len[i][b] * len[i][c] + dot(e[i][a], e[i][b]) * len[i][c] +
-                       dot(e[i][a], e[i][c]) * len[i][b] + dot(e[i][b], e[i][c]) * len[i][a];
-    out.angle[i] = 2.0 * fast_atan2(num, den);
-  }
   if (!voronoi) {
     out.voronoi[0] = out.voronoi[1] = out.voronoi[2] = out.voronoi[3] = 0.0;
     return out;
   }
+  V3 e[4][4];
+  for (int i = 0; i < 4; ++i)
+    for (int j = i + 1; j < 4; ++j) {
+      e[i][j] = sub(v[j], v[i]);
+      e[j][i] = scale(e[i][j], -1.0);
+    }
   // Tet circumcentre: (|u|^2 (v x w) + |v|^2 (w x u) + |w|^2 (u x v)) / (2 det).
   const V3 cc = scale(add(add(scale(cross(v[2], v[3]), dot(v[1], v[1])), scale(cross(v[3], v[1]), dot(v[2], v[2]))),
                           scale(cross(v[1], v[2]), dot(v[3], v[3]))),

@@ -7,12 +7,17 @@
 //
 //   volume        V(t) = det[b-a, c-a, d-a] / 6 (> 0: the container's tets are positive).
 //                 DTFE: rho_i = (d+1) m_i / sum_t V(t) = 4 m_i / sum_t V(t).
-//   solid angle   Omega_i(t), the solid angle of t at vertex i (Van Oosterom & Strackee).
-//                 The angles at a point sum to 4 pi when it is interior (its star is a
-//                 whole ball) and to at most 2 pi on the convex hull (the star is a
-//                 convex cone): the hull test is sum < 3 pi, with a margin of pi that
-//                 neither rounding nor the 4e-6 rad approximation of each angle comes
-//                 near below 7 * 10^5 tets at one point, so the flag is exact there.
+//   hull term     for each face f of t (opposite vertex f), a hash H_f of its three
+//                 labels signed by the face's orientation as t's boundary sees it,
+//                 s_f = (-1)^f * (the parity of sorting its labels); a vertex gets the
+//                 sum over the three faces through it. Two tets sharing a face see it
+//                 with opposite orientations. At an interior point every face through
+//                 it is shared by two tets of its star, so its terms cancel exactly
+//                 (sums mod 2^64, in any order). A point on the hull's boundary is a
+//                 vertex of at least three boundary faces (faces of one tet), whose
+//                 terms cancel only if 64-bit hashes do: 1 in 2^64 for each hull point.
+//                 Combinatorial, like the rows' T = 2 d - 4 (field_accumulate.hpp): no
+//                 coordinates, no rounding.
 //   Voronoi       the cell of an interior point p is the union over its Delaunay edges
 //                 pq of the pyramids (apex p) over the Voronoi facets of pq; a facet is
 //                 cut into triangles (M_pq, F_f, C_t), one per tet t around pq and face
@@ -31,7 +36,6 @@ namespace tetstream::pipeline {
 struct TetContribution {
   double volume;       // V(t), the same for all four vertices
   double voronoi[4];   // the Voronoi pieces of t at each vertex
-  double angle[4];     // the solid angle of t at each vertex
 };
 
 // p: the four vertices, 3 doubles each, positively oriented. Without `voronoi` the
@@ -42,8 +46,9 @@ TetContribution tet_contribution(const double* const p[4], bool voronoi = true);
 // same order): `field --neighbours` alone needs only the volume (for `hull_volume`).
 double tet_volume(const double* const p[4]);
 
-// atan2(y, x) for y >= 0, within 2e-6 rad (for the solid angles; see the .cpp).
-double fast_atan2(double y, double x);
+// The hull terms of the tet with labels q[0..3] (positively oriented), one a vertex:
+// a point is interior exactly when its terms sum to 0 mod 2^64 (see above).
+void tet_hull_terms(const std::uint64_t q[4], std::uint64_t out[4]);
 
 // Exact point location with a symbolic perturbation: whether g lies inside the
 // positively oriented tet (a, b, c, d), where a point on a face is moved off it by an

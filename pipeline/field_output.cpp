@@ -1,5 +1,6 @@
 #include "pipeline/field_output.hpp"
 
+#include "core/compiler.hpp"
 #include "pipeline/temp_files.hpp"
 
 #include <cmath>
@@ -43,11 +44,75 @@ class Column {
 
 }  // namespace
 
+PointOrder::PointOrder(const FieldOptions& options, std::uint64_t original_end, std::uint64_t memory_bytes,
+                       ExternalSortOptions sort)
+    : end_(original_end) {
+  // The density (and the grid's densities with --mass) needs the star's volume, the
+  // Voronoi output the cell's; the label only for the grid's way back to label order.
+  const bool volume = options.density || options.grid_wanted(), voronoi = options.voronoi;
+  const bool label = options.grid_wanted() && !options.mass.empty();
+  const std::uint64_t per_index = 1 + 8 * (std::uint64_t(volume) + std::uint64_t(voronoi) + std::uint64_t(label));
+  if (original_end > memory_bytes / per_index) {
+    sorter_ = std::make_unique<ExternalSorter<PointRecord, ByOriginal>>(std::move(sort));
+    return;
+  }
+  // Written once here: a fresh mapping's pages are placed on huge pages as they fault
+  // (the placement below is at random, and would miss the TLB on every point with
+  // small pages), and every flag starts clear (an index never added is a duplicate
+  // `run` merged).
+  flags_.assign(std::size_t(original_end), 0);
+  if (volume) volume_.assign(std::size_t(original_end), 0.0);
+  if (voronoi) voronoi_.assign(std::size_t(original_end), 0.0);
+  if (label) label_.assign(std::size_t(original_end), 0);
+}
+
+void PointOrder::add(std::span<const FinalPoint> points) {
+  if (sorter_) {
+    for (const FinalPoint& p : points) sorter_->push({p.original, p.label, p.volume, p.voronoi, p.hull ? 1u : 0u});
+    return;
+  }
+  // Label order is not input order: every slot is a cache miss, asked for ahead.
+  constexpr std::size_t kAhead = 16;
+  for (std::size_t k = 0; k < points.size(); ++k) {
+    if (k + kAhead < points.size()) {
+      const std::size_t j = std::size_t(points[k + kAhead].original);
+      TS_PREFETCH(&flags_[j]);
+      if (!volume_.empty()) TS_PREFETCH(&volume_[j]);
+      if (!voronoi_.empty()) TS_PREFETCH(&voronoi_[j]);
+    }
+    const FinalPoint& p = points[k];
+    const std::size_t i = std::size_t(p.original);
+    flags_[i] = std::uint8_t(kPresent | (p.hull ? kHull : 0));
+    if (!volume_.empty()) volume_[i] = p.volume;
+    if (!voronoi_.empty()) voronoi_[i] = p.voronoi;
+    if (!label_.empty()) label_[i] = p.label;
+  }
+}
+
+void PointOrder::merge(const std::function<void(std::span<const PointRecord>)>& visit) {
+  if (sorter_) {
+    sorter_->merge(visit);
+    sorter_.reset();
+    return;
+  }
+  // The records the sort would give, in the same order (only the fields asked for set).
+  std::vector<PointRecord> batch;
+  batch.reserve(std::size_t(1) << 16);
+  for (std::size_t i = 0; i < end_; ++i) {
+    if (!(flags_[i] & kPresent)) continue;
+    batch.push_back({i, label_.empty() ? 0 : label_[i], volume_.empty() ? 0.0 : volume_[i],
+                     voronoi_.empty() ? 0.0 : voronoi_[i], (flags_[i] & kHull) ? 1u : 0u});
+    if (batch.size() == batch.capacity()) visit(batch), batch.clear();
+  }
+  if (!batch.empty()) visit(batch);
+  flags_ = {}, volume_ = {}, voronoi_ = {}, label_ = {};
+}
+
 std::string field_path(const FieldOptions& options, const std::string& what) {
   return options.output + "." + what + ".npy";
 }
 
-void write_point_fields(ExternalSorter<PointRecord, ByOriginal>& records, const FieldOptions& options,
+void write_point_fields(PointOrder& records, const FieldOptions& options,
                         std::uint64_t point_count, io::ScalarFileReader* masses,
                         const std::function<void(std::uint64_t, double)>& by_label, FieldSummary& summary) {
   std::optional<Column> density, voronoi;

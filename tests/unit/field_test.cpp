@@ -168,8 +168,14 @@ class FieldTest : public testing_util::ScratchDirTest {
 
   // gen -> run (out of core, several zones) -> the container rewritten with small
   // frames, so a field job has many frames and batches to combine.
-  std::string container(io::Distribution dist, std::uint64_t n, std::uint64_t seed, std::uint32_t frame_tets = 3000) {
-    testing_util::write_points_file(path("points.f64"), testing_util::generated_points(dist, n, seed));
+  // duplicate_every k > 0: every k-th point is a copy of the one before it (`run` merges
+  // it: the container's original indices have gaps).
+  std::string container(io::Distribution dist, std::uint64_t n, std::uint64_t seed, std::uint32_t frame_tets = 3000,
+                        std::uint64_t duplicate_every = 0) {
+    std::vector<double> points = testing_util::generated_points(dist, n, seed);
+    for (std::size_t i = duplicate_every; duplicate_every && i < n; i += duplicate_every)
+      std::copy_n(&points[3 * (i - 1)], 3, &points[3 * i]);
+    testing_util::write_points_file(path("points.f64"), points);
     pipeline::RunOptions o;
     o.input = path("points.f64");
     o.output = path("run.tets");
@@ -438,6 +444,38 @@ TEST_F(FieldTest, SameBytesForThreadsAndMemory) {
   }
 }
 
+// The points go back to input order placed by original index when their columns fit
+// their share, through the external sort otherwise: the same bytes, with merged
+// duplicates (gaps in the original indices) and the grid's densities with --mass (the
+// way back to label order) included.
+TEST_F(FieldTest, PointsPlacedOrSortedSameBytes) {
+  const std::uint64_t n = 8000;
+  const std::string tets = container(io::Distribution::kClusters, n, 41, 1500, 9);
+  const std::uint64_t kept = io::TetReader(tets).point_count();
+  EXPECT_EQ(kept, n - (n - 1) / 9);
+  std::vector<double> mass(n);
+  for (std::size_t i = 0; i < n; ++i) mass[i] = 1.0 + double(i % 7) / 8;
+  std::ofstream(path("mass.f64"), std::ios::binary).write(reinterpret_cast<const char*>(mass.data()), std::streamsize(8 * n));
+  for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {  // 0: from the budget (placed); 1: sorted
+    pipeline::FieldOptions o;
+    o.input = tets;
+    o.output = path(share ? "sorted" : "placed");
+    o.density = o.voronoi = true;
+    o.grid = {16, 12, 8};
+    o.mass = path("mass.f64");
+    o.point_memory = share;
+    o.progress = false;
+    o.tmpdir = dir_.string();
+    pipeline::compute_fields(o);
+  }
+  for (const char* what : {"density", "voronoi", "grid"}) {
+    const auto placed = file_bytes(path(std::string("placed.") + what + ".npy"));
+    EXPECT_FALSE(placed.empty()) << what;
+    EXPECT_EQ(placed, file_bytes(path(std::string("sorted.") + what + ".npy"))) << what;
+  }
+  EXPECT_EQ(load_npy<double>(path("placed.density.npy")).size(), kept);
+}
+
 // Neighbour rows that outgrow their share spill to the scratch file in buckets by
 // original index; the CSR files are the same bytes as when they stay in memory.
 TEST_F(FieldTest, NeighbourRowsSpillSameBytes) {
@@ -531,22 +569,43 @@ TEST_F(FieldTest, PerturbedLocationIsExclusive) {
   EXPECT_LE(int(pipeline::tet_contains(a, b, c, up, vertex)) + int(pipeline::tet_contains(a, c, b, dn, vertex)), 1);
 }
 
-TEST(FieldGeometry, FastAtan2) {
-  double worst = 0;
-  for (int i = 0; i <= 200000; ++i) {
-    const double t = 3.141592653589793 * i / 200000;  // directions over the upper half plane
-    const double y = std::sin(t), x = std::cos(t);
-    worst = std::max(worst, std::fabs(pipeline::fast_atan2(std::fabs(y), x) - std::atan2(std::fabs(y), x)));
-  }
-  EXPECT_LT(worst, 2e-6);
-  EXPECT_EQ(pipeline::fast_atan2(0.0, 0.0), 0.0);
-  // The solid angles of a tet's vertices against the formula's own reference values.
-  const double a[3] = {0, 0, 0}, b[3] = {1, 0, 0}, c[3] = {0, 1, 0}, d[3] = {0, 0, 1};
-  const double* p[4] = {a, b, c, d};
-  const auto t = pipeline::tet_contribution(p);
-  EXPECT_NEAR(t.angle[0], 3.141592653589793 / 2, 4e-6);  // an octant
-  EXPECT_NEAR(t.volume, 1.0 / 6, 1e-15);
-  EXPECT_NEAR(t.voronoi[0] + t.voronoi[1] + t.voronoi[2] + t.voronoi[3], 1.0 / 6, 1e-15);
+TEST(FieldGeometry, HullTermsCancelAroundAnInteriorPoint) {
+  // The octahedron around label 0 (the origin), cut into its 8 octant tets, each
+  // positively oriented (its vertices swapped where the octant's orientation is
+  // negative): the centre's terms cancel, every other vertex lies on the hull.
+  const double xyz[7][3] = {{0, 0, 0}, {1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  std::uint64_t sum[7] = {};
+  double volume = 0;
+  for (int sx = 0; sx < 2; ++sx)
+    for (int sy = 0; sy < 2; ++sy)
+      for (int sz = 0; sz < 2; ++sz) {
+        std::uint64_t q[4] = {0, std::uint64_t(1 + sx), std::uint64_t(3 + sy), std::uint64_t(5 + sz)};
+        if ((sx + sy + sz) % 2 == 1) std::swap(q[2], q[3]);
+        const double* p[4] = {xyz[q[0]], xyz[q[1]], xyz[q[2]], xyz[q[3]]};
+        const auto t = pipeline::tet_contribution(p);
+        ASSERT_GT(t.volume, 0);
+        volume += t.volume;
+        EXPECT_NEAR(t.voronoi[0] + t.voronoi[1] + t.voronoi[2] + t.voronoi[3], t.volume, 1e-15);
+        std::uint64_t terms[4];
+        pipeline::tet_hull_terms(q, terms);
+        for (int v = 0; v < 4; ++v) sum[q[v]] += terms[v];
+      }
+  EXPECT_NEAR(volume, 8.0 / 6, 1e-15);
+  EXPECT_EQ(sum[0], 0u);
+  for (int v = 1; v < 7; ++v) EXPECT_NE(sum[v], 0u) << v;
+  // A tet's terms do not depend on where its vertices start (an even permutation keeps
+  // the orientation), and the other orientation negates them.
+  const std::uint64_t q[4] = {10, 20, 30, 40}, even[4] = {20, 10, 40, 30}, odd[4] = {20, 10, 30, 40};
+  std::uint64_t a[4], b[4], c[4];
+  pipeline::tet_hull_terms(q, a);
+  pipeline::tet_hull_terms(even, b);
+  pipeline::tet_hull_terms(odd, c);
+  EXPECT_EQ(a[0], b[1]);
+  EXPECT_EQ(a[1], b[0]);
+  EXPECT_EQ(a[2], b[3]);
+  EXPECT_EQ(a[3], b[2]);
+  EXPECT_EQ(a[0], std::uint64_t(0) - c[1]);
+  EXPECT_EQ(a[2], std::uint64_t(0) - c[2]);
 }
 
 TEST_F(FieldTest, BadOptionsAndInput) {
