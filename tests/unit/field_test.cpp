@@ -300,7 +300,9 @@ TEST_F(FieldTest, NeighboursAloneHullFromRows) {
     o.progress = false;
     o.tmpdir = dir_.string();
     const pipeline::FieldSummary alone = pipeline::compute_fields(o);
-    if (c.dist != io::Distribution::kGrid) EXPECT_GT(alone.far_labels_peak, 0u);  // the lattice's window fits the ring
+    if (c.dist != io::Distribution::kGrid) {
+      EXPECT_GT(alone.far_labels_peak, 0u);  // the lattice's window fits the ring
+    }
     EXPECT_GT(hull, 0u);
     EXPECT_EQ(all.hull_points, hull);
     EXPECT_EQ(alone.hull_points, hull);
