@@ -158,95 +158,20 @@ class RankJob {
     const StageContext context{options_, dir_, checkpoint_, state_, root ? &disk : nullptr};
     summary.resumed = state_.contains("sort") || state_.contains("sorted") || state_.contains("output");
 
-    // ---- sort: spread over the ranks (each reads, sorts and writes its part), or on
-    // rank 0 alone for an input without a count up front (text) ----
+    // ---- sort ----
     std::optional<SortStage> sort;
-    std::string sorted_text, how;
-    together(comm_, [&] {
-      if (!root) return;
-      sort.emplace(context, budget_, threads_, claim_);
-      sort->prepare();
-      how = sort->recorded() ? "recorded" : sorts_by_ranges(options_.input, options_.read) ? "ranks" : "root";
-    });
-    how = comm_.broadcast(how, 0);
-    if (how == "ranks") {
-      DistributedSortTarget target;
-      target.partial = options_.output + ".partial";
-      std::string identity;
-      if (root) {
-        target.header = sort->points_header();
-        const io::OutputPart::Identity id = io::OutputPart::identity_of(claim_->fd());
-        identity = json::array({id.first, id.second}).dump();
-      }
-      const json id = json::parse(comm_.broadcast(identity, 0));
-      target.identity = {id.at(0).get<std::uint64_t>(), id.at(1).get<std::uint64_t>()};
-      PointSortOptions sort_options;
-      sort_options.memory_bytes = std::size_t(options_.memory_bytes);
-      sort_options.budget = &budget_;
-      sort_options.run_points = std::size_t(options_.sort_run_points);
-      sort_options.progress = options_.progress;
-      sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, options_, threads_); };
-      SortedPoints made;
-      {
-        const ScopedThreads threads(threads_);
-        // This rank's runs: rank-R-points-K.run in the work directory (the sorter
-        // removes them; a stopped job's are work files its directory's owner clears).
-        made = sort_points_distributed(comm_, options_.input, options_.read, sort_options, dir_,
-                                       rank_prefix(comm_.rank()) + "-points", target);
-      }
-      together(comm_, [&] {
-        if (!root) return;
-        sort->adopt(std::move(made));
-        sort->commit();
-      });
-    }
-    together(comm_, [&] {
-      if (!root) return;
-      const SortedPoints& s = how == "root" ? sort->run() : sort->result();
-      if (how == "root") sort->commit();
-      if (s.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
-      sorted_text = sorted_json(s).dump();
-      summary.seconds_sort = seconds_since(start_);
-      spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs{}, {:.1f}s", s.count, s.duplicates,
-                   "xyz"[s.axis], s.runs, how == "ranks" ? " on every rank" : "", summary.seconds_sort);
-    });
-    sorted_text = comm_.broadcast(sorted_text, 0);
+    const std::string sorted_text = comm_.broadcast(sort_step(context, sort), 0);
     const SortedPoints sorted = root ? sort->result() : sorted_from_json(json::parse(sorted_text));
     summary.input_points = sorted.input_count;
     summary.points = sorted.count;
     summary.duplicates = sorted.duplicates;
     summary.axis = sorted.axis;
 
-    // ---- index and plan, on every rank: the same plan everywhere ----
-    // Each rank builds a K-th of the index's blocks into one file, which every rank
-    // then maps (pipeline/stage_index.hpp): the build is shared, and the index is held
-    // by the page cache, not once a rank.
+    // ---- index and plan, on every rank ----
     IndexStage index(sorted, threads_);
     std::optional<TriangulatePlan> plan;
     RunSummary::Rank mine;
-    const std::string index_path = dir_ + "/index.shared";
-    const auto index_start = StageClock::now();
-    std::uint64_t my_nodes = 0;
-    together(comm_, [&] {
-      index.prepare();
-      my_nodes = index.build_shared_part(comm_.rank(), size);
-    });
-    const std::vector<std::uint64_t> nodes = comm_.all_gather(my_nodes);
-    std::uint64_t total_nodes = 0, first_node = 0;
-    for (int r = 0; r < size; ++r) {
-      if (r < comm_.rank()) first_node += nodes[std::size_t(r)];
-      total_nodes += nodes[std::size_t(r)];
-    }
-    together(comm_, [&] {
-      if (root) index.create_shared_file(index_path, total_nodes);
-    });
-    together(comm_, [&] { index.write_shared_part(index_path, total_nodes, first_node); });
-    together(comm_, [&] {
-      index.attach_shared(index_path, total_nodes, size);
-      mine.seconds_index = seconds_since(index_start);
-      budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
-      plan = plan_triangulation(index, options_, budget_, threads_);
-    });
+    index_step(index, plan, mine);
     summary.hull_vertices = index.view().hull_points.size();
 
     // ---- triangulate this rank's blocks of labels; its frames to the output (rank
@@ -403,6 +328,91 @@ class RankJob {
   }
 
  private:
+  // The sort: spread over the ranks (each reads, sorts and writes its part), or on rank
+  // 0 alone for an input without a count up front (text), or as rank 0's checkpoint
+  // recorded it. Returns, on rank 0, the sorted points' description for the others.
+  std::string sort_step(const StageContext& context, std::optional<SortStage>& sort) {
+    const bool root = comm_.rank() == 0;
+    std::string how, identity;
+    together(comm_, [&] {
+      if (!root) return;
+      sort.emplace(context, budget_, threads_, claim_);
+      sort->prepare();
+      how = sort->recorded() ? "recorded" : sorts_by_ranges(options_.input, options_.read) ? "ranks" : "root";
+      const io::OutputPart::Identity id = io::OutputPart::identity_of(claim_->fd());
+      identity = json::array({id.first, id.second}).dump();
+    });
+    how = comm_.broadcast(how, 0);
+    if (how == "ranks") {
+      DistributedSortTarget target;
+      target.partial = options_.output + ".partial";
+      if (root) target.header = sort->points_header();
+      const json id = json::parse(comm_.broadcast(identity, 0));
+      target.identity = {id.at(0).get<std::uint64_t>(), id.at(1).get<std::uint64_t>()};
+      PointSortOptions sort_options;
+      sort_options.memory_bytes = std::size_t(options_.memory_bytes);
+      sort_options.budget = &budget_;
+      sort_options.run_points = std::size_t(options_.sort_run_points);
+      sort_options.progress = options_.progress;
+      sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, options_, threads_); };
+      SortedPoints made;
+      {
+        const ScopedThreads threads(threads_);
+        // This rank's runs: rank-R-points-K.run in the work directory (the sorter
+        // removes them; a stopped job's are work files its directory's owner clears).
+        made = sort_points_distributed(comm_, options_.input, options_.read, sort_options, dir_,
+                                       rank_prefix(comm_.rank()) + "-points", target);
+      }
+      together(comm_, [&] {
+        if (!root) return;
+        sort->adopt(std::move(made));
+        sort->commit();
+      });
+    }
+    std::string sorted_text;
+    together(comm_, [&] {
+      if (!root) return;
+      const SortedPoints& s = how == "root" ? sort->run() : sort->result();
+      if (how == "root") sort->commit();
+      if (s.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
+      sorted_text = sorted_json(s).dump();
+      summary_.seconds_sort = seconds_since(start_);
+      spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs{}, {:.1f}s", s.count, s.duplicates,
+                   "xyz"[s.axis], s.runs, how == "ranks" ? " on every rank" : "", summary_.seconds_sort);
+    });
+    return sorted_text;
+  }
+
+  // The index: each rank builds a K-th of its blocks into one file, which every rank
+  // then maps (pipeline/stage_index.hpp): the build is shared, and the index is held by
+  // the page cache, not once a rank. Then the zone plan.
+  void index_step(IndexStage& index, std::optional<TriangulatePlan>& plan, RunSummary::Rank& mine) {
+    const int size = comm_.size();
+    const std::string path = dir_ + "/index.shared";
+    const auto start = StageClock::now();
+    std::uint64_t my_nodes = 0;
+    together(comm_, [&] {
+      index.prepare();
+      my_nodes = index.build_shared_part(comm_.rank(), size);
+    });
+    const std::vector<std::uint64_t> nodes = comm_.all_gather(my_nodes);
+    std::uint64_t total_nodes = 0, first_node = 0;
+    for (int r = 0; r < size; ++r) {
+      if (r < comm_.rank()) first_node += nodes[std::size_t(r)];
+      total_nodes += nodes[std::size_t(r)];
+    }
+    together(comm_, [&] {
+      if (comm_.rank() == 0) index.create_shared_file(path, total_nodes);
+    });
+    together(comm_, [&] { index.write_shared_part(path, total_nodes, first_node); });
+    together(comm_, [&] {
+      index.attach_shared(path, total_nodes, size);
+      mine.seconds_index = seconds_since(start);
+      budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
+      plan = plan_triangulation(index, options_, budget_, threads_);
+    });
+  }
+
   const RunOptions& options_;
   Communicator& comm_;
   const std::string dir_;
