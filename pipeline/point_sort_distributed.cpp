@@ -75,14 +75,11 @@ struct InputRange {
   std::uint64_t count = 0, first = 0, end = 0;
 };
 
-// The input's reader at point `first` (this rank's range).
-std::unique_ptr<io::PointReader> open_at(const std::string& input, const io::PointReadOptions& read_options,
-                                         std::uint64_t first) {
-  auto reader = io::open_points(input, read_options);
-  if (reader->skip(first) != first)
-    throw InputError(reader->source_name() + ": changed while being read (ended before point " +
+// Moves a fresh reader to point `first` (this rank's range).
+void skip_to(io::PointReader& reader, std::uint64_t first) {
+  if (reader.skip(first) != first)
+    throw InputError(reader.source_name() + ": changed while being read (ended before point " +
                      std::to_string(first) + ")");
-  return reader;
 }
 
 // Reads exactly n points (the input's count said they are there).
@@ -141,7 +138,10 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
   };
 
   std::unique_ptr<io::PointReader> reader;
-  together(comm, [&] { reader = open_at(input, read_options, range.first); });
+  together(comm, [&] {
+    reader = io::open_points(input, read_options);
+    skip_to(*reader, range.first);
+  });
   const std::uint64_t widest = (range.count + ranks - 1) / ranks;  // the most records a rank reads
   const std::uint64_t rounds = (widest + chunk - 1) / chunk;
   Progress progress("sorting", "points", range.end - range.first, options.progress && root);
@@ -222,7 +222,7 @@ SortedPoints sort_points_distributed(Communicator& comm, const std::string& inpu
     range.count = *reader->count();
     range.first = std::uint64_t((unsigned __int128)range.count * me / ranks);
     range.end = std::uint64_t((unsigned __int128)range.count * (me + 1) / ranks);
-    reader = open_at(input, read_options, range.first);
+    skip_to(*reader, range.first);
     const std::uint64_t n = range.end - range.first;
     const std::uint64_t step = std::max<std::uint64_t>(1, n / kSamplesPerRank);
     std::vector<double> chunk(3 * kReadChunk);

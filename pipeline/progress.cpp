@@ -112,6 +112,7 @@ double Progress::seconds() const {
 
 void Progress::add(std::uint64_t n) {
   done_.fetch_add(n, std::memory_order_relaxed);
+  if (!enabled_ && share_fd_ < 0) return;  // silent and not shared: nothing to time
   const std::int64_t now =
       std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start_).count();
   if (share_fd_ >= 0) {

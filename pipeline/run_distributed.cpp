@@ -17,6 +17,7 @@
 #include "pipeline/stage_triangulate.hpp"
 #include "pipeline/stage_write.hpp"
 #include "pipeline/temp_files.hpp"
+#include "pipeline/work_dir.hpp"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
@@ -26,7 +27,6 @@
 
 #include <filesystem>
 #include <optional>
-#include <regex>
 #include <string>
 #include <vector>
 
@@ -117,17 +117,14 @@ std::string rank_prefix(int rank) { return "rank-" + std::to_string(rank); }
 std::string fragment_name(int rank) { return rank_prefix(rank) + ".tets"; }
 std::string progress_file(const std::string& dir, int rank) { return dir + "/" + rank_prefix(rank) + ".progress"; }
 
-// The files of ranks 1 and up in the job's checkpoint directory (their records,
-// pending frames, fragments, progress counts), by their names; never a directory,
-// never through a link (unlink removes the link itself).
+// The work files of ranks 1 and up in the job's checkpoint directory (their records,
+// pending frames, fragments, progress counts, sort runs), by the names work_dir.hpp
+// owns; never a directory, never through a link (unlink removes the link itself).
 void remove_other_ranks_files(const std::string& dir) {
-  static const std::regex kTheirs(R"(rank-([0-9]+)(\.json|\.tets|\.tets\.partial|-pending-[0-9]+\.tets|\.progress)(\.tmp)?)");
   std::vector<std::string> names;
   for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     const std::string name = entry.path().filename().string();
-    std::smatch m;
-    if (std::regex_match(name, m, kTheirs) && m[1] != "0" && !std::filesystem::is_directory(entry.symlink_status()))
-      names.push_back(name);
+    if (work_file_rank(name) >= 1 && !std::filesystem::is_directory(entry.symlink_status())) names.push_back(name);
   }
   for (const std::string& name : names) remove_file(dir + "/" + name);
 }

@@ -60,6 +60,13 @@ bool is_work_file_name(const std::string& name) {
   return std::regex_match(name, kNames);
 }
 
+int work_file_rank(const std::string& name) {
+  static const std::regex kRank(R"(rank-([0-9]{1,9})[-.].*)");
+  std::smatch m;
+  if (!is_work_file_name(name) || !std::regex_match(name, m, kRank)) return -1;
+  return std::stoi(m[1].str());
+}
+
 WorkDir WorkDir::create_unique(const std::string& parent, const std::string& prefix) {
   std::string templ = (parent.empty() ? std::string(".") : parent) + "/" + prefix + "-XXXXXX";
   std::vector<char> buf(templ.begin(), templ.end());

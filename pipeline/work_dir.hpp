@@ -75,5 +75,9 @@ bool remove_stale_work_dir(const StaleWorkDir& stale);
 // the ranks of a job share), rank-R.progress (a rank's count for rank 0's progress
 // line), and the .tmp of each while it is written atomically.
 bool is_work_file_name(const std::string& name);
+// The rank R of a work file that rank R of a job under mpirun wrote (rank-R.json,
+// rank-R.tets, rank-R-pending-S.tets, rank-R.progress, rank-R-NAME-K.run, ...); -1 for
+// the others (rank 0's files carry no rank).
+int work_file_rank(const std::string& name);
 
 }  // namespace tetstream::pipeline

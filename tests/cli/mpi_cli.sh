@@ -80,27 +80,40 @@ PY
 done
 "$T" -q verify clusters-f64-3.tets || fail "verify of the 3-rank output"
 
-# A rank that fails mid-run (rank 1 only: a full disk at its third segment) stops
-# every rank: exit 3, one error line, no output; the checkpoint is kept, a resume on
-# another number of ranks is refused (the split is part of it), and a resume on the
-# same number ends with the bytes of one process.
+# A rank that fails (rank 1 only, by fault injection) stops every rank: exit 3, one
+# error line (rank 1's), no output under its final name, the checkpoint kept (rank 0's
+# state and rank 1's record). run3 / run2: the job on 3 / 2 ranks, rank 1 failing at
+# $FAULT1, into ${OUT3:-failed.tets}; rank1_fails NAME FAULT RUNNER [run options] runs one
+# and checks all of that.
 run3() {
   local out=${OUT3:-failed.tets}
   mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@" \
     : -n 1 -x TETSTREAM_FAULT="${FAULT1:-}" "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@" \
     : -n 1 "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@"
 }
-set +e
-FAULT1=segment:2 run3 2>failed.err
-rc=$?
-set -e
-[ "$rc" = 3 ] || { cat failed.err >&2; fail "a failing rank: exit $rc, expected 3"; }
-[ "$(grep -c 'tetstream: error:' failed.err)" = 1 ] || { cat failed.err >&2; fail "a failing rank: not one error line"; }
-grep -q "injected failure at segment:2" failed.err || fail "a failing rank: not its error"
-[ ! -e failed.tets ] || fail "a failing rank left an output under its final name"
-[ -f failed.tets.ckpt/state.json ] && [ -f failed.tets.ckpt/rank-1.json ] || fail "a failing rank: no checkpoint kept"
-# Resumed on 2 ranks: the sort and rank 0's frames are kept, ranks 1 and 2's labels
-# triangulated again by rank 1: the same bytes, and their files gone.
+run2() {
+  local out=${OUT3:-failed.tets}
+  mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@" \
+    : -n 1 -x TETSTREAM_FAULT="${FAULT1:-}" "$T" -q --threads 1 run uniform.f64 -o "$out" --memory 32M "$@"
+}
+rank1_fails() {
+  local name=$1 fault=$2 runner=$3 rc
+  shift 3
+  set +e
+  OUT3=$name.tets FAULT1=$fault "$runner" "$@" 2>"$name.err"
+  rc=$?
+  set -e
+  [ "$rc" = 3 ] || { cat "$name.err" >&2; fail "$name: rank 1 failing at $fault: exit $rc, expected 3"; }
+  [ "$(grep -c 'tetstream: error:' "$name.err")" = 1 ] || { cat "$name.err" >&2; fail "$name: not one error line"; }
+  grep -q "injected failure at $fault" "$name.err" || { cat "$name.err" >&2; fail "$name: not rank 1's error"; }
+  [ ! -e "$name.tets" ] || fail "$name: a failing rank left an output under its final name"
+  [ -f "$name.tets.ckpt/state.json" ] && [ -f "$name.tets.ckpt/rank-1.json" ] || fail "$name: no checkpoint kept"
+}
+
+# Rank 1 fails at its third segment (a full disk). Resumed on 2 ranks: the sort and
+# rank 0's frames are kept, ranks 1 and 2's labels triangulated again by rank 1: the
+# same bytes, and their files gone.
+rank1_fails failed segment:2 run3
 mpi 2 "$T" --log-level warn --threads 1 run uniform.f64 -o failed.tets --memory 32M --resume 2>other.err ||
   { cat other.err >&2; fail "a 3-rank job resumed on 2 ranks failed"; }
 grep -q "started on 3 ranks and goes on on 2" other.err || { cat other.err >&2; fail "no word of the new number of ranks"; }
@@ -110,12 +123,7 @@ cmp uniform-f64-1p.tets failed.tets || fail "resumed on 2 ranks after a failing 
 # A 2-rank job whose rank 1 fails: rank 0 has written its half (more than a third)
 # before the job stops. Resumed on 3 ranks, rank 0's range reaches the end of its
 # frames and ranks 1 and 2 share the rest: the same bytes.
-set +e
-mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M \
-  : -n 1 -x TETSTREAM_FAULT=segment:1 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M 2>grown.err
-rc=$?
-set -e
-[ "$rc" = 3 ] || { cat grown.err >&2; fail "a failing rank of 2: exit $rc, expected 3"; }
+rank1_fails grown segment:1 run2
 mpi 3 "$T" -q --threads 1 run uniform.f64 -o grown.tets --memory 32M --resume ||
   fail "a 2-rank job resumed on 3 ranks failed"
 cmp uniform-f64-1p.tets grown.tets || fail "resumed on 3 ranks: other bytes than one process"
@@ -123,42 +131,24 @@ cmp uniform-f64-1p.tets grown.tets || fail "resumed on 3 ranks: other bytes than
 
 # The same failure resumed by one process (no mpirun): the same bytes, and every
 # rank's files removed with the checkpoint.
-set +e
-mpirun -q --oversubscribe -n 1 "$T" -q --threads 1 run uniform.f64 -o alone.tets --memory 32M \
-  : -n 1 -x TETSTREAM_FAULT=segment:1 "$T" -q --threads 1 run uniform.f64 -o alone.tets --memory 32M 2>alone.err
-rc=$?
-set -e
-[ "$rc" = 3 ] || { cat alone.err >&2; fail "a failing rank of 2 (alone): exit $rc, expected 3"; }
+rank1_fails alone segment:1 run2
 "$T" -q --threads 1 run uniform.f64 -o alone.tets --memory 32M --resume || fail "one process resuming a 2-rank job failed"
 cmp uniform-f64-1p.tets alone.tets || fail "one process resuming a 2-rank job: other bytes"
 [ ! -e alone.tets.ckpt ] || fail "the checkpoint is left after one process resumed a 2-rank job"
 
 # Rank 1 fails as it copies its frames into the output (every rank has triangulated;
-# ranks 1 and 2 write theirs side by side): the same exit and line, the output not
-# under its final name; --resume places the frames again from the kept fragments.
-set +e
-OUT3=placed.tets FAULT1=place:0 run3 2>placed.err
-rc=$?
-set -e
-[ "$rc" = 3 ] && [ "$(grep -c 'tetstream: error:' placed.err)" = 1 ] && grep -q "injected failure at place:0" placed.err ||
-  { cat placed.err >&2; fail "a rank failing as it places its frames: exit $rc"; }
-[ ! -e placed.tets ] && [ -f placed.tets.ckpt/rank-1.json ] || fail "a failed placement: output present or no checkpoint"
+# ranks 1 and 2 write theirs side by side); --resume places the frames again from the
+# kept fragments.
+rank1_fails placed place:0 run3
 OUT3=placed.tets run3 --resume
 cmp uniform-f64-1p.tets placed.tets || fail "resumed after a failed placement: other bytes than one process"
 [ ! -e placed.tets.ckpt ] || fail "the checkpoint is left after the resumed placement"
 
 # Rank 1 fails in the sort every rank takes part in (its first sorted run, --sort-run-points
-# forcing several): the same exit and line, the output not under its final name, the
-# checkpoint kept; --resume sorts again and ends with the same bytes.
+# forcing several); --resume sorts again and ends with the same bytes.
 "$T" -q --threads 1 run uniform.f64 -o sorted-1p.tets --memory 32M --sort-run-points 20000 --no-checkpoint
 cmp uniform-f64-1p.tets sorted-1p.tets || fail "--sort-run-points changed the bytes"
-set +e
-OUT3=sortfail.tets FAULT1=sort-run:0 run3 --sort-run-points 20000 2>sortfail.err
-rc=$?
-set -e
-[ "$rc" = 3 ] && [ "$(grep -c 'tetstream: error:' sortfail.err)" = 1 ] && grep -q "injected failure at sort-run:0" sortfail.err ||
-  { cat sortfail.err >&2; fail "a rank failing in the sort: exit $rc"; }
-[ ! -e sortfail.tets ] && [ -f sortfail.tets.ckpt/state.json ] || fail "a failed sort: output present or no checkpoint"
+rank1_fails sortfail sort-run:0 run3 --sort-run-points 20000
 OUT3=sortfail.tets run3 --sort-run-points 20000 --resume
 cmp uniform-f64-1p.tets sortfail.tets || fail "resumed after a failed sort: other bytes than one process"
 [ ! -e sortfail.tets.ckpt ] || fail "the checkpoint is left after the resumed sort"

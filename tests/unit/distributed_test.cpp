@@ -5,6 +5,7 @@
 #include "pipeline/communicator.hpp"
 #include "pipeline/progress.hpp"
 #include "pipeline/run_distributed.hpp"
+#include "pipeline/work_dir.hpp"
 
 #include "scratch_dir.hpp"
 
@@ -60,6 +61,20 @@ TEST(RankLabelBounds, RankZerosWrittenLabelsStayItsOwn) {
   const std::vector<std::uint64_t> all = rank_label_bounds(count, block, 2, count);
   EXPECT_EQ(all, (std::vector<std::uint64_t>{0, count, count}));
   EXPECT_EQ(rank_label_bounds(count, block, 1, 500000), (std::vector<std::uint64_t>{0, count}));
+}
+
+// A resume on another number of ranks removes the other ranks' work files by their
+// names: each of a rank's names gives its rank; rank 0's, and names that are not work
+// files (a user's "rank-1.json.bak"), give none.
+TEST(WorkFileRank, EveryNameARankWritesAndNoOther) {
+  for (const auto& [name, rank] : std::vector<std::pair<std::string, int>>{
+           {"rank-1.json", 1}, {"rank-12.tets", 12}, {"rank-3.tets.partial", 3}, {"rank-2-pending-7.tets", 2},
+           {"rank-4.progress", 4}, {"rank-5-points-0.run", 5}, {"rank-5-points-0.run.hull", 5},
+           {"rank-1.json.tmp", 1}, {"state.json", -1}, {"pending-3.tets", -1}, {"index.shared", -1},
+           {"points-0.run", -1}, {"rank-1.json.bak", -1}, {"rank-x.json", -1}, {"myrank-1.json", -1}}) {
+    EXPECT_EQ(work_file_rank(name), rank) << name;
+    if (rank >= 0) EXPECT_TRUE(is_work_file_name(name)) << name;
+  }
 }
 
 // A job of `codes.size()` ranks seen from `rank`: all_gather hands back every rank's
