@@ -6,6 +6,7 @@
 #include "io/point_detail.hpp"
 
 #include <algorithm>
+#include <optional>
 #include <vector>
 
 namespace tetstream::io::detail {
@@ -27,6 +28,7 @@ class ConcatPointReader final : public PointReader {
       else if (!checked_add(total, *r->count(), total)) throw InputError(p + ": the files hold more than 2^64 points");
       if (formats.find(r->format_name()) == std::string::npos) formats += (formats.empty() ? "" : "; ") + r->format_name();
       sizes_.push_back(r->source_size().value_or(0));
+      counts_.push_back(r->count());
     }
     if (known) count_ = total;
     if (known && total == 0) throw InputError(source_name_ + ": no points in any of the files");
@@ -51,6 +53,36 @@ class ConcatPointReader final : public PointReader {
     next_ = paths_.size() + 1;
     if (points_read_ == 0) throw InputError(source_name_ + ": no points in any of the files");
     return 0;
+  }
+
+  // A whole file whose header gave its count (checked when this reader was made) is
+  // passed without opening it; within a file, its own reader skips (seeking where it
+  // can). A file with no points is opened as read() would (it is never skipped whole,
+  // so whoever reaches it checks it to its end).
+  std::uint64_t skip(std::uint64_t n) override {
+    std::uint64_t done = 0;
+    while (done < n) {
+      if (current_) {
+        const std::uint64_t k = current_->skip(n - done);
+        done += k;
+        points_read_ += k;
+        if (done == n) break;
+        bytes_done_ += current_->bytes_read();  // its end: on to the next file
+        current_.reset();
+        continue;
+      }
+      if (next_ >= paths_.size()) break;
+      first_.push_back(points_read_);
+      const std::optional<std::uint64_t> count = counts_[next_];
+      if (count && *count > 0 && *count <= n - done) {
+        done += *count;
+        points_read_ += *count;
+        bytes_done_ += sizes_[next_++];
+        continue;
+      }
+      current_ = open_one_(paths_[next_++]);
+    }
+    return done;
   }
 
   std::uint64_t bytes_read() const override { return bytes_done_ + (current_ ? current_->bytes_read() : 0); }
@@ -82,6 +114,7 @@ class ConcatPointReader final : public PointReader {
   std::vector<std::string> paths_;
   OpenOne open_one_;
   std::vector<std::uint64_t> sizes_;
+  std::vector<std::optional<std::uint64_t>> counts_;  // each file's, when its header gives it
   std::vector<std::uint64_t> first_;  // index of the first point of each file opened so far
   std::unique_ptr<PointReader> current_;
   std::size_t next_ = 0;

@@ -153,6 +153,22 @@ class Hdf5PointReader final : public PointReader {
     return n;
   }
 
+  // A hyperslab can start at any row: skipping moves the position, reading nothing.
+  std::uint64_t skip(std::uint64_t n) override {
+    std::uint64_t left = std::min<std::uint64_t>(n, *count_ - points_read_), done = 0;
+    while (left > 0) {
+      const Dataset& d = datasets_[current_];
+      const std::uint64_t take = std::min(left, d.rows - (points_read_ - d.first));
+      if (take == 0) {
+        ++current_;
+        continue;
+      }
+      bytes_ += take * 3 * d.scalar;
+      points_read_ += take, done += take, left -= take;
+    }
+    return done;
+  }
+
   std::uint64_t bytes_read() const override { return bytes_; }
   std::optional<std::uint64_t> source_size() const override {
     std::uint64_t total = 0;

@@ -76,6 +76,13 @@ class LasPointReader final : public PointReader {
     return n;
   }
 
+  // The records are fixed-length: the binary reader seeks past them.
+  std::uint64_t skip(std::uint64_t n) override {
+    const std::uint64_t k = records_->skip(n);
+    points_read_ += k;
+    return k;
+  }
+
   std::uint64_t bytes_read() const override { return records_->bytes_read(); }
   std::optional<std::uint64_t> source_size() const override { return records_->source_size(); }
   std::string location(std::uint64_t index) const override { return records_->location(index); }

@@ -124,7 +124,10 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
   sorter_options.name = runs_name;
   typename RecordSort<R>::Sorter sorter(sorter_options, typename RecordSort<R>::Less{axis});
   std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
-  std::vector<SortedPoint> run, send(chunk);
+  // The exchange carries the container's records (R: 16 bytes for float32 input of at
+  // most 2^32 points, 28 for float64; 32 only past 2^32), not the 32-byte SortedPoint.
+  std::vector<SortedPoint> run;
+  std::vector<R> send(chunk);
   run.reserve(capacity);
   std::vector<double> xyz(3 * chunk), run_xyz;
   std::vector<std::uint64_t> run_hull;
@@ -158,9 +161,7 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
       for (std::size_t i = 0; i < got; ++i) ++counts[to[i] = std::uint32_t(rank_of(splitters, key_of(&xyz[3 * i], axis)))];
       for (std::size_t r = 0, s = 0; r < ranks; ++r) slot[r] = s, s += counts[r];
       for (std::size_t i = 0; i < got; ++i) {
-        SortedPoint& p = send[slot[to[i]]++];
-        std::memcpy(p.xyz, &xyz[3 * i], sizeof p.xyz);
-        p.original = at + i;
+        send[slot[to[i]]++].set(&xyz[3 * i], at + i);  // exact: R holds the input's own values
       }
       check_interrupted();
     });
@@ -172,7 +173,18 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
     });
     const std::size_t at = run.size();
     run.resize(at + std::size_t(total));  // within the capacity reserved: no reallocation
-    comm.exchange(send.data(), counts, run.data() + at, incoming, sizeof(SortedPoint));
+    // Received as records R packed at the start of the new slots, then widened in
+    // place, last first: record i lies at or before slot i, so widening slot i only
+    // overwrites records already widened.
+    std::byte* landing = reinterpret_cast<std::byte*>(run.data() + at);
+    comm.exchange(send.data(), counts, landing, incoming, sizeof(R));
+    for (std::size_t i = std::size_t(total); i-- > 0;) {
+      R record;
+      std::memcpy(&record, landing + i * sizeof(R), sizeof(R));
+      SortedPoint& p = run[at + i];
+      record.xyz(p.xyz);
+      p.original = record.original();
+    }
     received += total;
     progress.add(got);
   }

@@ -2,7 +2,8 @@
 # `mpirun -n K tetstream run` (issue #20): K = 1, 2, 3 ranks on this machine write the
 # bytes of one process with the same --memory, on uniform (float64 and float32),
 # clustered and degenerate (grid) points with several blocks a rank, inputs with exact
-# duplicates and a text input; the points are sorted by every rank together (each
+# duplicates, a text input, and LAS, HDF5 and several-file inputs (which a rank seeks
+# in to reach its range); the points are sorted by every rank together (each
 # reads, sends and writes its part); a failing rank
 # stops the job with one error line and the single process's exit code; a failed or
 # killed job resumed on the same ranks ends with the same bytes; what does not run
@@ -60,7 +61,8 @@ assert sum(r["tets"] for r in ranks) == s["tets"], (ranks, s["tets"])
 assert ranks[0]["labels"][0] == 0 and ranks[-1]["labels"][1] == s["points"]
 assert all(a["labels"][1] == b["labels"][0] for a, b in zip(ranks, ranks[1:])), ranks
 # Ranks hand each other the points of the sort's exchange (at most their own range of
-# the input, 32 bytes a point, less what stays on the rank), their hull candidates'
+# the input, in the container's records: 16 bytes a float32 point, 28 a float64 one,
+# less what stays on the rank), their hull candidates'
 # labels (8 bytes, at most one a point) and summaries (the tets go through files);
 # rank 0 also the sorted file's description, whose hull labels (decimal text) grow
 # with the hull.
@@ -71,14 +73,70 @@ assert all(0 < b < 64 * 1024 + 40 * share for b in sent[1:]), (sent, share)
 assert 0 < sent[0] < 64 * 1024 + 40 * share + 24 * s["hull_vertices"], (sent, s["hull_vertices"])
 # The points went through the exchange, not through rank 0: about (n - 1) / n of a
 # rank's records belong to other ranks' ranges (the inputs are in random or grid
-# order); at least half of that is asked.
-assert all(b > 16 * share * (n - 1) // n for b in sent), (sent, share)
+# order); at least half of that is asked. And no more than a record a point
+# (with the hull labels and the summaries): the exchange sends the input's precision.
+record = 16 if sys.argv[1].startswith("uniform-f32") else 28
+assert all(b > record // 2 * share * (n - 1) // n for b in sent), (sent, share)
+assert all(b < 64 * 1024 + (record + 2) * share for b in sent[1:]), (sent, share, record)
 PY
     fi
   done
   ls | grep -q '^tetstream-run-' && fail "$input: a work directory was left behind"
 done
 "$T" -q verify clusters-f64-3.tets || fail "verify of the 3-rank output"
+
+# Inputs a rank reaches its range of by seeking (each rank reads only its own records):
+# LAS (fixed-length records after a header), several files (whole files passed by
+# their header's count, then a seek inside one) and HDF5 datasets (a hyperslab from
+# any row). The same bytes as one process. (Debian's python3, with numpy and h5py from
+# scripts/setup.sh, when another python3 comes first on the PATH.)
+PY3=$(command -v /usr/bin/python3 || command -v python3)
+"$PY3" - <<'PY'
+import struct, random
+import numpy as np
+rng = random.Random(7)
+n = 60000
+scale, offset = (0.001, 0.001, 0.001), (500000.0, 4000000.0, 100.0)
+pts = [(rng.randrange(10**6), rng.randrange(10**6), rng.randrange(10**6)) for _ in range(n)]
+real = [[p[k] * scale[k] + offset[k] for p in pts] for k in range(3)]
+h = bytearray(227)
+h[0:4] = b"LASF"; h[24] = 1; h[25] = 2
+struct.pack_into("<HIIBHI", h, 94, 227, 227, 0, 0, 20, n)
+struct.pack_into("<12d", h, 131, *scale, *offset, max(real[0]), min(real[0]), max(real[1]), min(real[1]),
+                 max(real[2]), min(real[2]))
+with open("lidar.las", "wb") as f:
+    f.write(h)
+    for p in pts:
+        f.write(struct.pack("<3iHBBbBH", *p, 0, 0, 0, 0, 0, 0))
+u = np.fromfile("uniform.f64", dtype="<f8").reshape(-1, 3)
+u[:70000].tofile("part-a.f64"); np.save("part-b.npy", u[70000:120000]); u[120000:].tofile("part-c.f64")
+try:
+    import h5py
+    with h5py.File("snap.hdf5", "w") as f:
+        f["PartType0/Coordinates"] = u[:45000]
+        f["PartType1/Coordinates"] = u[45000:100000].astype("<f4").astype("<f8")
+except ImportError:
+    pass
+PY
+seek_inputs=("lidar.las" "part-a.f64 part-b.npy part-c.f64")
+if [ -f snap.hdf5 ]; then
+  if "$T" -q info snap.hdf5 --dataset /PartType0/Coordinates >/dev/null 2>h5.err; then
+    seek_inputs+=("snap.hdf5 --dataset /PartType0/Coordinates --dataset /PartType1/Coordinates")
+  else
+    grep -q "without HDF5" h5.err || { cat h5.err >&2; fail "info snap.hdf5"; }
+    echo "mpi_cli: this tetstream reads no HDF5: its seek is not run"
+  fi
+fi
+for input in "${seek_inputs[@]}"; do
+  base=seek-$(echo "$input" | cut -c1-6 | tr -c 'a-z0-9\n' _)
+  # shellcheck disable=SC2086
+  "$T" -q --threads 1 run $input -o "$base-1p.tets" --memory 32M --no-checkpoint
+  for n in 2 3; do
+    # shellcheck disable=SC2086
+    mpi "$n" "$T" -q --threads 1 run $input -o "$base-$n.tets" --memory 32M
+    cmp "$base-1p.tets" "$base-$n.tets" || fail "$input: $n ranks wrote other bytes than one process"
+  done
+done
 
 # A rank that fails (rank 1 only, by fault injection) stops every rank: exit 3, one
 # error line (rank 1's), no output under its final name, the checkpoint kept (rank 0's

@@ -57,6 +57,26 @@ inline std::vector<double> read_all(const std::string& path, PointReadOptions op
   return out;
 }
 
+// Skipping n points then reading the rest gives what reading everything and dropping
+// the first n gives, for n from 0 to past the end; skip() returns how many it passed.
+// (How a rank of a distributed job reaches its range: seeking where the format allows.)
+inline void expect_skip_is_read_and_drop(const std::string& path, PointReadOptions opt = {}) {
+  const std::vector<double> all = read_all(path, opt);
+  const std::size_t count = all.size() / 3;
+  opt.block_bytes = 4096;
+  for (std::size_t n : {std::size_t(0), std::size_t(1), std::size_t(2), count / 2, count - 1, count, count + 5}) {
+    if (n > count + 5) continue;  // (count - 1 when count is 0)
+    auto r = open_points(path, opt);
+    const std::size_t skipped = std::min(n, count);
+    EXPECT_EQ(r->skip(n), skipped) << path << " skip " << n;
+    EXPECT_EQ(r->points_read(), skipped) << path << " skip " << n;
+    std::vector<double> rest, buf(3 * 7);
+    while (std::size_t k = r->read(buf.data(), 7)) rest.insert(rest.end(), buf.begin(), buf.begin() + 3 * k);
+    EXPECT_EQ(rest, std::vector<double>(all.begin() + std::ptrdiff_t(3 * skipped), all.end())) << path << " skip " << n;
+    EXPECT_EQ(r->points_read(), count) << path << " skip " << n;
+  }
+}
+
 // The message of the InputError that reading `path` throws ("" if none).
 inline std::string read_error(const std::string& path, PointReadOptions opt = {}) {
   try {

@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <string>
 #include <vector>
 
@@ -125,6 +127,74 @@ TEST(PointInput, SeveralFilesAreOneInput) {
   EXPECT_THROW(open_points(dir.file("a.f64"), o), InputError);
   o.more_inputs = {"-"};
   EXPECT_THROW(open_points(dir.file("a.f64"), o), UsageError);
+}
+
+// skip() is how a rank of a distributed job reaches its range of the input: seeking in
+// raw, npy, PLY binary and (point_las_test) LAS files and over whole files of several,
+// reading and dropping text.
+TEST(PointInput, SkipIsReadAndDrop) {
+  TempDir dir;
+  std::vector<double> v;
+  for (int i = 0; i < 3 * 23; ++i) v.push_back(i * 0.25 - 3);
+  const std::vector<double> head(v.begin(), v.begin() + 3 * 9), tail(v.begin() + 3 * 9, v.end());
+  write_bytes(dir.file("a.f64"), le_doubles(v));
+  expect_skip_is_read_and_drop(dir.file("a.f64"));
+  // Records with a stride and an offset (4 bytes before each x, 4 after z).
+  std::string strided;
+  for (std::size_t i = 0; i < v.size(); i += 3) strided += "abcd" + le_doubles({v[i], v[i + 1], v[i + 2]}) + "wxyz";
+  write_bytes(dir.file("s.bin"), strided);
+  PointReadOptions o;
+  o.format = PointFormat::kRaw, o.type = ScalarType::kFloat64, o.stride = 32, o.offset = 4;
+  expect_skip_is_read_and_drop(dir.file("s.bin"), o);
+  write_bytes(dir.file("a.npy"), npy_bytes(1, "<f8", "(23, 3)", le_doubles(v)));
+  expect_skip_is_read_and_drop(dir.file("a.npy"));
+  const std::string ply_head = "ply\nformat binary_little_endian 1.0\nelement vertex 23\n"
+                               "property double x\nproperty double y\nproperty double z\nend_header\n";
+  write_bytes(dir.file("a.ply"), ply_head + le_doubles(v));
+  expect_skip_is_read_and_drop(dir.file("a.ply"));
+  std::string text;
+  for (std::size_t i = 0; i < v.size(); i += 3)
+    text += std::to_string(v[i]) + " " + std::to_string(v[i + 1]) + " " + std::to_string(v[i + 2]) + "\n";
+  write_bytes(dir.file("a.txt"), text);
+  expect_skip_is_read_and_drop(dir.file("a.txt"));
+
+  // Several files, counts known: whole files passed, the rest skipped inside one.
+  write_bytes(dir.file("h.f64"), le_doubles(head));
+  write_bytes(dir.file("t.npy"), npy_bytes(1, "<f8", "(14, 3)", le_doubles(tail)));
+  o = PointReadOptions{};
+  o.more_inputs = {dir.file("t.npy"), dir.file("h.f64")};
+  expect_skip_is_read_and_drop(dir.file("h.f64"), o);
+  {
+    auto r = open_points(dir.file("h.f64"), o);
+    ASSERT_TRUE(r->count());
+    EXPECT_EQ(r->skip(9 + 14 + 2), 25u);  // into the third file's records
+    std::vector<double> buf(3 * 8);
+    ASSERT_EQ(r->read(buf.data(), 8), 7u);
+    EXPECT_EQ(buf[0], head[6]);
+    // A point found bad now is named in its own file.
+    EXPECT_EQ(std::string(r->error_at(25, "bad").what()), dir.file("h.f64") + ": byte 48: bad");
+  }
+  // And with a text file (no count: read and dropped).
+  o.more_inputs = {dir.file("a.txt"), dir.file("t.npy")};
+  expect_skip_is_read_and_drop(dir.file("h.f64"), o);
+
+  // Seeking reads nothing: a NaN among the skipped records is not seen (the rank whose
+  // range holds it reads it, and says so), in one file or as a whole file of several.
+  std::vector<double> bad = head;
+  bad[4] = std::numeric_limits<double>::quiet_NaN();
+  write_bytes(dir.file("bad.f64"), le_doubles(bad));
+  EXPECT_THROW(read_all(dir.file("bad.f64")), InputError);
+  auto expect_rest_reads = [&](const std::string& path, PointReadOptions opt, std::uint64_t n, std::size_t left) {
+    auto r = open_points(path, opt);
+    EXPECT_EQ(r->skip(n), n);
+    std::vector<double> buf(3 * 64);
+    std::size_t got = 0;
+    while (std::size_t k = r->read(buf.data(), 64)) got += k;
+    EXPECT_EQ(got, left) << path;
+  };
+  expect_rest_reads(dir.file("bad.f64"), PointReadOptions{}, 2, 7);
+  o.more_inputs = {dir.file("t.npy")};
+  expect_rest_reads(dir.file("bad.f64"), o, 9, 14);
 }
 
 TEST(PointInput, GlobsExpandInNaturalOrder) {
