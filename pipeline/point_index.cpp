@@ -244,4 +244,21 @@ double PointIndex::leaf_spacing_quantile(double q, std::uint64_t first, std::uin
   return *nth;
 }
 
+std::vector<std::uint64_t> PointIndex::compact_sample(std::uint64_t b, std::uint32_t max_points, bool last) const {
+  std::vector<std::uint64_t> labels;
+  if (b >= blocks_.size()) return labels;
+  const Block& block = blocks_[std::size_t(b)];
+  if (block.nodes == 0) return labels;
+  std::uint32_t i = block.first_node;
+  // Preorder: node i's first child is i + 1, its second begins where the first's
+  // subtree ends.
+  // Alternating children, so that the sample lies inside the block's region rather
+  // than in a corner of it (the data's own edge there).
+  for (bool second = last; !nodes_[i].leaf && nodes_[i].end - nodes_[i].begin > max_points; second = !second)
+    i = second ? nodes_[i + 1].next : i + 1;
+  const std::uint64_t base = b * block_points_;
+  for (std::uint32_t j = nodes_[i].begin; j < nodes_[i].end; ++j) labels.push_back(base + (entries_[std::size_t(base + j)] & kOffsetMask));
+  return labels;
+}
+
 }  // namespace tetstream::pipeline

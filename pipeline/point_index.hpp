@@ -160,6 +160,14 @@ class PointIndex {
   // the blocks holding those labels (the spacing of a segment's own points).
   double leaf_spacing_quantile(double q, std::uint64_t first = 0, std::uint64_t last = ~std::uint64_t(0)) const;
 
+  // A spatially compact sample of block b: the labels of the subtree reached from the
+  // block's root by taking the first child, then the second, and so on (`last`: the
+  // second first), down to the first node of at most max_points points. For estimates
+  // (pipeline/rank_cost.hpp).
+  std::vector<std::uint64_t> compact_sample(std::uint64_t b, std::uint32_t max_points, bool last) const;
+  std::uint64_t block_count() const { return blocks_.size(); }
+  std::uint32_t block_points() const { return block_points_; }
+
   std::size_t memory_bytes() const {
     return own_entries_.capacity() * sizeof(std::uint32_t) + own_fine_.capacity() * sizeof(std::uint16_t) +
            own_nodes_.capacity() * sizeof(Node) + own_blocks_.capacity() * sizeof(Block) + resident_bytes_;

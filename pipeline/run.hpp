@@ -96,6 +96,7 @@ struct RunSummary {
     std::uint64_t segments = 0, zones = 0, tets = 0;
     std::uint64_t frame_bytes = 0;    // of its frames
     std::uint64_t message_bytes = 0;  // it sent to the other ranks (Communicator::bytes_sent)
+    double expected_cost_share = 0;   // of the job's expected cost (pipeline/rank_cost.hpp) in its labels
     double seconds_index = 0, seconds_triangulate = 0, seconds_write = 0;
   };
   std::vector<Rank> ranks;

@@ -10,6 +10,7 @@
 #include "pipeline/memory_budget.hpp"
 #include "pipeline/point_sort_distributed.hpp"
 #include "pipeline/progress.hpp"
+#include "pipeline/rank_cost.hpp"
 #include "pipeline/run_internal.hpp"
 #include "pipeline/stage.hpp"
 #include "pipeline/stage_index.hpp"
@@ -25,6 +26,8 @@
 
 #include <omp.h>
 
+#include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -35,17 +38,38 @@ namespace tetstream::pipeline {
 using nlohmann::json;
 
 std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks,
-                                             std::uint64_t rank0_done) {
+                                             std::uint64_t rank0_done, const std::vector<std::uint64_t>& costs) {
   const std::uint64_t k = std::uint64_t(std::max(ranks, 1));
   const std::uint64_t blocks = block ? (count + block - 1) / block : 0;
+  if (!costs.empty() && costs.size() != blocks) throw std::logic_error("rank_label_bounds: a cost a block");
+  // prefix[i]: the cost of blocks [0, i) (i itself without costs).
+  std::vector<std::uint64_t> prefix(std::size_t(blocks) + 1, 0);
+  for (std::uint64_t i = 0; i < blocks; ++i) prefix[std::size_t(i) + 1] = prefix[std::size_t(i)] + (costs.empty() ? 1 : costs[std::size_t(i)]);
+  // The block boundary in [from, to] whose cost from `from` is nearest part j of
+  // `parts` of the cost of [from, to) (the lower one on a tie), in exact integers.
+  auto cut = [&](std::uint64_t from, std::uint64_t to, std::uint64_t parts, std::uint64_t j) {
+    if (j == 0 || j == parts) return j == 0 ? from : to;
+    using Wide = unsigned __int128;
+    const std::uint64_t base = prefix[std::size_t(from)];
+    const Wide target = Wide(prefix[std::size_t(to)] - base) * j;  // times parts, like the candidates below
+    const auto first = prefix.begin() + std::ptrdiff_t(from), end = prefix.begin() + std::ptrdiff_t(to) + 1;
+    // The first boundary at or past the target, and the one before it.
+    auto it = std::partition_point(first, end, [&](std::uint64_t p) { return Wide(p - base) * parts < target; });
+    if (it == end) --it;
+    if (it != first) {
+      const Wide over = Wide(*it - base) * parts - target, under = target - Wide(*(it - 1) - base) * parts;
+      if (under <= over) --it;
+    }
+    return std::uint64_t(it - prefix.begin());
+  };
   std::vector<std::uint64_t> bounds(k + 1);
-  for (std::uint64_t r = 0; r <= k; ++r) bounds[r] = std::min(count, blocks * r / k * block);
+  for (std::uint64_t r = 0; r <= k; ++r) bounds[r] = std::min(count, cut(0, blocks, k, r) * block);
   if (k == 1 || rank0_done <= bounds[1]) return bounds;
   // Rank 0 keeps its blocks up to the one that holds the end of its frames; the others
   // share the blocks after it.
-  const std::uint64_t first = std::min(blocks, (rank0_done + block - 1) / block), rest = blocks - first;
+  const std::uint64_t first = std::min(blocks, (rank0_done + block - 1) / block);
   bounds[1] = std::min(count, first * block);
-  for (std::uint64_t r = 1; r <= k; ++r) bounds[r] = std::min(count, (first + rest * (r - 1) / (k - 1)) * block);
+  for (std::uint64_t r = 1; r <= k; ++r) bounds[r] = std::min(count, cut(first, blocks, k - 1, r - 1) * block);
   return bounds;
 }
 
@@ -95,7 +119,7 @@ json rank_json(const RunSummary::Rank& r, const WrittenWork& work) {
           {"tets", r.tets},                     {"frame_bytes", r.frame_bytes},
           {"seconds_index", r.seconds_index},   {"seconds_triangulate", r.seconds_triangulate},
           {"seconds_write", r.seconds_write},   {"message_bytes", r.message_bytes},
-          {"work", counters_json(work)}};
+          {"expected_cost_share", r.expected_cost_share}, {"work", counters_json(work)}};
 }
 
 RunSummary::Rank rank_from(const json& j) {
@@ -110,6 +134,7 @@ RunSummary::Rank rank_from(const json& j) {
   r.seconds_triangulate = j.at("seconds_triangulate").get<double>();
   r.seconds_write = j.at("seconds_write").get<double>();
   r.message_bytes = j.at("message_bytes").get<std::uint64_t>();
+  r.expected_cost_share = j.value("expected_cost_share", 0.0);
   return r;
 }
 
@@ -180,8 +205,18 @@ class RankJob {
     // ranks) stay in its range.
     std::string written;
     if (root) written = std::to_string(state_.contains("output") ? state_["output"].at("next_label").get<std::uint64_t>() : 0);
-    const std::vector<std::uint64_t> bounds =
-        rank_label_bounds(sorted.count, block, size, std::stoull(comm_.broadcast(written, 0)));
+    const std::uint64_t rank0_done = std::stoull(comm_.broadcast(written, 0));
+    const std::vector<std::uint64_t> costs = block_costs(index, sorted.count, block);
+    const std::vector<std::uint64_t> bounds = rank_label_bounds(sorted.count, block, size, rank0_done, costs);
+    {
+      const auto cost_of = [&](std::uint64_t a, std::uint64_t b) {  // of labels [a, b), whole blocks
+        std::uint64_t c = 0;
+        for (std::uint64_t i = a / block; i < (b + block - 1) / block; ++i) c += costs[std::size_t(i)];
+        return double(c);
+      };
+      const double total = cost_of(0, sorted.count);
+      mine.expected_cost_share = total > 0 ? cost_of(bounds[std::size_t(comm_.rank())], bounds[std::size_t(comm_.rank()) + 1]) / total : 0;
+    }
     mine.first_label = bounds[std::size_t(comm_.rank())];
     mine.end_label = bounds[std::size_t(comm_.rank()) + 1];
     if (root)
@@ -383,6 +418,32 @@ class RankJob {
   // The index: each rank builds a K-th of its blocks into one file, which every rank
   // then maps (pipeline/stage_index.hpp): the build is shared, and the index is held by
   // the page cache, not once a rank. Then the zone plan.
+  // Every block's expected cost (pipeline/rank_cost.hpp), in the units of a point:
+  // rank r computes the r-th K-th of them from the shared index, rank 0 gathers them
+  // and hands all of them to every rank, which then cut the same ranges.
+  std::vector<std::uint64_t> block_costs(const IndexStage& index, std::uint64_t count, std::uint64_t block) {
+    const std::uint64_t blocks = (count + block - 1) / block, k = std::uint64_t(comm_.size()), r = std::uint64_t(comm_.rank());
+    std::string mine;
+    const auto start = StageClock::now();
+    together(comm_, [&] {
+      const std::uint64_t b0 = blocks * r / k, b1 = blocks * (r + 1) / k;
+      for (double c : expected_cost(*index.view().index, index.view().points, b0 * block, std::min(count, b1 * block), block)) {
+        const std::uint64_t v = std::uint64_t(std::llround(c));
+        mine.append(reinterpret_cast<const char*>(&v), sizeof v);
+      }
+      index.release_pages();
+      spdlog::debug("expected costs of {} blocks of {} labels: {:.2f}s", b1 - b0, block, seconds_since(start));
+    });
+    const std::vector<std::string> parts = comm_.gather(mine, 0);
+    std::string all;
+    for (const std::string& p : parts) all += p;
+    all = comm_.broadcast(all, 0);
+    std::vector<std::uint64_t> costs(all.size() / sizeof(std::uint64_t));
+    std::memcpy(costs.data(), all.data(), costs.size() * sizeof(std::uint64_t));
+    if (costs.size() != blocks) throw std::logic_error("block_costs: the ranks' parts do not add up");
+    return costs;
+  }
+
   void index_step(IndexStage& index, std::optional<TriangulatePlan>& plan, RunSummary::Rank& mine) {
     const int size = comm_.size();
     const std::string path = dir_ + "/index.shared";

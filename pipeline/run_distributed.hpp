@@ -45,12 +45,14 @@ namespace tetstream::pipeline {
 RunSummary run_job_distributed(const RunOptions& options, Communicator& comm);
 
 // The label ranges of `ranks` ranks over `count` labels: contiguous runs of whole
-// blocks of `block` labels, balanced by points; bounds[r] to bounds[r + 1] is rank
-// r's (empty when there are fewer blocks than ranks). `rank0_done`: the labels rank 0
-// has written already (a resumed job's record, maybe from another number of ranks):
-// when they reach past its share, its range ends at the block that holds their end and
-// the other ranks share the rest.
+// blocks of `block` labels, balanced by the blocks' `costs` (one a block; empty: by
+// points), each rank's range ending at the block boundary nearest its share of the
+// cost; bounds[r] to bounds[r + 1] is rank r's (empty when there are fewer
+// blocks than ranks). `rank0_done`: the labels rank 0 has written already (a resumed
+// job's record, maybe from another number of ranks): when they reach past its share,
+// its range ends at the block that holds their end and the other ranks share the rest.
 std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t block, int ranks,
-                                             std::uint64_t rank0_done = 0);
+                                             std::uint64_t rank0_done = 0,
+                                             const std::vector<std::uint64_t>& costs = {});
 
 }  // namespace tetstream::pipeline

@@ -60,6 +60,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
                        {"tets", r.tets},
                        {"frame_bytes", r.frame_bytes},
                        {"message_bytes", r.message_bytes},
+                       {"expected_cost_share", r.expected_cost_share},
                        {"seconds", {{"index", r.seconds_index},
                                     {"triangulate", r.seconds_triangulate},
                                     {"write", r.seconds_write}}}});

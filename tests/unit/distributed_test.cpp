@@ -63,6 +63,36 @@ TEST(RankLabelBounds, RankZerosWrittenLabelsStayItsOwn) {
   EXPECT_EQ(rank_label_bounds(count, block, 1, 500000), (std::vector<std::uint64_t>{0, count}));
 }
 
+// With the blocks' expected costs, each rank's range ends at the block boundary
+// nearest its share of the cost: a range of cheap blocks is long, one of dear blocks
+// short; uniform costs give the ranges of no costs; rank 0's written frames still bind.
+TEST(RankLabelBounds, BalancedByTheBlocksCosts) {
+  const std::uint64_t block = 1000, count = 12 * block - 17;  // 12 blocks, the last short
+  const std::vector<std::uint64_t> flat(12, 5);
+  for (int ranks : {1, 2, 3, 5, 12, 13})
+    EXPECT_EQ(rank_label_bounds(count, block, ranks, 0, flat), rank_label_bounds(count, block, ranks)) << ranks;
+  // Blocks 0-5 cost 1 each, 6-11 cost 3: a total of 24, 12 a rank on 2 ranks.
+  std::vector<std::uint64_t> costs(12, 1);
+  for (int i = 6; i < 12; ++i) costs[std::size_t(i)] = 3;
+  EXPECT_EQ(rank_label_bounds(count, block, 2, 0, costs), (std::vector<std::uint64_t>{0, 8 * block, count}));
+  // 4 ranks, 6 each: blocks 0-5 | 6-7 | 8-9 | 10-11.
+  EXPECT_EQ(rank_label_bounds(count, block, 4, 0, costs),
+            (std::vector<std::uint64_t>{0, 6 * block, 8 * block, 10 * block, count}));
+  // Rank 0 wrote into block 8: it keeps blocks 0-8 (cost 15); ranks 1-2 share 9-11 (9).
+  EXPECT_EQ(rank_label_bounds(count, block, 3, 8 * block + 1, costs),
+            (std::vector<std::uint64_t>{0, 9 * block, 10 * block, count}));
+  // One dear block (111 in all, 37 a rank): rank 0 stops short of it (3 is nearer 37
+  // than 103), rank 1 takes it alone (103 is nearer 74 than 3), rank 2 the rest.
+  std::vector<std::uint64_t> spike(12, 1);
+  spike[3] = 100;
+  const std::vector<std::uint64_t> b = rank_label_bounds(count, block, 3, 0, spike);
+  EXPECT_EQ(b.front(), 0u);
+  EXPECT_EQ(b.back(), count);
+  for (std::size_t r = 0; r + 1 < b.size(); ++r) EXPECT_LE(b[r], b[r + 1]);
+  EXPECT_EQ(b, (std::vector<std::uint64_t>{0, 3 * block, 4 * block, count}));
+  EXPECT_THROW(rank_label_bounds(count, block, 2, 0, std::vector<std::uint64_t>(11, 1)), std::logic_error);
+}
+
 // A resume on another number of ranks removes the other ranks' work files by their
 // names: each of a rank's names gives its rank; rank 0's, and names that are not work
 // files (a user's "rank-1.json.bak"), give none.

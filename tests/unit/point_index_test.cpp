@@ -2,6 +2,7 @@
 // of a ball (within the label range, outside the excluded slab it may skip), and the
 // sampled key search must agree with a plain binary search over the sorted file.
 #include "pipeline/point_index.hpp"
+#include "pipeline/rank_cost.hpp"
 #include "pipeline/segment.hpp"
 
 #include "scratch_dir.hpp"
@@ -141,6 +142,42 @@ TEST_F(SharedIndex, PartsInOneFileAnswerAsTheWholeIndex) {
     }
     EXPECT_EQ(whole.leaf_spacing_quantile(0.5), shared.leaf_spacing_quantile(0.5));
   }
+}
+
+// The expected cost: a point of a (slightly jittered) plane costs several times a
+// point of a solid cube, whose pilot tets have balls of their neighbours' size; the
+// units' sums add up to the range's whole, whatever the unit.
+TEST(RankCost, FlatTetsMakeAPointDearer) {
+  const std::size_t n = 40000;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  std::vector<SortedPoint> p(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = u(rng), y = u(rng), z = u(rng);
+    p[i].xyz[0] = x, p[i].xyz[1] = y, p[i].xyz[2] = x < 0 ? 0.25 + 1e-4 * z : z;  // a plane, then a cube
+    p[i].original = i;
+  }
+  std::sort(p.begin(), p.end(), [](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, 0); });
+  const std::size_t plane = std::size_t(std::count_if(p.begin(), p.end(), [](const SortedPoint& q) { return q.xyz[0] < 0; }));
+  PointIndex index;
+  const PointRecords records = records_of(p.data());
+  index.build(records, p.size(), 0, 4096);
+  const std::vector<double> whole = expected_cost(index, records, 0, n, n);
+  ASSERT_EQ(whole.size(), 1u);
+  // Whole blocks of each side (a block that straddles x = 0 is left out).
+  const std::uint64_t bp = index.block_points(), flat_end = plane / bp * bp, solid_begin = (plane + bp - 1) / bp * bp;
+  const double flat = expected_cost(index, records, 0, flat_end, flat_end)[0] / double(flat_end);
+  const double solid = expected_cost(index, records, solid_begin, n, n - solid_begin)[0] / double(n - solid_begin);
+  EXPECT_GT(flat, 1.7 * solid);  // (2.59 and 1.38 as built)
+  EXPECT_LT(solid, 1.5);
+  for (std::uint64_t unit : {1000u, 4096u, 7777u}) {
+    const std::vector<double> parts = expected_cost(index, records, 0, n, unit);
+    EXPECT_EQ(parts.size(), (n + unit - 1) / unit);
+    double sum = 0;
+    for (double c : parts) sum += c;
+    EXPECT_NEAR(sum, whole[0], 1e-9 * whole[0]) << unit;
+  }
+  EXPECT_EQ(expected_cost(index, records, 100, 300, 1000).size(), 1u);
 }
 
 TEST(PointIndex, BlockPointsFollowTheSlabDensity) {

@@ -1,0 +1,42 @@
+#pragma once
+// What a range of labels is expected to cost to triangulate, for dividing a job's
+// labels between the ranks of a distributed run (pipeline/run_distributed.cpp).
+//
+// Points alone are a poor measure: on a surface (a LiDAR terrain, plates, a shell)
+// a point costs several times what a uniform point does, because its tets are flat
+// and their circumballs huge, so most fail the range test and need emptiness queries
+// (docs/benchmarks.md, issue 18). A half-terrain, half-uniform set split by points
+// gave the terrain's rank 3.5 times the other's triangulation time.
+//
+// The estimate looks at that cause directly: in each block of the point index, a
+// pilot triangulation of two spatially compact samples (about 2048 points each) counts
+// the share f of its inner tets whose circumradius exceeds 8 times the median. On
+// uniform and clustered points f is about 0.01; on the terrain 0.18.
+// A point then costs 1 + kFlatTetWeight * f.
+#include "pipeline/point_index.hpp"
+
+#include <cstdint>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// The cost of labels [first, last) in blocks of `unit` labels: element i covers labels
+// [first + i * unit, first + (i + 1) * unit) (the last one may be shorter), each label
+// costing its index block's factor (block_cost_factor). Deterministic: every rank
+// computes the same figures from the same index and points.
+std::vector<double> expected_cost(const PointIndex& index, const PointRecords& points, std::uint64_t first,
+                                  std::uint64_t last, std::uint64_t unit);
+
+// 1 + kFlatTetWeight * f for index block b (see above); 1 when a sample is too small
+// or too flat to triangulate.
+double block_cost_factor(const PointIndex& index, const PointRecords& points, std::uint64_t b);
+
+// What a tet whose ball is huge beside its neighbours' adds to its point's cost, in
+// points. The share f of such pilot tets, mean over the blocks of 10^6 points at 64M:
+// terrain about 0.17, two plates 0.12, ellipsoid shell 0.04, clusters 0.014, uniform
+// 0.007. With 12 a terrain point costs about 2.9 uniform points; measured, 3.5 at 64M
+// (the half-terrain set on 2 ranks), 2.3 at 1G and 10^7 points (docs/benchmarks.md):
+// the true factor grows as zones shrink, the weight is a compromise.
+inline constexpr double kFlatTetWeight = 12.0;
+
+}  // namespace tetstream::pipeline
