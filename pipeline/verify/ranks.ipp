@@ -25,6 +25,8 @@ void Engine<L>::hand_over_front(const std::vector<std::size_t>& order, const std
   const std::size_t ranks = std::size_t(comm_.size()), me = std::size_t(comm_.rank());
   std::vector<std::vector<Facet>> facets_to(ranks);
   std::vector<std::vector<Edge>> edges_to(ranks);
+  const auto t0 = Clock::now();
+  std::size_t decoded = 0;
   together(comm_, [&] {
     if (upper_ == ~0ull) return;  // no later rank owns a label
     std::vector<L> labels;
@@ -34,6 +36,7 @@ void Engine<L>::hand_over_front(const std::vector<std::size_t>& order, const std
         const std::size_t k = order[j];
         if (src_.batch(k).max_label < upper_) continue;
         src_.read_batch(k, labels);
+        ++decoded;
         canonicalize(k, labels, flags, false, [](std::size_t, std::uint64_t, const L*) {});
         const std::uint64_t first_tet = src_.batch(k).first_tet;
         for (std::size_t i = 0; i < flags.size(); ++i) {
@@ -57,6 +60,10 @@ void Engine<L>::hand_over_front(const std::vector<std::size_t>& order, const std
       front_error_ = std::current_exception();
     }
   });
+  std::uint64_t sent = 0;
+  for (const auto& v : facets_to) sent += v.size();
+  spdlog::debug("verify: rank {}: front of {} facet records from {} of its {} frames in {:.2f}s", me, sent, decoded,
+                split_.first[me + 1] - split_.first[me], since(t0));
   std::vector<Facet> front = exchange_records(comm_, facets_to);
   facets_to = {};
   std::vector<Edge> edges = exchange_records(comm_, edges_to);
