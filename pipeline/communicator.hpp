@@ -12,6 +12,7 @@
 #include "core/error.hpp"
 
 #include <cstdint>
+#include <algorithm>
 #include <exception>
 #include <memory>
 #include <string>
@@ -87,6 +88,49 @@ void together(Communicator& comm, F&& work) {
     if (int(r) == comm.rank()) std::rethrow_exception(failure);
     throw PeerFailed(ExitCode(int(codes[r])));
   }
+}
+
+// Every rank's records for this one, by rank in order: `to[r]` goes to rank r (every
+// rank calls it, with to.size() == comm.size()). In rounds of fewer than 2^30 records
+// a call, as exchange() asks; T is copied as bytes.
+template <class T>
+std::vector<T> exchange_records(Communicator& comm, const std::vector<std::vector<T>>& to) {
+  const std::size_t k = std::size_t(comm.size());
+  std::vector<std::uint64_t> counts(k);
+  std::uint64_t most = 0;
+  for (std::size_t r = 0; r < k; ++r) most = std::max<std::uint64_t>(most, counts[r] = to[r].size());
+  const std::vector<std::uint64_t> incoming = comm.all_to_all(counts);
+  for (std::uint64_t n : incoming) most = std::max(most, n);
+  std::uint64_t rounds_needed = 0;
+  const std::uint64_t piece = std::max<std::uint64_t>(1, (std::uint64_t(1) << 30) / k);
+  for (std::uint64_t r : comm.all_gather((most + piece - 1) / piece)) rounds_needed = std::max(rounds_needed, r);
+  std::vector<std::uint64_t> at(k + 1, 0);  // where each sender's records start in the result
+  for (std::size_t r = 0; r < k; ++r) at[r + 1] = at[r] + incoming[r];
+  std::vector<T> out(std::size_t(at[k]));
+  std::vector<T> send;
+  std::vector<T> receive;
+  for (std::uint64_t round = 0; round < rounds_needed; ++round) {
+    std::vector<std::uint64_t> sc(k), rc(k);
+    send.clear();
+    for (std::size_t r = 0; r < k; ++r) {
+      const std::uint64_t from = std::min(counts[r], round * piece), to_end = std::min(counts[r], from + piece);
+      sc[r] = to_end - from;
+      send.insert(send.end(), to[r].begin() + std::ptrdiff_t(from), to[r].begin() + std::ptrdiff_t(to_end));
+      const std::uint64_t rf = std::min(incoming[r], round * piece);
+      rc[r] = std::min(incoming[r], rf + piece) - rf;
+    }
+    std::uint64_t total = 0;
+    for (std::uint64_t n : rc) total += n;
+    receive.resize(std::size_t(total));
+    comm.exchange(send.data(), sc, receive.data(), rc, sizeof(T));
+    std::uint64_t got = 0;
+    for (std::size_t r = 0; r < k; ++r) {
+      const std::uint64_t rf = std::min(incoming[r], round * piece);
+      std::copy_n(receive.begin() + std::ptrdiff_t(got), rc[r], out.begin() + std::ptrdiff_t(at[r] + rf));
+      got += rc[r];
+    }
+  }
+  return out;
 }
 
 }  // namespace tetstream::pipeline

@@ -37,6 +37,8 @@
 // doubles; random access by label), 2 bits
 // per point (vertex and hull-vertex bitmaps), a batch of scratch, and the open facets
 // and edges up to the budget; beyond that, disk.
+#include "pipeline/communicator.hpp"
+
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -128,6 +130,7 @@ class VerifySource {
     std::uint64_t first_tet = 0;  // ordinal of its first tet
     std::uint64_t tet_count = 0;
     std::uint64_t min_label = 0;  // a lower bound of its labels (0 when unknown)
+    std::uint64_t max_label = ~0ull;  // an upper bound of its labels (~0 when unknown)
   };
   virtual ~VerifySource() = default;
   virtual std::uint64_t point_count() const = 0;
@@ -189,8 +192,18 @@ class ContainerSource : public VerifySource {
 
 // Runs every check (or the sample's). Violations are results, not exceptions;
 // exceptions are for unreadable input (InputError) and I/O failures (IoError).
-VerifyReport verify(const VerifySource& source, const VerifyOptions& options);
-// Opens the container and verifies it.
-VerifyReport verify_file(const std::string& path, const VerifyOptions& options);
+//
+// On the ranks of a job (every rank calls it, with the same source and options): rank
+// r checks about a K-th of the tets, the frames whose smallest labels fall in its
+// label range (pipeline/verify/split.hpp), and finalizes the facets and edges keyed
+// in that range; the records an earlier rank's tets make for them are handed over
+// first (pipeline/verify/ranks.ipp). Rank 0's report is the job's: the same counts,
+// violations, volumes and verdict as one process (single_process(), the run of rank 0
+// of 1), apart from the resource figures (peaks: the largest rank's; spills: summed).
+// The other ranks' reports carry the verdict (counts) only. A failure on any rank
+// stops every rank (together(), pipeline/communicator.hpp).
+VerifyReport verify(const VerifySource& source, const VerifyOptions& options, Communicator& comm = single_process());
+// Opens the container (on every rank) and verifies it.
+VerifyReport verify_file(const std::string& path, const VerifyOptions& options, Communicator& comm = single_process());
 
 }  // namespace tetstream::pipeline

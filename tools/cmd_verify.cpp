@@ -6,6 +6,7 @@
 #include "pipeline/summary_json.hpp"
 #include "pipeline/verify.hpp"
 #include "tools/command.hpp"
+#include "tools/world.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -38,7 +39,14 @@ struct VerifyArgs {
 void run_verify(VerifyArgs& args, Context& ctx) {
   args.options.memory_bytes = pipeline::parse_memory_size(args.memory);
   args.options.progress = !ctx.global.quiet;
-  const pipeline::VerifyReport r = pipeline::verify_file(args.input, args.options);
+  // Under mpirun, every rank checks its share (pipeline/verify.hpp); rank 0 reports for
+  // the job, the others learn the verdict and exit with its code, silently.
+  pipeline::Communicator& comm = world();
+  const pipeline::VerifyReport r = pipeline::verify_file(args.input, args.options, comm);
+  if (comm.rank() != 0) {
+    if (!r.ok()) throw pipeline::PeerFailed(ExitCode::kBadInput);
+    return;
+  }
   ctx.summary = pipeline::verify_report_json(r, args.input);
   if (!ctx.global.json) {
     std::cout << args.input << ": " << r.summary() << std::endl;

@@ -166,10 +166,10 @@ int main(int argc, char** argv) {
     // (Every rank refuses; rank 0 says why.)
     if (world().size() > 1)
       for (const CLI::App* sub : app.get_subcommands())
-        if (sub->get_name() != "run") {
+        if (sub->get_name() != "run" && sub->get_name() != "verify") {
           if (other_rank) throw pipeline::PeerFailed(ExitCode::kUsage);
-          throw UsageError("only `tetstream run` runs under mpirun; start `tetstream " + sub->get_name() +
-                           "` as one process");
+          throw UsageError("only `tetstream run` and `tetstream verify` run under mpirun; start `tetstream " +
+                           sub->get_name() + "` as one process");
         }
     configure_logging(ctx.global);
     pipeline::install_interrupt_handlers();

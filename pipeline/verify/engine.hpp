@@ -6,11 +6,16 @@
 //   engine_run.ipp      memory plan, points, the frame loop, the radix sorts;
 //   frames.ipp          a frame's tets: storage, orientation, volume, facets and edges;
 //   pairing.ipp         facet pairing and local Delaunay, open facets and edges, spills;
-//   hull.ipp            the boundary surface (closed, convex), Euler, volume, the report.
+//   hull.ipp            the boundary surface (closed, convex), Euler, volume, the report;
+//   ranks.ipp           a distributed job's hand-overs: the front of records whose keys
+//                       another rank owns, the vertex bitmaps, boundary edges, the report.
 // Internal: included only by pipeline/verify/engine.cpp (it defines non-inline helpers).
 #include "pipeline/verify.hpp"
 
+#include "pipeline/communicator.hpp"
 #include "pipeline/interrupt.hpp"
+#include "pipeline/verify/exact_sum.hpp"
+#include "pipeline/verify/split.hpp"
 
 #include "core/error.hpp"
 #include "core/predicates.hpp"
@@ -68,6 +73,21 @@ class ViolationLog {
                                [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
     list.insert(at, std::move(l));
     if (list.size() > max_) list.pop_back();
+  }
+
+  // Another log's counts and listed violations (a rank's, on rank 0; ranks in order, so
+  // equal ordinals keep the order of the ranks).
+  void merge(const std::array<std::uint64_t, kViolationKinds>& counts, const std::vector<VerifyReport::Listed>& listed) {
+    for (std::size_t k = 0; k < std::size_t(kViolationKinds); ++k) counts_[k].fetch_add(counts[k]);
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& l : listed) {
+      auto& list = listed_[std::size_t(l.kind)];
+      if (max_ == 0 || (list.size() == max_ && list.back().where <= l.where)) continue;
+      auto at = std::upper_bound(list.begin(), list.end(), l.where,
+                                 [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
+      list.insert(at, l);
+      if (list.size() > max_) list.pop_back();
+    }
   }
 
   void into(VerifyReport& r) const {
@@ -247,6 +267,17 @@ class Bitmap {
     return c;
   }
   std::size_t bytes() const { return words_.size() * 8; }
+  // Bits set in [lo, hi).
+  std::uint64_t count(std::uint64_t lo, std::uint64_t hi) const {
+    std::uint64_t c = 0;
+    for (std::uint64_t i = lo; i < hi && i % 64; ++i) c += get(i);
+    std::uint64_t i = std::min(hi, (lo + 63) / 64 * 64);
+    for (; i + 64 <= hi; i += 64) c += std::uint64_t(std::popcount(words_[i >> 6]));
+    for (; i < hi; ++i) c += get(i);
+    return c;
+  }
+  // The words, for a rank's hand-over of the bits of another's labels.
+  std::vector<std::uint64_t>& words() { return words_; }
 
  private:
   std::vector<std::uint64_t> words_;
@@ -354,8 +385,9 @@ class Engine {
   using HullEdge = HullEdgeRec<L>;
   using Edge = EdgeKey<L>;
 
-  Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep)
-      : src_(src), opt_(opt), rep_(rep), log_(opt.max_listed), n_(src.point_count()), used_(n_), hull_used_(n_) {
+  Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep, Communicator& comm)
+      : src_(src), opt_(opt), rep_(rep), comm_(comm), log_(opt.max_listed), n_(src.point_count()), used_(n_),
+        hull_used_(n_) {
     sampled_ = opt.sample < 1.0;
     label_bits_ = std::max(1, int(std::bit_width(n_ > 0 ? n_ - 1 : 0)));
     if (sampled_) sample_cut_ = std::uint64_t(std::ldexp(opt.sample, 64));  // sample < 1: below 2^64
@@ -389,6 +421,29 @@ class Engine {
   void plan_memory();
   void load_points();
   void process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min);
+  // Checks a decoded frame (its count, every good tet's labels within the frame's
+  // declared [min_label, max_label]: InputError otherwise) and puts each tet in
+  // canonical form (labels sorted; flags bit 0: odd permutation, bit 1: broken, i.e. a
+  // storage violation, logged when log_storage). on_good(i, ordinal, g) for each good
+  // tet, g its labels as stored; called from several threads.
+  template <class OnGood>
+  void canonicalize(std::size_t k, std::vector<L>& labels, std::vector<std::uint8_t>& flags, bool log_storage,
+                    OnGood&& on_good);
+  // The facet records of a canonical tet s (flags: its parity bit), emit(facet, through
+  // s[0]), and its six edges.
+  template <class Emit>
+  static void tet_facets(const L* s, std::uint64_t ordinal, int parity, Emit&& emit);
+  template <class Emit>
+  static void tet_edges(const L* s, Emit&& emit);
+  // ranks.ipp: the records this rank's tets make for keys later ranks own (a front),
+  // sent to their owners and folded here in the order one process folds them.
+  void hand_over_front(const std::vector<std::size_t>& order, const std::vector<std::uint64_t>& position);
+  void replay_front(std::vector<Facet>& front, const std::vector<std::size_t>& order,
+                    const std::vector<std::uint64_t>& position);
+  void hand_over_bits(Bitmap& bits);
+  void hand_over_hull_edges();
+  std::string partial_totals();
+  void merge_totals(const std::vector<std::string>& parts);
   // Per-thread buffers of a step's slice of tets.
   struct Part {
     std::vector<Facet> a, b, f, tmp;   // A and B facets, merged
@@ -413,10 +468,12 @@ class Engine {
   void finish_edges();
   void finish_hull();
   void finish();
+  void totals_into_report();
 
   const VerifySource& src_;
   const VerifyOptions& opt_;
   VerifyReport& rep_;
+  Communicator& comm_;
   ViolationLog log_;
   const std::uint64_t n_;
   bool sampled_ = false;
@@ -445,8 +502,17 @@ class Engine {
   std::vector<std::size_t> bounds_, chunk_sizes_;
   std::vector<HullEdge> hull_edges_batch_;
 
-  // Totals.
-  long double tet_volume6_ = 0, hull_volume6_ = 0;
+  // The ranks' shares: this rank's frames and the labels it owns, [lower_, upper_).
+  // Records with keys >= upper_ are made by hand_over_front(), not by the pass.
+  VerifySplit split_;
+  std::uint64_t lower_ = 0, upper_ = ~0ull;
+  std::exception_ptr front_error_;  // the pre-pass's failure (hand_over_front)
+  ExternalSortOptions hull_sort_options_;
+
+  // Totals. Volumes summed exactly (exact_sum.hpp): the same bits however the tets are
+  // cut into threads, spills and ranks. thread_volume_: one a thread (process_frame).
+  ExactSum tet_volume6_, hull_volume6_;
+  std::vector<ExactSum> thread_volume_;
   bool wide_volume_ = false;  // volumes in long double (volume_fits_double)
   long double volume6(const double* a, const double* b, const double* c, const double* d) const {
     return wide_volume_ ? det3<long double>(a, b, c, d) : det3<double>(a, b, c, d);
@@ -454,6 +520,7 @@ class Engine {
   std::atomic<std::uint64_t> orient_tests_{0}, insphere_tests_{0}, hull_tests_{0};
   std::uint64_t good_tets_ = 0, interior_ = 0, boundary_ = 0, bad_facets_ = 0, edges_ = 0, hull_edges_ = 0;
   std::uint64_t facets_checked_ = 0, tets_checked_ = 0;
+  std::uint64_t vertices_ = 0, hull_vertices_ = 0;  // of this rank's labels, then (rank 0) of all
   double seconds_points_ = 0, seconds_tets_ = 0, seconds_final_ = 0;
 };
 

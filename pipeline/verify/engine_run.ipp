@@ -110,17 +110,40 @@ void Engine<L>::load_points() {
 template <class L>
 void Engine<L>::run() {
   const auto t0 = Clock::now();
-  tmp_parent_ = opt_.tmpdir;
-  if (tmp_parent_.empty()) {
-    const char* env = std::getenv("TMPDIR");
-    tmp_parent_ = env && *env ? std::string(env) : src_.directory();
-    if (tmp_parent_.empty()) tmp_parent_ = ".";
+  // Frames in order of their smallest label (frames are independent, so any order is
+  // allowed, and this one retires keys soonest even when a writer appended a late
+  // frame). later_min[j]: the smallest label of the frames after position j.
+  // position[k]: where frame k comes in that order. The order is cut into the ranks'
+  // runs (split.hpp); one process is the run of rank 0 of 1.
+  const std::size_t frames = src_.batch_count();
+  std::vector<std::size_t> order(frames);
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return src_.batch(a).min_label < src_.batch(b).min_label; });
+  std::vector<std::uint64_t> later_min(frames + 1, ~0ull), position(frames), mins(frames), counts(frames);
+  for (std::size_t j = frames; j-- > 0;) later_min[j] = std::min(later_min[j + 1], src_.batch(order[j]).min_label);
+  for (std::size_t j = 0; j < frames; ++j) {
+    position[order[j]] = j;
+    mins[j] = src_.batch(order[j]).min_label;
+    counts[j] = src_.batch(order[j]).tet_count;
   }
-  plan_memory();
-  load_points();
+  split_ = split_frames(mins, counts, comm_.size());
+  const std::size_t me = std::size_t(comm_.rank());
+  lower_ = me == 0 ? 0 : split_.low[me];
+  upper_ = split_.low[me + 1];
+  const std::size_t first = split_.first[me], last = split_.first[me + 1];
 
-  auto make_dir = [this] { return make_tmpdir(); };
-  {
+  together(comm_, [&] {
+    tmp_parent_ = opt_.tmpdir;
+    if (tmp_parent_.empty()) {
+      const char* env = std::getenv("TMPDIR");
+      tmp_parent_ = env && *env ? std::string(env) : src_.directory();
+      if (tmp_parent_.empty()) tmp_parent_ = ".";
+    }
+    plan_memory();
+    load_points();
+
+    auto make_dir = [this] { return make_tmpdir(); };
     ExternalSortOptions o;
     o.memory_bytes = sorter_budget_;
     o.make_dir = make_dir;
@@ -131,55 +154,58 @@ void Engine<L>::run() {
     edge_spill_->set_reducer([](Edge* first, std::size_t n) { return std::size_t(std::unique(first, first + n) - first); });
     o.name = "hull-edges";
     o.memory_bytes = std::max<std::size_t>(sorter_budget_ / 5, std::size_t(4) << 20);
+    hull_sort_options_ = o;
     hull_sorter_ = std::make_unique<ExternalSorter<HullEdge, HullEdgeLess<L>>>(o);
-  }
+  });
+  // The records of this rank's tets whose keys later ranks own, to them; theirs for
+  // this rank's keys, folded here first (a collective step: every rank takes part).
+  if (comm_.size() > 1) hand_over_front(order, position);
 
-  // Pass over the tets, frame by frame in order of their smallest label (frames
-  // are independent, so any order is allowed, and this one retires keys soonest even
-  // when a writer appended a late frame); the next frame decodes while this one is
-  // checked. later_min[j]: the smallest label of the frames after position j.
-  const auto t1 = Clock::now();
-  const std::size_t frames = src_.batch_count();
-  std::vector<std::size_t> order(frames);
-  std::iota(order.begin(), order.end(), std::size_t(0));
-  std::stable_sort(order.begin(), order.end(),
-                   [&](std::size_t a, std::size_t b) { return src_.batch(a).min_label < src_.batch(b).min_label; });
-  std::vector<std::uint64_t> later_min(frames + 1, ~0ull);
-  for (std::size_t j = frames; j-- > 0;) later_min[j] = std::min(later_min[j + 1], src_.batch(order[j]).min_label);
-  Progress progress("verifying", "tets", src_.tet_count(), opt_.progress);
-  std::vector<L> current, next;
-  std::future<void> pending;
-  if (frames > 0) pending = std::async(std::launch::async, [&] { src_.read_batch(order[0], next); });
-  for (std::size_t j = 0; j < frames; ++j) {
-    pending.get();
-    std::swap(current, next);
-    if (j + 1 < frames) pending = std::async(std::launch::async, [&, j] { src_.read_batch(order[j + 1], next); });
-    try {
-      process_frame(order[j], current, later_min[j + 1]);
-    } catch (...) {
-      if (pending.valid()) pending.wait();
-      throw;
+  // Pass over this rank's frames; the next frame decodes while this one is checked.
+  together(comm_, [&] {
+    const auto t1 = Clock::now();
+    std::uint64_t my_tets = 0;
+    for (std::size_t j = first; j < last; ++j) my_tets += src_.batch(order[j]).tet_count;
+    Progress progress("verifying", "tets", my_tets, opt_.progress);
+    std::vector<L> current, next;
+    std::future<void> pending;
+    if (first < last) pending = std::async(std::launch::async, [&] { src_.read_batch(order[first], next); });
+    for (std::size_t j = first; j < last; ++j) {
+      pending.get();
+      std::swap(current, next);
+      if (j + 1 < last) pending = std::async(std::launch::async, [&, j] { src_.read_batch(order[j + 1], next); });
+      try {
+        process_frame(order[j], current, later_min[j + 1]);
+      } catch (...) {
+        if (pending.valid()) pending.wait();
+        throw;
+      }
+      progress.add(current.size() / 4);
+      check_interrupted();
     }
-    progress.add(current.size() / 4);
-    check_interrupted();
-  }
-  progress.finish();
-  current = {}, next = {};
-  seconds_tets_ = since(t1);
+    progress.finish();
+    current = {}, next = {};
+    if (front_error_) std::rethrow_exception(front_error_);  // the pass did not meet it again
+    seconds_tets_ = since(t1);
 
-  // Everything still open is final now (or goes to the spills): free the open sets
-  // before the spills merge.
-  const auto t2 = Clock::now();
-  if (!sampled_) merge_edges(~0ull);
-  live_e_ = {}, merged_e_ = {};
-  retire_facets(~0ull);
-  live_ = {}, merged_ = {}, parts_ = {};
-  finish_facets();
+    // Every key this rank owns is final now (or goes to the spills): free the open
+    // sets before the spills merge.
+    const auto t2 = Clock::now();
+    if (!sampled_) merge_edges(~0ull);
+    live_e_ = {}, merged_e_ = {};
+    retire_facets(~0ull);
+    live_ = {}, merged_ = {}, parts_ = {};
+    finish_facets();
+    if (!sampled_) finish_edges();
+    seconds_final_ = since(t2);
+  });
   if (!sampled_) {
-    finish_hull();
-    finish_edges();
+    // A boundary edge's key is its smaller label: to the rank that owns it.
+    if (comm_.size() > 1) hand_over_hull_edges();
+    together(comm_, [&] { finish_hull(); });
+    hand_over_bits(hull_used_);
   }
-  seconds_final_ = since(t2);
+  hand_over_bits(used_);
   finish();
   rep_.seconds = since(t0);
   spdlog::debug("verify: points {:.2f}s, tets {:.2f}s, final merges {:.2f}s", seconds_points_, seconds_tets_,

@@ -2,7 +2,9 @@
 // Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
 
 template <class L>
-void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min) {
+template <class OnGood>
+void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<std::uint8_t>& flags, bool log_storage,
+                             OnGood&& on_good) {
   const VerifySource::Batch b = src_.batch(k);
   const std::size_t t = labels.size() / 4;
   if (labels.size() % 4 != 0 || t != b.tet_count)
@@ -10,16 +12,13 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
                      " tets decoded, " + std::to_string(b.tet_count) + " expected");
   // Canonical form in place: the labels sorted; flags bit 0: odd permutation (the
   // sorted order has the opposite orientation), bit 1: broken (storage).
-  std::vector<std::uint8_t> flags(t);
-  constexpr std::size_t kChunk = 4096;  // fixed chunks: volume sums independent of threads
+  flags.assign(t, 0);
+  constexpr std::size_t kChunk = 4096;
   const std::int64_t chunks = std::int64_t((t + kChunk - 1) / kChunk);
-  std::vector<long double> vol(std::size_t(chunks), 0.0L);
-  std::uint64_t checked = 0, good = 0;
-  bool below_min = false;
-#pragma omp parallel for schedule(dynamic, 4) reduction(+ : checked, good) reduction(|| : below_min)
+  bool below_min = false, above_max = false;
+#pragma omp parallel for schedule(dynamic, 4) reduction(|| : below_min, above_max)
   for (std::int64_t c = 0; c < chunks; ++c) {
     const std::size_t lo = std::size_t(c) * kChunk, hi = std::min(t, lo + kChunk);
-    long double sum = 0;
     for (std::size_t i = lo; i < hi; ++i) {
       L* v = labels.data() + 4 * i;
       const std::uint64_t ordinal = b.first_tet + i;
@@ -32,40 +31,58 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
       };
       cx(0, 1), cx(2, 3), cx(0, 2), cx(1, 3), cx(1, 2);
       if (v[0] == v[1] || v[1] == v[2] || v[2] == v[3]) ok = false;
-      std::uint8_t f = std::uint8_t(swaps & 1);
+      flags[i] = std::uint8_t(swaps & 1);
       if (!ok) {
-        f |= 2;
-        log_.add(Violation::kStorage, ordinal, [&] {
-          return tet_text(ordinal, g[0], g[1], g[2], g[3]) + ": labels must be distinct and below " + std::to_string(n_);
-        });
-        flags[i] = f;
+        flags[i] |= 2;
+        if (log_storage)
+          log_.add(Violation::kStorage, ordinal, [&] {
+            return tet_text(ordinal, g[0], g[1], g[2], g[3]) + ": labels must be distinct and below " + std::to_string(n_);
+          });
         continue;
       }
-      ++good;
       if (std::uint64_t(v[0]) < b.min_label) below_min = true;
-      for (int j = 0; j < 4; ++j) used_.set(v[j]);
-      const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
-      sum += std::fabs(volume6(p0, p1, p2, p3));
-      if (tet_sampled(ordinal)) {
-        ++checked;
-        const int o = core::orient3d(p0, p1, p2, p3);
-        if (o <= 0)
-          log_.add(Violation::kOrientation, ordinal, [&] {
-            return tet_text(ordinal, g[0], g[1], g[2], g[3]) +
-                   (o == 0 ? ": flat (orient3d = 0)" : ": negatively oriented (orient3d = -1)");
-          });
-      }
-      flags[i] = f;
+      if (std::uint64_t(v[3]) > b.max_label) above_max = true;
+      on_good(i, ordinal, g);
     }
-    vol[std::size_t(c)] = sum;
   }
+  // The frame's declared label range is a promise the pass relies on (keys below the
+  // smallest label to come are final; a distributed job's front is cut by it).
   if (below_min)
     throw InputError(src_.name() + ": frame " + std::to_string(k) + ": a label below the frame's declared smallest label " +
                      std::to_string(b.min_label));
-  for (long double s : vol) tet_volume6_ += s;
-  tets_checked_ += checked;
-  good_tets_ += good;
-  orient_tests_ += checked;
+  if (above_max)
+    throw InputError(src_.name() + ": frame " + std::to_string(k) + ": a label above the frame's declared largest label " +
+                     std::to_string(b.max_label));
+}
+
+template <class L>
+void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min) {
+  const VerifySource::Batch b = src_.batch(k);
+  const std::size_t t = labels.size() / 4;
+  std::vector<std::uint8_t> flags;
+  const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
+  std::vector<std::uint64_t> checked(threads, 0), good(threads, 0);
+  if (thread_volume_.size() < threads) thread_volume_.resize(threads);
+  canonicalize(k, labels, flags, true, [&](std::size_t, std::uint64_t ordinal, const L* g) {
+    const std::size_t me = std::size_t(omp_get_thread_num());
+    ++good[me];
+    for (int j = 0; j < 4; ++j) used_.set(g[j]);
+    const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
+    thread_volume_[me].add(std::fabs(volume6(p0, p1, p2, p3)));
+    if (tet_sampled(ordinal)) {
+      ++checked[me];
+      const int o = core::orient3d(p0, p1, p2, p3);
+      if (o <= 0)
+        log_.add(Violation::kOrientation, ordinal, [&] {
+          return tet_text(ordinal, g[0], g[1], g[2], g[3]) +
+                 (o == 0 ? ": flat (orient3d = 0)" : ": negatively oriented (orient3d = -1)");
+        });
+    }
+  });
+  for (std::size_t i = 0; i < threads; ++i) {
+    tets_checked_ += checked[i], orient_tests_ += checked[i];
+    good_tets_ += good[i];
+  }
 
   // Steps: after each, keys below the smallest label still to come (in later steps
   // of this frame or in later frames) are final.
@@ -157,16 +174,12 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
   auto& b = part.b;
   a.clear(), b.clear();
   a.reserve(3 * (hi - lo)), b.reserve(hi - lo);
+  // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
   for (std::size_t i = lo; i < hi; ++i) {
     if (flags[i] & 2) continue;  // broken: no facets
-    const L* s = canon + 4 * i;
-    const std::uint64_t ordinal = first_ordinal + i;
-    const int parity = flags[i] & 1;
-    auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
-    if (facet_sampled(s[0], s[1], s[2])) a.push_back(Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)});
-    if (facet_sampled(s[0], s[1], s[3])) a.push_back(Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)});
-    if (facet_sampled(s[0], s[2], s[3])) a.push_back(Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)});
-    if (facet_sampled(s[1], s[2], s[3])) b.push_back(Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)});
+    tet_facets(canon + 4 * i, first_ordinal + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
+      if (std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2])) (through_min ? a : b).push_back(f);
+    });
   }
   const FacetLess<L> less;
   if (sorted_by_min) {
@@ -191,9 +204,9 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
   ea.reserve(3 * (hi - lo)), eb.reserve(3 * (hi - lo));
   for (std::size_t i = lo; i < hi; ++i) {
     if (flags[i] & 2) continue;
-    const L* s = canon + 4 * i;
-    ea.push_back(make_edge(s[0], s[1])), ea.push_back(make_edge(s[0], s[2])), ea.push_back(make_edge(s[0], s[3]));
-    eb.push_back(make_edge(s[1], s[2])), eb.push_back(make_edge(s[1], s[3])), eb.push_back(make_edge(s[2], s[3]));
+    tet_edges(canon + 4 * i, [&](L u, L v, bool through_min) {
+      if (std::uint64_t(u) < upper_) (through_min ? ea : eb).push_back(make_edge(u, v));
+    });
   }
   if (sorted_by_min) {
     for (std::size_t g = 0; g < ea.size();) {
@@ -212,3 +225,23 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
   part.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), part.e.begin()), part.e.end());
 }
 
+
+// A = the three facets through s[0], B = the fourth. Facet opposite s_i, written
+// (others sorted, s_i), has the orientation of (s0..s3) times (-1)^(3-i), and
+// (s0..s3) has the tet's times (-1)^parity; kSide when that is positive.
+template <class L>
+template <class Emit>
+void Engine<L>::tet_facets(const L* s, std::uint64_t ordinal, int parity, Emit&& emit) {
+  auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
+  emit(Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)}, true);
+  emit(Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)}, true);
+  emit(Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)}, true);
+  emit(Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)}, false);
+}
+
+template <class L>
+template <class Emit>
+void Engine<L>::tet_edges(const L* s, Emit&& emit) {
+  emit(s[0], s[1], true), emit(s[0], s[2], true), emit(s[0], s[3], true);
+  emit(s[1], s[2], false), emit(s[1], s[3], false), emit(s[2], s[3], false);
+}

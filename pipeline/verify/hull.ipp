@@ -65,14 +65,47 @@ void Engine<L>::finish_hull() {
   hull_sorter_.reset();
 }
 
+// The report. Each rank counts the vertices of its own labels (its bitmaps hold the
+// whole job's bits there, hand_over_bits) and lists its missing points; rank 0 adds
+// every rank's totals and runs the checks of the whole (Euler, hull topology, volume).
 template <class L>
 void Engine<L>::finish() {
+  VerifyReport& r = rep_;
+  const std::uint64_t lo = std::min(lower_, n_), hi = std::min(upper_, n_);
+  vertices_ = used_.count(lo, hi);
+  if (!sampled_) hull_vertices_ = hull_used_.count(lo, hi);
+  // Coverage: every label a vertex.
+  if (vertices_ < hi - lo) {
+    for (std::uint64_t l = lo; l < hi; ++l)
+      if (!used_.get(l))
+        log_.add(Violation::kMissingPoint, l, [&] {
+          const PointCoords::Point p = P(l);
+          return "point " + std::to_string(l) + " (" + std::to_string(p[0]) + ", " + std::to_string(p[1]) + ", " +
+                 std::to_string(p[2]) + ") is in no tet";
+        });
+  }
+  for (const ExactSum& s : thread_volume_) tet_volume6_.add(s);
+  thread_volume_.clear();
+  const std::vector<std::string> parts = comm_.gather(partial_totals(), 0);
+  if (comm_.rank() == 0) {
+    merge_totals(parts);
+    totals_into_report();
+  }
+  // Every rank learns the verdict (the counts): the job exits with one code.
+  std::string counts(reinterpret_cast<const char*>(r.counts.data()), sizeof r.counts);
+  counts = comm_.broadcast(counts, 0);
+  std::memcpy(r.counts.data(), counts.data(), sizeof r.counts);
+}
+
+// Rank 0: the job's totals into the report, with the checks of the whole.
+template <class L>
+void Engine<L>::totals_into_report() {
   VerifyReport& r = rep_;
   r.sampled = sampled_;
   r.sample = opt_.sample;
   r.points = n_;
   r.tets = src_.tet_count();
-  r.vertices = used_.count();
+  r.vertices = vertices_;
   r.interior_facets = interior_;
   r.boundary_facets = boundary_;
   r.facets = interior_ + boundary_ + bad_facets_;
@@ -81,20 +114,9 @@ void Engine<L>::finish() {
   r.hull_tests = hull_tests_.load();
   r.tets_checked = tets_checked_;
   r.facets_checked = facets_checked_;
-
-  // Coverage: every label a vertex.
-  if (r.vertices < n_) {
-    for (std::uint64_t l = 0; l < n_; ++l)
-      if (!used_.get(l))
-        log_.add(Violation::kMissingPoint, l, [&] {
-          const PointCoords::Point p = P(l);
-          return "point " + std::to_string(l) + " (" + std::to_string(p[0]) + ", " + std::to_string(p[1]) + ", " +
-                 std::to_string(p[2]) + ") is in no tet";
-        });
-  }
   if (!sampled_) {
     r.edges = edges_;
-    r.hull_vertices = hull_used_.count();
+    r.hull_vertices = hull_vertices_;
     r.hull_edges = hull_edges_;
     r.euler = std::int64_t(r.vertices) - std::int64_t(r.edges) + std::int64_t(r.facets) - std::int64_t(good_tets_);
     r.hull_euler = std::int64_t(r.hull_vertices) - std::int64_t(r.hull_edges) + std::int64_t(r.boundary_facets);
@@ -112,10 +134,11 @@ void Engine<L>::finish() {
       });
     // Compared in long double (the volumes of coordinates near DBL_MAX exceed any
     // double); reported as doubles (inf when they do).
-    r.tet_volume = double(tet_volume6_ / 6);
-    r.hull_volume = double(hull_volume6_ / 6);
-    const long double scale = std::max(std::fabs(hull_volume6_), std::numeric_limits<long double>::min());
-    r.volume_rel_error = double(std::fabs(tet_volume6_ - hull_volume6_) / scale);
+    const long double tets6 = tet_volume6_.value(), hull6 = hull_volume6_.value();
+    r.tet_volume = double(tets6 / 6);
+    r.hull_volume = double(hull6 / 6);
+    const long double scale = std::max(std::fabs(hull6), std::numeric_limits<long double>::min());
+    r.volume_rel_error = double(std::fabs(tets6 - hull6) / scale);
     if (!(r.volume_rel_error <= opt_.volume_tolerance))
       log_.add(Violation::kVolume, 0, [&] {
         std::ostringstream s;
@@ -127,4 +150,3 @@ void Engine<L>::finish() {
   }
   log_.into(r);
 }
-

@@ -27,7 +27,11 @@ MemorySource::MemorySource(std::vector<double> xyz, std::vector<std::uint64_t> t
     b.first_tet = first;
     b.tet_count = std::min<std::uint64_t>(batch_tets, t - first);
     b.min_label = std::numeric_limits<std::uint64_t>::max();
-    for (std::uint64_t i = 4 * first; i < 4 * (first + b.tet_count); ++i) b.min_label = std::min(b.min_label, tets_[i]);
+    b.max_label = 0;
+    for (std::uint64_t i = 4 * first; i < 4 * (first + b.tet_count); ++i) {
+      b.min_label = std::min(b.min_label, tets_[i]);
+      b.max_label = std::max(b.max_label, tets_[i]);
+    }
     batches_.push_back(b);
   }
 }
@@ -58,7 +62,7 @@ std::uint64_t ContainerSource::tet_count() const { return reader_.tet_count(); }
 std::size_t ContainerSource::batch_count() const { return std::size_t(reader_.frame_count()); }
 VerifySource::Batch ContainerSource::batch(std::size_t k) const {
   const io::FrameEntry& f = reader_.frames()[k];
-  return Batch{f.first_tet, f.tet_count, f.base_label};
+  return Batch{f.first_tet, f.tet_count, f.base_label, f.max_label};
 }
 void ContainerSource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
   reader_.read_points(first, n, xyz, nullptr);

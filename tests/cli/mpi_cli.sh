@@ -6,8 +6,9 @@
 # in to reach its range); the points are sorted by every rank together (each
 # reads, sends and writes its part); a failing rank
 # stops the job with one error line and the single process's exit code; a failed or
-# killed job resumed on the same ranks ends with the same bytes; what does not run
-# distributed yet is refused with one line.
+# killed job resumed on the same ranks ends with the same bytes; `verify` on 1, 2 and 3
+# ranks reports what one process reports, on good and damaged containers; `info`, not
+# distributed, is refused with one line.
 #
 # Needs mpirun and a tetstream built with MPI. Without them the test reports itself
 # skipped (exit 77), unless TETSTREAM_REQUIRE_MPI=1 (scripts/test.sh sets it, after
@@ -284,15 +285,85 @@ set -e
 [ "$(grep -c 'tetstream: error:' bad.err)" = 1 ] && grep -q "truncated.f64" bad.err || { cat bad.err >&2; fail "bad input: not one line naming the file"; }
 [ ! -e bad.tets ] && [ ! -e bad.tets.partial ] || fail "bad input left an output"
 
-# Not distributed yet, refused with one line and exit 2: other commands than run.
-for cmd in "info uniform-f64-1p.tets" "verify uniform-f64-1p.tets"; do
-  set +e
-  # shellcheck disable=SC2086
-  mpi 2 "$T" -q $cmd 2>refused.err
-  rc=$?
-  set -e
-  [ "$rc" = 2 ] && [ "$(grep -c 'tetstream: error:' refused.err)" = 1 ] || { cat refused.err >&2; fail "'$cmd' under mpirun: exit $rc"; }
+# verify on K = 2, 3 ranks (each checks the frames of its label range; the records of
+# its tets keyed in later ranks' labels are handed over): the report of one process,
+# --json field by field but for timings and resources, on the outputs above (several
+# frames a rank, 32M) and on damaged containers, with the same exit code.
+same_report() {  # same_report A.json B.json WHAT
+  python3 - "$1" "$2" <<'PY' || fail "$3: the reports differ"
+import json, sys
+a, b = (json.load(open(p)) for p in sys.argv[1:3])
+resources = {"seconds", "peak_open_facets", "peak_open_edges", "spilled_records", "spill_bytes", "memory_planned"}
+diff = [k for k in sorted(set(a) | set(b)) if k not in resources and a.get(k) != b.get(k)]
+assert not diff, [(k, a.get(k), b.get(k)) for k in diff]
+PY
+}
+verify_ranks() {  # verify_ranks NAME.tets EXPECTED_EXIT: one process (no mpirun), then K = 2, 3
+  local f=$1 want=$2 n rc
+  for n in 1 2 3; do
+    set +e
+    if [ "$n" = 1 ]; then
+      "$T" -q --threads 1 --json verify "$f" >"$f-v$n.json" 2>"$f-v$n.err"
+    else
+      mpirun -q --bind-to none --oversubscribe -n "$n" "$T" -q --threads 1 --json verify "$f" >"$f-v$n.json" 2>"$f-v$n.err"
+    fi
+    rc=$?
+    set -e
+    [ "$rc" = "$want" ] || { cat "$f-v$n.err" >&2; fail "verify $f on $n ranks: exit $rc, expected $want"; }
+    if [ "$want" = 0 ] || [ "$want" = 1 ] && [ -s "$f-v$n.json" ]; then
+      [ "$n" = 1 ] || same_report "$f-v1.json" "$f-v$n.json" "verify $f on $n ranks"
+    fi
+    grep 'tetstream: error:' "$f-v$n.err" >"$f-v$n.line" || true
+    [ "$(wc -l <"$f-v$n.line")" = "$([ "$want" = 0 ] && echo 0 || echo 1)" ] || { cat "$f-v$n.err" >&2; fail "verify $f on $n ranks: not one error line"; }
+    cmp -s "$f-v1.line" "$f-v$n.line" || fail "verify $f on $n ranks: another error line than one rank's"
+  done
+}
+for base in uniform-f64 clusters-f64 grid-f64; do
+  verify_ranks "$base-1p.tets" 0
+  [ "$(python3 -c "import json; print(json.load(open('$base-1p.tets-v3.json'))['valid'])")" = True ] || fail "$base: not valid"
 done
+# One rank under mpirun agrees too.
+mpi 1 "$T" -q --threads 1 --json verify grid-f64-1p.tets >grid-rank.json
+same_report grid-f64-1p.tets-v1.json grid-rank.json "verify on 1 rank"
+
+# Damaged, checksums valid (tets_edit: the first tet of the first frame of rank 1 of
+# K flipped, dropped or doubled, where records are handed over): the same violations,
+# listed alike, exit 1. A frame's byte flipped (its CRC fails): one error line, the
+# same, exit 1.
+edit=${TETSTREAM_TETS_EDIT:-$(dirname "$T")/../tests/tets_edit}
+[ -x "$edit" ] || fail "no tets_edit ($edit); set TETSTREAM_TETS_EDIT"
+for e in "uniform-f64 flip 2" "grid-f64 drop 3" "clusters-f64 dup 3"; do
+  read -r base kind k <<<"$e"
+  "$edit" "$base-1p.tets" "$kind-$k.tets" "$kind" "$k" 1 >/dev/null
+  verify_ranks "$kind-$k.tets" 1
+  python3 - "$kind-$k.tets-v1.json" "$kind" <<'PY' || fail "$kind: not the violations expected"
+import json, sys
+d = json.load(open(sys.argv[1]))
+want = {"flip": "orientation", "drop": "hull_convex", "dup": "duplicate_tet"}[sys.argv[2]]
+assert not d["valid"] and d["violation_counts"][want] > 0 and d["listed"], d
+PY
+done
+cp uniform-f64-1p.tets crc.tets
+python3 - <<'PY'
+import struct
+b = bytearray(open("crc.tets", "rb").read())
+idx = struct.unpack_from("<Q", b, len(b) - 48)[0]
+p = idx + 16
+p += 4 + 24 * struct.unpack_from("<I", b, p)[0]
+frames = struct.unpack_from("<Q", b, p)[0]
+off, _, _, length = struct.unpack_from("<QQII", b, p + 8 + 40 * (frames * 2 // 3))  # a frame of the last rank of 3
+b[off + 16 + length // 2] ^= 0x20
+open("crc.tets", "wb").write(b)
+PY
+verify_ranks crc.tets 1
+grep -q "crc.tets" crc.tets-v3.line || fail "a bad checksum: the line does not name the file"
+
+# Not distributed, refused with one line and exit 2: info.
+set +e
+mpi 2 "$T" -q info uniform-f64-1p.tets 2>refused.err
+rc=$?
+set -e
+[ "$rc" = 2 ] && [ "$(grep -c 'tetstream: error:' refused.err)" = 1 ] || { cat refused.err >&2; fail "'info' under mpirun: exit $rc"; }
 
 # A rank left on one core of several by mpirun's binding says so, once; unbound, or
 # with as many ranks as cores, it does not (2 cores or more; OpenMPI binds one or two

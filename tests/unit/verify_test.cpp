@@ -13,6 +13,7 @@
 #include "pipeline/external_sort.hpp"
 #include "pipeline/temp_files.hpp"
 #include "pipeline/verify.hpp"
+#include "thread_ranks.hpp"
 #include "test_points.hpp"
 
 #include <gtest/gtest.h>
@@ -27,6 +28,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <tuple>
 #include <unistd.h>
 #include <vector>
 
@@ -665,6 +667,78 @@ TEST(Verify, RewrittenButChecksummedTetsAreCaught) {
     SCOPED_TRACE(edit);
     const VerifyReport r = verify_output(o, "rewritten-" + std::to_string(seed) + ".tets");
     EXPECT_FALSE(r.ok()) << r.summary();
+  }
+}
+
+// A distributed verify (K ranks as threads, tests/unit/thread_ranks.hpp) gives one
+// process's report: counts, violations listed (kind, ordinal, text), volumes to the
+// bit, on correct outputs and on the edits above (at random and near the middle,
+// where the ranks hand records over), frames of 200 tets in steps of 64, stored in
+// order or in reverse.
+void expect_same_report(const VerifyReport& a, const VerifyReport& b) {
+  EXPECT_EQ(a.ok(), b.ok());
+  EXPECT_EQ(a.counts, b.counts);
+  ASSERT_EQ(a.listed.size(), b.listed.size()) << a.summary() << "\n" << b.summary();
+  for (std::size_t i = 0; i < a.listed.size(); ++i) {
+    EXPECT_EQ(a.listed[i].kind, b.listed[i].kind);
+    EXPECT_EQ(a.listed[i].where, b.listed[i].where);
+    EXPECT_EQ(a.listed[i].text, b.listed[i].text);
+  }
+  EXPECT_EQ(std::make_tuple(a.points, a.tets, a.vertices, a.facets, a.interior_facets, a.boundary_facets, a.edges,
+                            a.hull_vertices, a.hull_edges, a.euler, a.hull_euler),
+            std::make_tuple(b.points, b.tets, b.vertices, b.facets, b.interior_facets, b.boundary_facets, b.edges,
+                            b.hull_vertices, b.hull_edges, b.euler, b.hull_euler));
+  EXPECT_EQ(std::make_tuple(a.orient_tests, a.insphere_tests, a.hull_tests, a.tets_checked, a.facets_checked),
+            std::make_tuple(b.orient_tests, b.insphere_tests, b.hull_tests, b.tets_checked, b.facets_checked));
+  EXPECT_EQ(std::make_tuple(a.tet_volume, a.hull_volume, a.volume_rel_error),
+            std::make_tuple(b.tet_volume, b.hull_volume, b.volume_rel_error));
+}
+
+TEST(Verify, RanksGiveOneProcesssReport) {
+  static const Output grid = triangulate(test::grid(7));
+  for (std::uint64_t seed = 0; seed <= 24; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    std::mt19937_64 g(seed);
+    Output o = seed % 3 == 0 ? grid : uniform_output();
+    const std::size_t tets = o.tets.size() / 4;
+    const std::size_t t = seed % 2 ? g() % tets : tets / 2 - 40 + g() % 80, k = g() % 4;
+    switch (seed == 0 ? 9 : g() % 5) {
+      case 0: o.tets[4 * t + k] = (o.tets[4 * t + k] + 1 + g() % (o.count() - 1)) % o.count(); break;
+      case 1: std::swap(o.tets[4 * t + k], o.tets[4 * t + (k + 1) % 4]); break;
+      case 2: erase_tet(o.tets, t); break;
+      case 3:
+        o.tets.insert(o.tets.end(), o.tets.begin() + std::ptrdiff_t(4 * t), o.tets.begin() + std::ptrdiff_t(4 * t + 4));
+        sort_by_min(o.tets);
+        break;
+      case 4: o.tets[4 * t + k] = o.tets[4 * ((t + 1 + g() % (tets - 1)) % tets) + g() % 4]; break;
+      default: break;  // seed 0: the correct output
+    }
+    if (seed % 4 == 2) {
+      // Frames stored in reverse (a writer's order need not be the visiting order):
+      // ordinals then run against the steps in which one process meets the records.
+      // Whole frames of 200 tets (800 labels) move; the short last frame stays last.
+      const std::size_t whole = o.tets.size() / 800 * 800;
+      std::vector<std::uint64_t> reversed;
+      for (std::size_t begin = whole; begin > 0; begin -= 800)
+        reversed.insert(reversed.end(), o.tets.begin() + std::ptrdiff_t(begin - 800), o.tets.begin() + std::ptrdiff_t(begin));
+      reversed.insert(reversed.end(), o.tets.begin() + std::ptrdiff_t(whole), o.tets.end());
+      o.tets = std::move(reversed);
+    }
+    const pipeline::MemorySource source(o.xyz, o.tets, 200);
+    VerifyOptions v = quiet_options();
+    v.batch_tets = 64;
+    v.sample = seed % 8 == 5 ? 0.5 : 1.0;
+    v.wide_labels = seed % 5 == 4;  // the 64-bit records travel too
+    const VerifyReport one = pipeline::verify(source, v);
+    for (int ranks : {2, 3}) {
+      SCOPED_TRACE(std::to_string(ranks) + " ranks");
+      std::vector<VerifyReport> reports(static_cast<std::size_t>(ranks));
+      test::run_ranks(ranks, [&](pipeline::Communicator& comm) {
+        reports[std::size_t(comm.rank())] = pipeline::verify(source, v, comm);
+      });
+      expect_same_report(one, reports[0]);
+      for (const VerifyReport& r : reports) EXPECT_EQ(r.counts, one.counts);  // every rank knows the verdict
+    }
   }
 }
 
