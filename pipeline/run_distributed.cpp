@@ -415,9 +415,6 @@ class RankJob {
     return sorted_text;
   }
 
-  // The index: each rank builds a K-th of its blocks into one file, which every rank
-  // then maps (pipeline/stage_index.hpp): the build is shared, and the index is held by
-  // the page cache, not once a rank. Then the zone plan.
   // Every block's expected cost (pipeline/rank_cost.hpp), in the units of a point:
   // rank r computes the r-th K-th of them from the shared index, rank 0 gathers them
   // and hands all of them to every rank, which then cut the same ranges.
@@ -444,6 +441,9 @@ class RankJob {
     return costs;
   }
 
+  // The index: each rank builds a K-th of its blocks into one file, which every rank
+  // then maps (pipeline/stage_index.hpp): the build is shared, and the index is held by
+  // the page cache, not once a rank. Then the zone plan.
   void index_step(IndexStage& index, std::optional<TriangulatePlan>& plan, RunSummary::Rank& mine) {
     const int size = comm_.size();
     const std::string path = dir_ + "/index.shared";
