@@ -115,7 +115,7 @@ try:
     import h5py
     with h5py.File("snap.hdf5", "w") as f:
         f["PartType0/Coordinates"] = u[:45000]
-        f["PartType1/Coordinates"] = u[45000:100000].astype("<f4").astype("<f8")
+        f["PartType1/Coordinates"] = u[45000:100000].astype("<f4")  # a float32 dataset after a float64 one
 except ImportError:
     pass
 PY
