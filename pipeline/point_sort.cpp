@@ -57,10 +57,7 @@ void write_runs(typename RecordSort<R>::Sorter& sorter, const std::string& sourc
   std::vector<std::uint64_t> run_hull;
   auto flush_run = [&] {
     if (run.empty()) return;
-    sort_detail::sort_run_and_find_hull(run, axis, shares, run_xyz, run_hull, hull_originals);
-    maybe_inject_fault("sort-run", result.runs);
-    sort_detail::push_run<R>(sorter, run);
-    ++result.runs;
+    sort_detail::sort_and_push_run<R>(sorter, run, axis, shares, run_xyz, run_hull, hull_originals, result.runs);
     if (resumable) {
       SortRunFile r;
       r.path = sorter.last_run_path();

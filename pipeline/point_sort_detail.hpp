@@ -4,6 +4,7 @@
 // run sorted, its hull candidates found and handed to the external sorter; the merge
 // of the runs into label order with exact duplicates dropped. Internal to pipeline/.
 #include "pipeline/external_sort.hpp"
+#include "pipeline/fault.hpp"
 #include "pipeline/hull.hpp"
 #include "pipeline/interrupt.hpp"
 #include "pipeline/memory_budget.hpp"
@@ -52,8 +53,8 @@ struct RecordSort {
 // Sorts `run` along `axis`, finds its hull vertex candidates (original indices into
 // `run_hull` and `hull_originals`; pieces of shares.hull_piece_points on
 // shares.hull_threads threads, so the kernels' memory stays a fraction of the budget
-// even when most points are on the hull, a thin shell). The caller then hands it to
-// the sorter: push_run().
+// even when most points are on the hull, a thin shell). sort_and_push_run() then hands
+// it to the sorter.
 inline void sort_run_and_find_hull(std::vector<SortedPoint>& run, int axis, const SortShares& shares,
                                    std::vector<double>& run_xyz, std::vector<std::uint64_t>& run_hull,
                                    std::unordered_set<std::uint64_t>& hull_originals) {
@@ -82,11 +83,19 @@ inline void sort_run_and_find_hull(std::vector<SortedPoint>& run, int axis, cons
   hull_originals.insert(run_hull.begin(), run_hull.end());
 }
 
-// A sorted run to the sorter as records R. `run` is consumed: its memory holds the
-// compacted records until the sorter has written them.
+// One run of either sort, from the points read to the sorter: sorted with its hull
+// candidates found (sort_run_and_find_hull), then handed to the sorter as records R
+// (`run` is consumed: its memory holds the compacted records until the sorter has
+// written them), `runs` counting it. A fault can be injected before the hand-over
+// ("sort-run", by run number). The caller clears `run`.
 template <class R>
-void push_run(typename RecordSort<R>::Sorter& sorter, std::vector<SortedPoint>& run) {
+void sort_and_push_run(typename RecordSort<R>::Sorter& sorter, std::vector<SortedPoint>& run, int axis,
+                       const SortShares& shares, std::vector<double>& run_xyz, std::vector<std::uint64_t>& run_hull,
+                       std::unordered_set<std::uint64_t>& hull_originals, std::size_t& runs) {
+  sort_run_and_find_hull(run, axis, shares, run_xyz, run_hull, hull_originals);
+  maybe_inject_fault("sort-run", runs);
   sorter.push_sorted_run(compact_in_place<R>(run));
+  ++runs;
 }
 
 // The merge: the runs into `out` in label order, exact duplicates dropped (the first,

@@ -133,10 +133,7 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
   std::vector<std::uint64_t> run_hull;
   auto flush = [&] {
     if (run.empty()) return;
-    sort_detail::sort_run_and_find_hull(run, axis, shares, run_xyz, run_hull, hull_originals);
-    maybe_inject_fault("sort-run", result.runs);
-    sort_detail::push_run<R>(sorter, run);
-    ++result.runs;
+    sort_detail::sort_and_push_run<R>(sorter, run, axis, shares, run_xyz, run_hull, hull_originals, result.runs);
     run.clear();
   };
 

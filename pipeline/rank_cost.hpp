@@ -11,7 +11,7 @@
 // The estimate looks at that cause directly: in each block of the point index, a
 // pilot triangulation of two spatially compact samples (about 2048 points each) counts
 // the share f of its inner tets whose circumradius exceeds 8 times the median. On
-// uniform and clustered points f is about 0.01; on the terrain 0.18.
+// uniform and clustered points f is about 0.01; on the terrain 0.17.
 // A point then costs 1 + kFlatTetWeight * f.
 #include "pipeline/point_index.hpp"
 
@@ -32,11 +32,13 @@ std::vector<double> expected_cost(const PointIndex& index, const PointRecords& p
 double block_cost_factor(const PointIndex& index, const PointRecords& points, std::uint64_t b);
 
 // What a tet whose ball is huge beside its neighbours' adds to its point's cost, in
-// points. The share f of such pilot tets, mean over the blocks of 10^6 points at 64M:
-// terrain about 0.17, two plates 0.12, ellipsoid shell 0.04, clusters 0.014, uniform
-// 0.007. With 12 a terrain point costs about 2.9 uniform points; measured, 3.5 at 64M
-// (the half-terrain set on 2 ranks), 2.3 at 1G and 10^7 points (docs/benchmarks.md):
-// the true factor grows as zones shrink, the weight is a compromise.
+// points. The mean cost a point over rank 0's blocks (10^6 points, 64M, 2 ranks; the
+// debug log of run_distributed's block_costs): uniform 1.066, clusters 1.123,
+// ellipsoid shell 1.657, two plates 2.430, terrain 2.999 (f 0.006 to 0.17): a terrain
+// point 2.8 uniform points, where 3.5 was measured at 64M (the half-terrain set on 2
+// ranks) and 2.3 at 1G and 10^7 (docs/benchmarks.md); two plates 2.3, where 1.4 was
+// measured at 128M. The true factor grows as zones shrink and the estimate does not
+// model zones: the weight is a compromise.
 inline constexpr double kFlatTetWeight = 12.0;
 
 }  // namespace tetstream::pipeline

@@ -424,12 +424,16 @@ class RankJob {
     const auto start = StageClock::now();
     together(comm_, [&] {
       const std::uint64_t b0 = blocks * r / k, b1 = blocks * (r + 1) / k;
-      for (double c : expected_cost(*index.view().index, index.view().points, b0 * block, std::min(count, b1 * block), block)) {
+      const std::uint64_t first = std::min(count, b0 * block), last = std::min(count, b1 * block);
+      double sum = 0;
+      for (double c : expected_cost(*index.view().index, index.view().points, first, last, block)) {
         const std::uint64_t v = std::uint64_t(std::llround(c));
         mine.append(reinterpret_cast<const char*>(&v), sizeof v);
+        sum += c;
       }
       index.release_pages();
-      spdlog::debug("expected costs of {} blocks of {} labels: {:.2f}s", b1 - b0, block, seconds_since(start));
+      spdlog::debug("expected costs of {} blocks of {} labels: {:.3f} a point, {:.2f}s", b1 - b0, block,
+                    last > first ? sum / double(last - first) : 0.0, seconds_since(start));
     });
     const std::vector<std::string> parts = comm_.gather(mine, 0);
     std::string all;
