@@ -98,6 +98,7 @@ nlohmann::json verify_report_json(const VerifyReport& r, const std::string& path
                       {"spilled_records", r.spilled_records},
                       {"spill_bytes", r.spill_bytes},
                       {"memory_planned", r.memory_planned},
+                      {"step_tets", r.step_tets},
                       {"seconds", r.seconds}};
   if (!r.sampled) {
     j["edges"] = r.edges;

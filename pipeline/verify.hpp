@@ -76,7 +76,11 @@ struct VerifyOptions {
   std::uint64_t seed = 1;      // of the sample
   double volume_tolerance = 1e-9;  // relative
   std::size_t max_listed = 10;     // violations described, per kind (all are counted)
-  std::size_t batch_tets = std::size_t(1) << 16;  // tets per processing step (a frame is split)
+  // Tets per processing step, at most (a frame is split into steps; a small --memory
+  // takes smaller ones). Each step merges the open facets and edges once, and they grow
+  // as N^(2/3), so steps of a whole frame of `run`'s output (2^18 tets) keep that merge
+  // a small share at 10^9 (docs/verify.md, "Speed").
+  std::size_t batch_tets = std::size_t(1) << 18;
   bool progress = true;
   bool wide_labels = false;  // the 64-bit label path even when labels fit 32 bits (tests)
   std::size_t open_bytes = 0;  // cap on the open facets (edges: a third); 0: from memory_bytes (tests force spills)
@@ -106,6 +110,7 @@ struct VerifyReport {
   std::uint64_t peak_open_facets = 0, peak_open_edges = 0;
   std::uint64_t spilled_records = 0, spill_bytes = 0;
   std::uint64_t memory_planned = 0;  // bytes of the big arrays at their peak (estimate)
+  std::uint64_t step_tets = 0;       // tets a processing step (planned from --memory)
   double seconds = 0;
 
   std::array<std::uint64_t, kViolationKinds> counts{};

@@ -74,6 +74,8 @@ void setup_verify(CLI::App& app, Context& ctx) {
       ->capture_default_str();
   cmd->add_option("--volume-tolerance", args->options.volume_tolerance, "Relative tolerance of the volume check")
       ->capture_default_str();
+  // Hidden: tets a processing step (benchmarks of the step's cost; tests use the API).
+  cmd->add_option("--step-tets", args->options.batch_tets, "Tets a processing step")->group("");
   cmd->callback([args, &ctx] { run_verify(*args, ctx); });
 }
 

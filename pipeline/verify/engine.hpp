@@ -377,6 +377,34 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
 }
 
 // ---------------------------------------------------------------------------------
+// The open records of one kind (facets or edges), sorted by key. Keys retire from the
+// front, step after step; the retired prefix is skipped by an index, not erased, so a
+// step copies the open set once (its merge with the step's records, into the other
+// buffer) and not a second time. At 10^9 points about 2.5 M facets and 3.8 M edges
+// stay open (N^(2/3) growth from 10^8's 0.55 M and 0.82 M), so a second copy a step
+// was a cost of its own.
+template <class T>
+class OpenSet {
+ public:
+  std::span<T> records() { return std::span<T>(buffer_).subspan(from_); }
+  std::size_t size() const { return buffer_.size() - from_; }
+  // The first `count` records are retired (final, or handed to a spill).
+  void retire_front(std::size_t count) { from_ += count; }
+  // Becomes `sorted` (taken); the old buffer is handed back for reuse.
+  void replace(std::vector<T>& sorted) {
+    std::swap(buffer_, sorted);
+    from_ = 0;
+  }
+  void clear() { buffer_.clear(), from_ = 0; }
+  void release() { buffer_ = {}, from_ = 0; }
+  void push_back(const T& r) { buffer_.push_back(r); }
+
+ private:
+  std::vector<T> buffer_;
+  std::size_t from_ = 0;  // buffer_[0, from_) is retired
+};
+
+// ---------------------------------------------------------------------------------
 // The engine, for 32- or 64-bit labels.
 template <class L>
 class Engine {
@@ -489,14 +517,17 @@ class Engine {
   std::string tmp_parent_;
 
   // Open facets and edges, sorted; spills.
-  std::vector<Facet> live_, merged_;
-  std::vector<Edge> live_e_, merged_e_;
+  OpenSet<Facet> live_;
+  OpenSet<Edge> live_e_;
+  std::vector<Facet> merged_;
+  std::vector<Edge> merged_e_;
   std::unique_ptr<ExternalSorter<Facet, FacetLess<L>>> facet_spill_;
   std::unique_ptr<ExternalSorter<Edge, std::less<Edge>>> edge_spill_;
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
   std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
 
   int label_bits_ = 1;  // bits of the largest label
+  std::size_t step_tets_ = 1;  // tets a step (plan_memory())
   std::vector<Part> parts_;
   std::vector<std::vector<PairCheck>> chunk_checks_;
   std::vector<std::size_t> bounds_, chunk_sizes_;

@@ -46,9 +46,16 @@ void Engine<L>::plan_memory() {
   std::size_t max_frame = 0;
   for (std::size_t k = 0; k < src_.batch_count(); ++k)
     max_frame = std::max<std::size_t>(max_frame, std::size_t(src_.batch(k).tet_count));
-  const std::size_t step = std::min<std::size_t>(max_frame, opt_.batch_tets);
-  const std::size_t scratch = max_frame * (2 * 4 * sizeof(L) + 1) +
-                              step * (15 * sizeof(Facet) + 21 * sizeof(Edge) + 2 * sizeof(PairCheck));
+  auto scratch_of = [&](std::size_t step) {
+    return max_frame * (2 * 4 * sizeof(L) + 1) + step * (15 * sizeof(Facet) + 21 * sizeof(Edge) + 2 * sizeof(PairCheck));
+  };
+  // The largest step (up to batch_tets) whose scratch leaves the open sets at least as
+  // much as it takes; never below 2^14 tets or batch_tets. Every rank plans the same
+  // step (same frames, same --memory), and the step does not change the report.
+  step_tets_ = std::max<std::size_t>(1, std::min<std::size_t>(max_frame, opt_.batch_tets));
+  const std::size_t floor_step = std::min<std::size_t>(step_tets_, std::size_t(1) << 14);
+  while (step_tets_ / 2 >= floor_step && points + 2 * scratch_of(step_tets_) > opt_.memory_bytes) step_tets_ /= 2;
+  const std::size_t scratch = scratch_of(step_tets_);
   const std::size_t fixed = points + scratch;
   std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
   if (rest < (std::size_t(16) << 20)) {
@@ -66,9 +73,11 @@ void Engine<L>::plan_memory() {
   if (opt_.open_bytes) live_facet_budget_ = opt_.open_bytes, live_edge_budget_ = opt_.open_bytes / 3;
   sorter_budget_ = rest * 5 / 8;
   rep_.memory_planned = fixed + rest;
-  spdlog::debug("verify: memory: points {}, scratch {}, open facets {}, open edges {}, sorts {}",
-                human_bytes(double(points)), human_bytes(double(scratch)), human_bytes(double(live_facet_budget_)),
-                human_bytes(double(live_edge_budget_)), human_bytes(double(sorter_budget_)));
+  rep_.step_tets = step_tets_;
+  spdlog::debug("verify: memory: points {}, scratch {} (steps of {} tets), open facets {}, open edges {}, sorts {}",
+                human_bytes(double(points)), human_bytes(double(scratch)), step_tets_,
+                human_bytes(double(live_facet_budget_)), human_bytes(double(live_edge_budget_)),
+                human_bytes(double(sorter_budget_)));
 }
 
 template <class L>
@@ -192,9 +201,9 @@ void Engine<L>::run() {
     // sets before the spills merge.
     const auto t2 = Clock::now();
     if (!sampled_) merge_edges(~0ull);
-    live_e_ = {}, merged_e_ = {};
+    live_e_.release(), merged_e_ = {};
     retire_facets(~0ull);
-    live_ = {}, merged_ = {}, parts_ = {};
+    live_.release(), merged_ = {}, parts_ = {};
     finish_facets();
     if (!sampled_) finish_edges();
     seconds_final_ = since(t2);
@@ -213,4 +222,4 @@ void Engine<L>::run() {
 }
 
 // One frame: storage, orientation and volume of every tet, then its facets and edges
-// in steps of batch_tets tets.
+// in steps of step_tets_ tets.

@@ -86,7 +86,7 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
 
   // Steps: after each, keys below the smallest label still to come (in later steps
   // of this frame or in later frames) are final.
-  const std::size_t step = opt_.batch_tets;
+  const std::size_t step = step_tets_;
   const std::size_t steps = (t + step - 1) / step;
   std::vector<std::uint64_t> later_min(steps + 1, future_min);
   for (std::size_t s = steps; s-- > 0;) {
@@ -124,7 +124,7 @@ void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::siz
     chunk_checks_.resize(std::size_t(std::max(1, omp_get_max_threads())));
   {
     std::vector<std::span<const Facet>> in;
-    in.emplace_back(live_);
+    in.emplace_back(live_.records());
     for (int p = 0; p < threads; ++p) {
       in.emplace_back(parts_[std::size_t(p)].f);
       facets_checked_ += parts_[std::size_t(p)].f.size();
@@ -144,21 +144,21 @@ void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::siz
           return w;
         });
     merged_.resize(n);
-    std::swap(live_, merged_);
+    live_.replace(merged_);
     retire_facets(threshold);
   }
 
   // ---- edges (not in a sample): union of the slices and the open set.
   if (!sampled_) {
     std::vector<std::span<const Edge>> in;
-    in.emplace_back(live_e_);
+    in.emplace_back(live_e_.records());
     for (int p = 0; p < threads; ++p) in.emplace_back(parts_[std::size_t(p)].e);
     const std::less<Edge> less;
     const std::size_t n = merge_ranges(in, merged_e_, less, less, chunk_sizes_, [](std::size_t, Edge* first, std::size_t m) {
       return std::size_t(std::unique(first, first + m) - first);
     });
     merged_e_.resize(n);
-    std::swap(live_e_, merged_e_);
+    live_e_.replace(merged_e_);
     merge_edges(threshold);
   }
 }

@@ -134,19 +134,19 @@ void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
 // spilled run may hold the same key); the rest stay open, spilled when too many.
 template <class L>
 void Engine<L>::retire_facets(std::uint64_t threshold) {
-  const auto cut = std::partition_point(live_.begin(), live_.end(),
+  const std::span<Facet> open = live_.records();
+  const auto cut = std::partition_point(open.begin(), open.end(),
                                         [&](const Facet& f) { return std::uint64_t(f.v[0]) < threshold; });
-  const auto spill_from = std::partition_point(live_.begin(), cut,
+  const auto spill_from = std::partition_point(open.begin(), cut,
                                                [&](const Facet& f) { return std::uint64_t(f.v[0]) < facet_spill_min_; });
-  for (auto it = live_.begin(); it != spill_from; ++it) final_facet(*it);
+  for (auto it = open.begin(); it != spill_from; ++it) final_facet(*it);
   if (spill_from != cut) facet_spill_->push_sorted_run(std::span<Facet>(&*spill_from, std::size_t(cut - spill_from)));
-  live_.erase(live_.begin(), cut);
+  live_.retire_front(std::size_t(cut - open.begin()));
   rep_.peak_open_facets = std::max<std::uint64_t>(rep_.peak_open_facets, live_.size());
   if (live_.size() * sizeof(Facet) > live_facet_budget_) {
-    facet_spill_min_ = std::min<std::uint64_t>(facet_spill_min_, live_.front().v[0]);
-    facet_spill_->push_sorted_run(std::span<Facet>(live_));
-    live_.clear();
-    live_.shrink_to_fit();
+    facet_spill_min_ = std::min<std::uint64_t>(facet_spill_min_, live_.records().front().v[0]);
+    facet_spill_->push_sorted_run(live_.records());
+    live_.release();
   }
   if (!hull_edges_batch_.empty()) {
     hull_sorter_->push(std::span<const HullEdge>(hull_edges_batch_));
@@ -181,19 +181,18 @@ void Engine<L>::final_facet(const Facet& f) {
 
 template <class L>
 void Engine<L>::merge_edges(std::uint64_t threshold) {
-  const auto cut = std::partition_point(live_e_.begin(), live_e_.end(),
-                                        [&](const Edge& e) { return edge_u(e) < threshold; });
-  const auto spill_from = std::partition_point(live_e_.begin(), cut,
+  const std::span<Edge> open = live_e_.records();
+  const auto cut = std::partition_point(open.begin(), open.end(), [&](const Edge& e) { return edge_u(e) < threshold; });
+  const auto spill_from = std::partition_point(open.begin(), cut,
                                                [&](const Edge& e) { return edge_u(e) < edge_spill_min_; });
-  edges_ += std::uint64_t(spill_from - live_e_.begin());
+  edges_ += std::uint64_t(spill_from - open.begin());
   if (spill_from != cut) edge_spill_->push_sorted_run(std::span<Edge>(&*spill_from, std::size_t(cut - spill_from)));
-  live_e_.erase(live_e_.begin(), cut);
+  live_e_.retire_front(std::size_t(cut - open.begin()));
   rep_.peak_open_edges = std::max<std::uint64_t>(rep_.peak_open_edges, live_e_.size());
   if (live_e_.size() * sizeof(Edge) > live_edge_budget_) {
-    edge_spill_min_ = std::min<std::uint64_t>(edge_spill_min_, edge_u(live_e_.front()));
-    edge_spill_->push_sorted_run(std::span<Edge>(live_e_));
-    live_e_.clear();
-    live_e_.shrink_to_fit();
+    edge_spill_min_ = std::min<std::uint64_t>(edge_spill_min_, edge_u(live_e_.records().front()));
+    edge_spill_->push_sorted_run(live_e_.records());
+    live_e_.release();
   }
 }
 

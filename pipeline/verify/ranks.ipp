@@ -72,12 +72,12 @@ void Engine<L>::hand_over_front(const std::vector<std::size_t>& order, const std
     replay_front(front, order, position);
     std::sort(edges.begin(), edges.end());
     edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-    live_e_ = std::move(edges);
+    live_e_.replace(edges);
   });
 }
 
 // Folds the received records as one process folds them: one process meets a key's
-// records step by step (a step: batch_tets tets of a frame, frames in `order`), each
+// records step by step (a step: step_tets_ tets of a frame, frames in `order`), each
 // step's records merged with the key's open record in FacetLess order, the open one
 // first on a tie, then folded (combine()). The received records come from frames
 // before this rank's; each key's are replayed in that order, so the open record this
@@ -99,7 +99,7 @@ void Engine<L>::replay_front(std::vector<Facet>& front, const std::vector<std::s
   for (std::size_t i = 0; i < front.size(); ++i) {
     const std::uint64_t ordinal = front[i].x & kPayload;
     const std::size_t k = std::size_t(std::upper_bound(first_tets.begin(), first_tets.end(), ordinal) - first_tets.begin()) - 1;
-    items[i] = Item{position[k], (ordinal - first_tets[k]) / opt_.batch_tets, front[i]};
+    items[i] = Item{position[k], (ordinal - first_tets[k]) / step_tets_, front[i]};
   }
   front = {};
   const FacetLess<L> less;

@@ -229,7 +229,9 @@ TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
     if (in_output) claim.emplace(options_.output);
     const SortedPoints sorted = sort(nullptr, claim ? &*claim : nullptr);
     EXPECT_EQ(sorted.offset != 0, in_output);
-    if (in_output) EXPECT_EQ(sorted.path, options_.output + ".partial");
+    if (in_output) {
+      EXPECT_EQ(sorted.path, options_.output + ".partial");
+    }
     IndexStage index(sorted, 1);
     index.prepare();
     index.run();

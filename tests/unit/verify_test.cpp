@@ -694,6 +694,36 @@ void expect_same_report(const VerifyReport& a, const VerifyReport& b) {
             std::make_tuple(b.tet_volume, b.hull_volume, b.volume_rel_error));
 }
 
+// The step (tets merged into the open sets at a time) is planned from --memory: a small
+// budget takes smaller steps, and neither the step nor the budget changes the report,
+// violations listed included.
+TEST(Verify, StepsDoNotChangeTheReport) {
+  static const Output o = triangulate(test::uniform_cube(20000, 5));
+  std::vector<std::uint64_t> tets = o.tets;
+  for (std::size_t t : {17u, 9000u, 64000u}) std::swap(tets[4 * t], tets[4 * t + 1]);  // flipped
+  tets.insert(tets.end(), tets.begin() + 4 * 5000, tets.begin() + 4 * 5001);        // repeated
+  erase_tet(tets, 30000);                                                           // a hole
+  const std::size_t n_tets = tets.size() / 4;
+  pipeline::MemorySource src(o.xyz, tets, n_tets);  // one frame of all the tets
+  const VerifyReport whole = pipeline::verify(src, quiet_options());
+  EXPECT_EQ(whole.step_tets, n_tets);
+  EXPECT_FALSE(whole.ok());
+  EXPECT_EQ(count(whole, Violation::kOrientation), 3u) << whole.summary();
+
+  VerifyOptions small = quiet_options();
+  small.memory_bytes = 16 << 20;  // 2 x the scratch of a whole-frame step is more
+  const VerifyReport halved = pipeline::verify(src, small);
+  EXPECT_LT(halved.step_tets, n_tets);
+  EXPECT_GE(halved.step_tets, std::uint64_t(1) << 14);
+  expect_same_report(whole, halved);
+
+  VerifyOptions steps = quiet_options();
+  steps.batch_tets = 1000;
+  const VerifyReport small_steps = pipeline::verify(src, steps);
+  EXPECT_EQ(small_steps.step_tets, 1000u);
+  expect_same_report(whole, small_steps);
+}
+
 TEST(Verify, RanksGiveOneProcesssReport) {
   static const Output grid = triangulate(test::grid(7));
   for (std::uint64_t seed = 0; seed <= 24; ++seed) {
@@ -871,8 +901,9 @@ TEST(ExternalSort, GivesBackRunsAsItMerges) {
     ASSERT_EQ(::stat(path.c_str(), &st), 0) << "keep_files: the run stays, as a hole";
     EXPECT_EQ(std::uint64_t(st.st_size), run.size() * 8) << "the size is kept";
     // Where the filesystem cannot punch (EOPNOTSUPP) the blocks stay: nothing to check.
-    if (std::uint64_t(st.st_blocks) * 512 < run.size() * 8)
+    if (std::uint64_t(st.st_blocks) * 512 < run.size() * 8) {
       EXPECT_EQ(st.st_blocks, 0) << path << ": blocks left after the merge read it all";
+    }
   }
 }
 
