@@ -122,10 +122,12 @@ FieldSummary compute_fields(const FieldOptions& options) {
   const std::uint64_t window_bytes = usable / 100 * 40, batch_bytes = usable / 100 * 25;
   std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
                                                            std::uint64_t(1) << 32);
-  std::uint64_t max_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
-  // Scratch reused, not re-faulted; at most 2^20 tets: fewer batches are fewer parallel
-  // regions (on a loaded machine an idle OpenMP thread spins through every serial step
-  // between them), fewer re-sorts of the pending entries, and several frames a batch to
+  const std::uint64_t budget_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
+  std::uint64_t max_tets = budget_tets;
+  // Scratch reused, not re-faulted; at most 2^20 tets (the neighbours may take more,
+  // below): fewer batches are fewer parallel regions (on a loaded machine an idle
+  // OpenMP thread spins through every serial step between them), fewer re-sorts of the
+  // pending entries, and several frames a batch to
   // decode in parallel. `run`'s frames hold a little over 2^18 tets, so at 2^19 nearly
   // every batch was one frame, decoded by one thread while the others waited (10^6
   // uniform points, 1G, --neighbours alone: 23 batches at 2^19, 9 at 2^20, 2.4-2.5 s of
@@ -140,7 +142,16 @@ FieldSummary compute_fields(const FieldOptions& options) {
   // Edges and entries are packed in 64 bits: labels and original indices below 2^32.
   if (options.neighbours && std::max(n, h.input_count) > (std::uint64_t(1) << 32))
     throw UsageError("field: --neighbours handles up to 2^32 points");
-  const BatchPlan plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
+  BatchPlan plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
+  // With neighbours, the entries of the unretired labels (about 16 a window label) are
+  // sorted again with every batch: batches of 2^20 tets, whose new entries are fewer
+  // than those, spend most of the sort on old ones. Larger batches, as the budget
+  // allows, keep the new entries the larger part (10^8 uniform points, 8G: 763 batches
+  // of 2^20 tets and a 258,333-label window; 167 of 2^22: 248.8 s -> 215.6 s).
+  if (options.neighbours && !options.batch_tets) {
+    const std::uint64_t wanted = std::min(std::bit_ceil(16 * plan.window_labels), budget_tets);
+    if (wanted > max_tets) plan = plan_batches(reader.frames(), n, max_tets = wanted, max_labels, options.input);
+  }
   summary.batches = plan.batches.size();
   summary.window_labels = plan.window_labels;
   summary.ring_labels = plan.ring_labels;
@@ -183,7 +194,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
     const std::uint64_t bound = 2 * (2 * n + summary.tets);
     const std::uint64_t share = options.neighbour_memory ? options.neighbour_memory : sort_options("neighbours").memory_bytes;
     neighbours = std::make_unique<NeighbourRows>(std::max(h.input_count, n), n, bound, share,
-                                                 tmp.path("neighbour-rows.u64"));
+                                                 tmp.path("neighbour-rows.u32"));
   }
   const std::string rho_path = tmp.path("rho-by-label.f64");
   std::unique_ptr<BinaryFile> rho_file;
@@ -210,7 +221,7 @@ FieldSummary compute_fields(const FieldOptions& options) {
     if (points) points->add(retired);
   };
   if (neighbours)  // every point gets a row, even one in no edge (not in a valid container)
-    sinks.row = [&](std::uint64_t original, std::span<const std::uint64_t> row) { neighbours->add(original, row); };
+    sinks.row = [&](std::uint64_t original, std::span<const std::uint32_t> row) { neighbours->add(original, row); };
   const AccumulateStats acc = accumulate_fields(reader, plan, sinks, &progress);
   summary.tet_volume = volume4 / 4.0;
   summary.far_labels_peak = acc.peak_far;
@@ -238,8 +249,12 @@ FieldSummary compute_fields(const FieldOptions& options) {
     summary.total_mass = double(n);
   }
   if (neighbours) {
-    neighbours->write(field_path(options, "neighbours.offsets"), field_path(options, "neighbours.indices"));
+    // int32 when it holds every offset and index (scipy.sparse makes the same choice),
+    // known only now that the entries are counted.
+    const bool wide = options.neighbour_int64 || neighbours->needs_int64();
+    neighbours->write(field_path(options, "neighbours.offsets"), field_path(options, "neighbours.indices"), wide);
     summary.neighbour_entries = neighbours->entries();
+    summary.neighbour_dtype = wide ? "int64" : "int32";
     spdlog::info("field: {} neighbour entries in {} bucket(s){}", neighbours->entries(), neighbours->buckets(),
                  neighbours->spilled() ? ", spilled to disk" : "");
     summary.files.push_back({"neighbours.offsets", field_path(options, "neighbours.offsets")});

@@ -38,6 +38,7 @@ struct FieldOptions {
   std::array<double, 6> box{};   // xmin, ymin, zmin, xmax, ymax, zmax; default: the points' bbox
   HullMode hull = HullMode::kNan;
   FieldType dtype = FieldType::kFloat64;
+  bool neighbour_int64 = false;  // the neighbour arrays in int64 even when int32 holds them
   std::string mass;    // per-point masses in input order (.npy 1-D f4/f8, or raw little-endian f64); empty: 1
   std::uint64_t memory_bytes = std::uint64_t(1) << 30;
   std::string tmpdir;  // empty: $TMPDIR, else the output's directory
@@ -60,6 +61,7 @@ struct FieldSummary {
   std::uint64_t hull_points = 0;
   std::uint64_t window_labels = 0, ring_labels = 0;  // the widest window, its ring
   std::uint64_t neighbour_entries = 0;
+  std::string neighbour_dtype;  // "int32" or "int64"; empty without --neighbours
   std::uint64_t far_labels_peak = 0;  // most labels held beyond the dense window
   std::uint64_t grid_points = 0, grid_inside = 0;  // grid points, those inside the hull
   double total_mass = 0.0;

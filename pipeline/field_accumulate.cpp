@@ -242,14 +242,14 @@ class Accumulator {
 #pragma omp parallel for schedule(dynamic, 1024)
     for (std::int64_t l = 0; l < nl; ++l) {
       const std::size_t s = row_start_[std::size_t(l)], e = row_start_[std::size_t(l) + 1];
-      std::uint64_t* o = row_others_.data() + s;
-      for (std::size_t i = s; i < e; ++i) o[i - s] = directed_[i] & 0xffffffffu;
+      std::uint32_t* o = row_others_.data() + s;
+      for (std::size_t i = s; i < e; ++i) o[i - s] = std::uint32_t(directed_[i]);  // the original (low word)
       std::sort(o, o + (e - s));
       row_length_[std::size_t(l)] = std::size_t(std::unique(o, o + (e - s)) - o);
     }
     for (std::size_t l = 0; l < labels; ++l)
       sinks_.row(points_.original(retired_ + l),
-                 std::span<const std::uint64_t>(row_others_.data() + row_start_[l], row_length_[l]));
+                 std::span<const std::uint32_t>(row_others_.data() + row_start_[l], row_length_[l]));
     std::copy(directed_.data() + cut, directed_.data() + directed_size_, directed_.data());
     directed_size_ -= cut;
   }
@@ -301,7 +301,7 @@ class Accumulator {
   std::size_t directed_size_ = 0;
   std::vector<std::uint64_t> directed_tmp_;
   std::vector<std::size_t> row_start_, row_length_;
-  std::vector<std::uint64_t> row_others_;
+  std::vector<std::uint32_t> row_others_;  // originals: below 2^32 (field.cpp)
   std::uint64_t retired_ = 0;
   AccumulateStats stats_;
 };

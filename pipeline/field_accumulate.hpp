@@ -47,7 +47,7 @@ struct AccumulateSinks {
   // Set to collect neighbours: called once per point, in label order, when it retires,
   // with its original index and its Delaunay neighbours' original indices (increasing,
   // no repeats; the span is valid during the call only).
-  std::function<void(std::uint64_t, std::span<const std::uint64_t>)> row;
+  std::function<void(std::uint64_t, std::span<const std::uint32_t>)> row;
 };
 
 struct AccumulateStats {

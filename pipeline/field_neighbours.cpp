@@ -17,19 +17,22 @@ namespace {
 
 constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
 
-// An int64 .npy array written front to back through a buffer: rows are ~15 entries,
-// too small to be writes of their own.
+// An integer .npy array (int32 or int64) written front to back through a buffer: rows
+// are ~15 entries, too small to be writes of their own.
+template <class Index>
 class IntArray {
  public:
-  IntArray(const std::string& path, std::uint64_t n) : w_(path, "<i8", {n}) { b_.reserve(kBuffer); }
+  IntArray(const std::string& path, std::uint64_t n) : w_(path, sizeof(Index) == 4 ? "<i4" : "<i8", {n}) {
+    b_.reserve(kBuffer);
+  }
   void add(std::uint64_t v) {
-    b_.push_back(std::int64_t(v));
+    b_.push_back(Index(v));
     if (b_.size() == kBuffer) flush();
   }
-  void add(const std::uint64_t* v, std::size_t n) {
+  void add(const std::uint32_t* v, std::size_t n) {
     while (n > 0) {
       const std::size_t k = std::min(n, kBuffer - b_.size());
-      b_.insert(b_.end(), v, v + k);  // original indices are < 2^63: the same bits as int64
+      b_.insert(b_.end(), v, v + k);  // below INT32_MAX when Index is int32 (needs_int64)
       v += k, n -= k;
       if (b_.size() == kBuffer) flush();
     }
@@ -42,26 +45,26 @@ class IntArray {
  private:
   static constexpr std::size_t kBuffer = std::size_t(1) << 16;
   void flush() {
-    w_.write(b_.data(), b_.size() * sizeof(std::int64_t));
+    w_.write(b_.data(), b_.size() * sizeof(Index));
     b_.clear();
   }
   io::NpyArrayWriter w_;
-  std::vector<std::int64_t> b_;
+  std::vector<Index> b_;
 };
 
 // The words of a bucket's chunks, read in order through one buffer.
 class ChunkReader {
  public:
   ChunkReader(int fd, const std::string& path, const std::vector<NeighbourRowsChunk>& chunks)
-      : fd_(fd), path_(path), chunks_(chunks), buf_(std::size_t(1) << 17) {}
+      : fd_(fd), path_(path), chunks_(chunks), buf_(std::size_t(1) << 18) {}
   // The next word; false at the end of the last chunk.
-  bool next(std::uint64_t& w) {
+  bool next(std::uint32_t& w) {
     if (pos_ == end_ && !refill()) return false;
     w = buf_[pos_++];
     return true;
   }
   // Appends the next n words to out (nullptr: skips them).
-  void take(std::uint64_t n, std::vector<std::uint64_t>* out) {
+  void take(std::uint64_t n, std::vector<std::uint32_t>* out) {
     while (n > 0) {
       if (pos_ == end_ && !refill()) throw IoError(path_ + ": a neighbour row is cut short");
       const std::size_t k = std::size_t(std::min<std::uint64_t>(n, end_ - pos_));
@@ -76,7 +79,8 @@ class ChunkReader {
     if (chunk_ == chunks_.size()) return false;
     const NeighbourRowsChunk& c = chunks_[chunk_];
     const std::uint64_t k = std::min<std::uint64_t>(buf_.size(), c.words - read_in_chunk_);
-    if (!io::pread_exactly(fd_, buf_.data(), std::size_t(k) * 8, (c.offset + read_in_chunk_) * 8))
+    if (!io::pread_exactly(fd_, buf_.data(), std::size_t(k) * sizeof(std::uint32_t),
+                           (c.offset + read_in_chunk_) * sizeof(std::uint32_t)))
       throw IoError(path_ + ": read failed");
     read_in_chunk_ += k;
     pos_ = 0, end_ = std::size_t(k);
@@ -85,15 +89,16 @@ class ChunkReader {
   int fd_;
   const std::string& path_;
   const std::vector<NeighbourRowsChunk>& chunks_;
-  std::vector<std::uint64_t> buf_;
+  std::vector<std::uint32_t> buf_;
   std::size_t chunk_ = 0, pos_ = 0, end_ = 0;
   std::uint64_t read_in_chunk_ = 0;
 };
 
 // Writes the rows of data (whole rows [original, degree, neighbours...], originals in
 // [lo, hi)) in original order; at: entries written so far.
-void write_rows(const std::vector<std::uint64_t>& data, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint64_t>& pos,
-                IntArray& offsets, IntArray& indices, std::uint64_t& at, std::uint64_t& rows) {
+template <class Index>
+void write_rows(const std::vector<std::uint32_t>& data, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint64_t>& pos,
+                IntArray<Index>& offsets, IntArray<Index>& indices, std::uint64_t& at, std::uint64_t& rows) {
   pos.assign(std::size_t(hi - lo), kNone);
   for (std::size_t i = 0; i < data.size(); i += 2 + std::size_t(data[i + 1])) {
     std::uint64_t& p = pos[std::size_t(data[i] - lo)];
@@ -117,23 +122,23 @@ NeighbourRows::NeighbourRows(std::uint64_t original_end, std::uint64_t point_cou
     : original_end_(std::max<std::uint64_t>(original_end, 1)), point_count_(point_count), scratch_(std::move(scratch)) {
   // Pass 1 buffers at most half the share: the window and the batch are live beside
   // it (their own accounting misses the entries pending for unretired labels). One
-  // bucket when the rows (2 header words a row) fit that half and, with the placement
-  // array (a word an original index), the whole share once pass 1 has freed its
-  // structures; else buckets of about half the share each, so that one bucket and its
-  // placement array fit when it is written, skew included.
-  const std::uint64_t budget_words = std::max<std::uint64_t>(memory_bytes / 8, 1 << 16);
-  const std::uint64_t pass1_words = budget_words / 2;
-  const std::uint64_t words = 2 * point_count + entries_bound;
+  // bucket when the rows (2 header words a row, 4 bytes a word) fit that half and, with
+  // the placement array (8 bytes an original index), the whole share once pass 1 has
+  // freed its structures; else buckets of about half the share each, so that one
+  // bucket and its placement array fit when it is written, skew included.
+  const std::uint64_t budget = std::max<std::uint64_t>(memory_bytes, std::uint64_t(1) << 18);
+  const std::uint64_t pass1 = budget / 2;
+  const std::uint64_t rows_bytes = sizeof(std::uint32_t) * (2 * point_count + entries_bound);
+  const std::uint64_t placement_bytes = sizeof(std::uint64_t) * original_end_;
   std::uint64_t b = 1;
-  if (words > pass1_words || words + original_end_ > budget_words)
-    b = (words + original_end_ + pass1_words - 1) / pass1_words;
+  if (rows_bytes > pass1 || rows_bytes + placement_bytes > budget) b = (rows_bytes + placement_bytes + pass1 - 1) / pass1;
   b = std::min(b, original_end_);
   width_ = (original_end_ + b - 1) / b;
   b = (original_end_ + width_ - 1) / width_;
   // Rows land in buckets at random (input order is not spatial order): the buffers
   // split the half evenly.
-  words_per_bucket_ = std::max<std::uint64_t>(pass1_words / b, 1 << 12);
-  half_words_ = pass1_words;
+  half_words_ = pass1 / sizeof(std::uint32_t);
+  words_per_bucket_ = std::max<std::uint64_t>(half_words_ / b, 1 << 12);
   buffers_.resize(std::size_t(b));
   chunks_.resize(std::size_t(b));
   bucket_words_.assign(std::size_t(b), 0);
@@ -146,15 +151,15 @@ NeighbourRows::~NeighbourRows() {
   }
 }
 
-void NeighbourRows::add(std::uint64_t original, std::span<const std::uint64_t> neighbours) {
+void NeighbourRows::add(std::uint64_t original, std::span<const std::uint32_t> neighbours) {
   const std::size_t b = std::size_t(original / width_);
-  std::vector<std::uint64_t>& buf = buffers_.at(b);
+  std::vector<std::uint32_t>& buf = buffers_.at(b);
   const std::uint64_t row = 2 + neighbours.size();
   if (!buf.empty() && buf.size() + row > words_per_bucket_) spill(b);
   // Reserved once: a doubling vector would hold one and a half buffers while it grows.
   if (buf.capacity() == 0) buf.reserve(std::size_t(words_per_bucket_));
-  buf.push_back(original);
-  buf.push_back(neighbours.size());
+  buf.push_back(std::uint32_t(original));  // originals and degrees are below 2^32 (the header)
+  buf.push_back(std::uint32_t(neighbours.size()));
   buf.insert(buf.end(), neighbours.begin(), neighbours.end());
   bucket_words_[b] += row;
   entries_ += neighbours.size();
@@ -162,23 +167,23 @@ void NeighbourRows::add(std::uint64_t original, std::span<const std::uint64_t> n
 }
 
 void NeighbourRows::spill(std::size_t b) {
-  std::vector<std::uint64_t>& buf = buffers_[b];
+  std::vector<std::uint32_t>& buf = buffers_[b];
   if (buf.empty()) return;
   if (!file_) file_ = std::make_unique<BinaryFile>(scratch_, "wb");
-  file_->write(buf.data(), sizeof(std::uint64_t), buf.size());
+  file_->write(buf.data(), sizeof(std::uint32_t), buf.size());
   chunks_[b].push_back({file_words_, buf.size()});
   file_words_ += buf.size();
   buf.clear();
   spilled_ = true;
 }
 
-void NeighbourRows::load(std::size_t b, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint64_t>& out) {
+void NeighbourRows::load(std::size_t b, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint32_t>& out) {
   out.clear();
   const int fd = ::open(scratch_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) throw IoError(scratch_ + ": cannot open");
   try {
     ChunkReader in(fd, scratch_, chunks_[b]);
-    std::uint64_t original = 0, degree = 0;
+    std::uint32_t original = 0, degree = 0;
     while (in.next(original)) {
       if (!in.next(degree)) throw IoError(scratch_ + ": a neighbour row is cut short");
       const bool keep = original >= lo && original < hi;
@@ -192,19 +197,32 @@ void NeighbourRows::load(std::size_t b, std::uint64_t lo, std::uint64_t hi, std:
   ::close(fd);
 }
 
-void NeighbourRows::write(const std::string& offsets_path, const std::string& indices_path) {
+bool NeighbourRows::needs_int64() const {
+  constexpr std::uint64_t kInt32Max = std::uint64_t(std::numeric_limits<std::int32_t>::max());
+  return entries_ > kInt32Max || original_end_ - 1 > kInt32Max;
+}
+
+void NeighbourRows::write(const std::string& offsets_path, const std::string& indices_path, bool wide) {
   if (rows_ != point_count_)
     throw std::logic_error("field: " + std::to_string(rows_) + " neighbour rows, expected " + std::to_string(point_count_));
-  IntArray offsets(offsets_path, point_count_ + 1), indices(indices_path, entries_);
+  if (wide) return write_as<std::int64_t>(offsets_path, indices_path);
+  if (needs_int64()) throw std::logic_error("field: the neighbour arrays do not fit int32");
+  write_as<std::int32_t>(offsets_path, indices_path);
+}
+
+template <class Index>
+void NeighbourRows::write_as(const std::string& offsets_path, const std::string& indices_path) {
+  IntArray<Index> offsets(offsets_path, point_count_ + 1), indices(indices_path, entries_);
   offsets.add(0);
   std::uint64_t at = 0, rows = 0;
-  std::vector<std::uint64_t> pos, data;
+  std::vector<std::uint64_t> pos;
+  std::vector<std::uint32_t> data;
   if (!spilled_) {
     // Everything is in memory: each bucket in place.
     for (std::size_t b = 0; b < buffers_.size(); ++b) {
       const std::uint64_t lo = b * width_, hi = std::min(original_end_, lo + width_);
       write_rows(buffers_[b], lo, hi, pos, offsets, indices, at, rows);
-      std::vector<std::uint64_t>().swap(buffers_[b]);
+      std::vector<std::uint32_t>().swap(buffers_[b]);
     }
   } else {
     // Every row to the file, the buffers freed; then a bucket at a time, in parts of
@@ -212,13 +230,14 @@ void NeighbourRows::write(const std::string& offsets_path, const std::string& in
     // distribution): each part rereads the bucket's chunks and keeps its own rows.
     for (std::size_t b = 0; b < buffers_.size(); ++b) {
       spill(b);
-      std::vector<std::uint64_t>().swap(buffers_[b]);
+      std::vector<std::uint32_t>().swap(buffers_[b]);
     }
     file_->close();
     const std::uint64_t half = std::max<std::uint64_t>(half_words_, 1);
     for (std::size_t b = 0; b < buffers_.size(); ++b) {
       const std::uint64_t lo = b * width_, hi = std::min(original_end_, lo + width_);
-      const std::uint64_t parts = std::max<std::uint64_t>(1, (bucket_words_[b] + (hi - lo) + half - 1) / half);
+      // Its rows' words and its placement array (two words an original index).
+      const std::uint64_t parts = std::max<std::uint64_t>(1, (bucket_words_[b] + 2 * (hi - lo) + half - 1) / half);
       const std::uint64_t step = (hi - lo + parts - 1) / parts;
       for (std::uint64_t p = lo; p < hi; p += step) {
         load(b, p, std::min(hi, p + step), data);

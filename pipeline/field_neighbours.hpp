@@ -16,9 +16,15 @@
 // and one read of the data when it spills, none at all when it fits (B = 1: 10^6
 // points in well under 1G).
 //
+// Rows are held in 32-bit words: `--neighbours` takes at most 2^32 points (field.cpp),
+// so an original index, a degree and a neighbour each fit one (half the memory, the
+// scratch file and the placement's traffic of 64-bit words).
+//
 // The bytes do not depend on the budget or the threads: every row lands at its
 // original index whatever bucket or chunk carried it. The entry count is known when
-// pass 1 ends, so the index array is written behind its final header directly.
+// pass 1 ends, so the index array is written behind its final header directly, and the
+// arrays' type can be chosen then: int32 when every offset and index fits (scipy.sparse's
+// own choice), int64 otherwise or when asked.
 #include "pipeline/temp_files.hpp"
 
 #include <cstdint>
@@ -30,7 +36,7 @@
 namespace tetstream::pipeline {
 
 struct NeighbourRowsChunk {
-  std::uint64_t offset, words;  // in the scratch file, in 8-byte words
+  std::uint64_t offset, words;  // in the scratch file, in 4-byte words
 };
 
 class NeighbourRows {
@@ -38,7 +44,7 @@ class NeighbourRows {
   // original_end: every original index is below it. entries_bound: the expected
   // number of entries (plans the buckets; more only makes them spill sooner).
   // memory_bytes: the rows' share of the budget. scratch: the chunk file's path
-  // (created at the first spill only).
+  // (created at the first spill only). Every original index must be below 2^32.
   NeighbourRows(std::uint64_t original_end, std::uint64_t point_count, std::uint64_t entries_bound,
                 std::uint64_t memory_bytes, std::string scratch);
   ~NeighbourRows();
@@ -46,10 +52,14 @@ class NeighbourRows {
   NeighbourRows& operator=(const NeighbourRows&) = delete;
 
   // One point's row (any order of points; each point once).
-  void add(std::uint64_t original, std::span<const std::uint64_t> neighbours);
-  // Writes the CSR pair (int64 .npy files): offsets (rows + 1), indices (entries).
-  // Throws std::logic_error unless exactly point_count rows were added.
-  void write(const std::string& offsets_path, const std::string& indices_path);
+  void add(std::uint64_t original, std::span<const std::uint32_t> neighbours);
+  // True when the CSR pair would need int64: an offset (up to entries()) or an index
+  // (below original_end) past INT32_MAX.
+  bool needs_int64() const;
+  // Writes the CSR pair as .npy files of int32 (wide false; needs_int64() must be
+  // false) or int64: offsets (rows + 1), indices (entries). Throws std::logic_error
+  // unless exactly point_count rows were added.
+  void write(const std::string& offsets_path, const std::string& indices_path, bool wide);
 
   std::uint64_t entries() const { return entries_; }
   std::uint64_t buckets() const { return buffers_.size(); }
@@ -58,11 +68,13 @@ class NeighbourRows {
  private:
   void spill(std::size_t bucket);
   // Rows with original in [lo, hi) of bucket b, as [original, degree, neighbours...].
-  void load(std::size_t b, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint64_t>& out);
+  void load(std::size_t b, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint32_t>& out);
+  template <class Index>
+  void write_as(const std::string& offsets_path, const std::string& indices_path);
 
   std::uint64_t original_end_, point_count_, width_, words_per_bucket_, half_words_;
   std::string scratch_;
-  std::vector<std::vector<std::uint64_t>> buffers_;  // a bucket's rows not spilled yet
+  std::vector<std::vector<std::uint32_t>> buffers_;  // a bucket's rows not spilled yet
   std::vector<std::vector<NeighbourRowsChunk>> chunks_;           // a bucket's spilled rows
   std::vector<std::uint64_t> bucket_words_;          // a bucket's rows, buffered and spilled
   std::unique_ptr<BinaryFile> file_;

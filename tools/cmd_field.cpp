@@ -19,7 +19,8 @@ constexpr const char* kFieldHelp =
     "`run` have no entry of their own):\n"
     "  --density dtfe     PREFIX.density.npy   rho_i = 4 m_i / (sum of the volumes of the tets at i)\n"
     "  --voronoi-volume   PREFIX.voronoi.npy   the Voronoi cell's volume; +inf on the hull\n"
-    "  --neighbours       PREFIX.neighbours.offsets.npy, PREFIX.neighbours.indices.npy (CSR, int64)\n"
+    "  --neighbours       PREFIX.neighbours.offsets.npy, PREFIX.neighbours.indices.npy (CSR; int32\n"
+    "                     when every offset and index fits, else int64; --index-dtype int64: always)\n"
     "  --grid N|NX,NY,NZ  PREFIX.grid.npy      the DTFE density at the cell centres, shape (NX, NY, NZ);\n"
     "                                          NaN outside the hull\n"
     "Hull points: density NaN with --hull nan (default), the open-star estimate with --hull open\n"
@@ -28,7 +29,7 @@ constexpr const char* kFieldHelp =
 
 struct FieldArgs {
   pipeline::FieldOptions options;
-  std::string memory = "1G", density, grid, box, hull = "nan", dtype = "float64";
+  std::string memory = "1G", density, grid, box, hull = "nan", dtype = "float64", index_dtype = "auto";
 };
 
 void run_field(FieldArgs& args, Context& ctx) {
@@ -45,6 +46,9 @@ void run_field(FieldArgs& args, Context& ctx) {
   if (args.dtype != "float64" && args.dtype != "float32" && args.dtype != "f8" && args.dtype != "f4")
     throw UsageError("field: --dtype must be float32 or float64, not '" + args.dtype + "'");
   o.dtype = args.dtype == "float32" || args.dtype == "f4" ? pipeline::FieldType::kFloat32 : pipeline::FieldType::kFloat64;
+  if (args.index_dtype != "auto" && args.index_dtype != "int64")
+    throw UsageError("field: --index-dtype must be auto or int64, not '" + args.index_dtype + "'");
+  o.neighbour_int64 = args.index_dtype == "int64";
   const pipeline::FieldSummary s = pipeline::compute_fields(o);
   nlohmann::json files = nlohmann::json::object();
   for (const auto& f : s.files) files[f.what] = f.path;
@@ -67,6 +71,7 @@ void run_field(FieldArgs& args, Context& ctx) {
                  {"voronoi_total_with_hull_pieces", s.voronoi_total},
                  {"total_mass", s.total_mass},
                  {"neighbour_entries", s.neighbour_entries},
+                 {"neighbour_dtype", s.neighbour_dtype.empty() ? nlohmann::json(nullptr) : nlohmann::json(s.neighbour_dtype)},
                  {"grid_points", s.grid_points},
                  {"grid_inside", s.grid_inside},
                  {"hull", args.hull},
@@ -91,6 +96,9 @@ void setup_field(CLI::App& app, Context& ctx) {
   cmd->add_option("--hull", args->hull, "Density at hull points: nan or open")->capture_default_str();
   cmd->add_option("--mass", args->options.mass, "Per-point masses in input order (.npy float64/float32, or raw float64)");
   cmd->add_option("--dtype", args->dtype, "float64 or float32 (density, Voronoi volume, grid)")->capture_default_str();
+  cmd->add_option("--index-dtype", args->index_dtype,
+                  "The neighbour arrays: auto (int32 when every offset and index fits, else int64) or int64")
+      ->capture_default_str();
   cmd->add_option("--memory", args->memory, "Memory budget, e.g. 512M, 4G")->capture_default_str();
   cmd->add_option("--tmpdir", args->options.tmpdir, "Directory for temporary files (default: $TMPDIR, else the output's)");
   cmd->callback([args, &ctx] { run_field(*args, ctx); });

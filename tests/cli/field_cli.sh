@@ -34,12 +34,32 @@ done
 # Every tet's Voronoi pieces tile it: the pieces of all points add up to the hull's volume.
 echo "$j" | json "abs(d['voronoi_total_with_hull_pieces'] - d['hull_volume']) <= 1e-9 * d['hull_volume']" | grep -q True \
   || fail "Voronoi pieces do not add up to the hull volume: $j"
-# float64 arrays of 20000 points: 8 bytes each after a 128-byte header; offsets N+1 int64.
+# float64 arrays of 20000 points: 8 bytes each after a 128-byte header; the neighbour
+# arrays int32 (every offset and index fits), offsets N+1 of them.
 [ "$(stat -c %s f.density.npy)" = $((128 + 8 * 20000)) ] || fail "density size $(stat -c %s f.density.npy)"
-[ "$(stat -c %s f.neighbours.offsets.npy)" = $((128 + 8 * 20001)) ] || fail "offsets size"
+[ "$(stat -c %s f.neighbours.offsets.npy)" = $((128 + 4 * 20001)) ] || fail "offsets size"
 [ "$(stat -c %s f.grid.npy)" = $((128 + 8 * 512)) ] || fail "grid size"
 entries=$(echo "$j" | json "d['neighbour_entries']")
-[ "$(stat -c %s f.neighbours.indices.npy)" = $((128 + 8 * entries)) ] || fail "indices size"
+[ "$(stat -c %s f.neighbours.indices.npy)" = $((128 + 4 * entries)) ] || fail "indices size"
+[ "$(echo "$j" | json "d['neighbour_dtype']")" = int32 ] || fail "neighbour_dtype: $j"
+grep -q "'descr': '<i4'" f.neighbours.indices.npy || fail "indices are not <i4"
+# --index-dtype int64: int64 arrays of the same values; anything else is refused.
+j64=$("$T" -q --json field c.tets -o w --neighbours --index-dtype int64)
+[ "$(echo "$j64" | json "d['neighbour_dtype']")" = int64 ] || fail "--index-dtype int64: $j64"
+[ "$(stat -c %s w.neighbours.indices.npy)" = $((128 + 8 * entries)) ] || fail "int64 indices size"
+python3 - <<'PY' || fail "int32 and int64 neighbour arrays differ"
+import struct
+def load(path):
+    b = open(path, 'rb').read()
+    hl = b[8] | b[9] << 8
+    code = 'i' if "'<i4'" in b[10:10 + hl].decode() else 'q'
+    data = b[10 + hl:]
+    return list(struct.unpack('<%d%s' % (len(data) // struct.calcsize(code), code), data))
+for w in ('offsets', 'indices'):
+    assert load('f.neighbours.%s.npy' % w) == load('w.neighbours.%s.npy' % w), w
+PY
+"$T" -q field c.tets -o x --neighbours --index-dtype int16 2> err.txt && fail "--index-dtype int16 accepted"
+grep -q "index-dtype" err.txt || fail "--index-dtype int16: $(cat err.txt)"
 
 # Without --json: the paths written, one a line.
 "$T" -q field c.tets -o g --density dtfe > paths.txt

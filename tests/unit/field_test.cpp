@@ -29,6 +29,7 @@
 #include <numeric>
 #include <set>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace tetstream {
@@ -51,7 +52,13 @@ template <class T>
 std::vector<T> load_npy(const std::string& path) {
   const std::vector<char> b = file_bytes(path);
   EXPECT_GE(b.size(), 10u) << path;
+  if (b.size() < 10) return {};
   const std::size_t hl = std::uint8_t(b[8]) | std::size_t(std::uint8_t(b[9])) << 8;
+  // The array's type must be T's: an int32 file read as int64 would pass no test.
+  const char* descr = std::is_floating_point_v<T> ? (sizeof(T) == 4 ? "<f4" : "<f8") : (sizeof(T) == 4 ? "<i4" : "<i8");
+  EXPECT_NE(std::string(b.data() + 10, std::min(hl, b.size() - 10)).find(std::string("'descr': '") + descr + "'"),
+            std::string::npos)
+      << path << " is not " << descr;
   std::vector<T> out((b.size() - 10 - hl) / sizeof(T));
   std::memcpy(out.data(), b.data() + 10 + hl, out.size() * sizeof(T));
   return out;
@@ -225,8 +232,10 @@ class FieldTest : public testing_util::ScratchDirTest {
     const auto order = ref.input_order();
     const auto rho = load_npy<double>(path("f.density.npy"));
     const auto vor = load_npy<double>(path("f.voronoi.npy"));
-    const auto off = load_npy<std::int64_t>(path("f.neighbours.offsets.npy"));
-    const auto idx = load_npy<std::int64_t>(path("f.neighbours.indices.npy"));
+    // int32: every offset and index fits (the default, --index-dtype auto).
+    const auto off = load_npy<std::int32_t>(path("f.neighbours.offsets.npy"));
+    const auto idx = load_npy<std::int32_t>(path("f.neighbours.indices.npy"));
+    EXPECT_EQ(s.neighbour_dtype, "int32");
     EXPECT_EQ(rho.size(), ref.n);
     EXPECT_EQ(vor.size(), ref.n);
     EXPECT_EQ(off.size(), ref.n + 1);
@@ -499,6 +508,26 @@ TEST_F(FieldTest, NeighbourRowsSpillSameBytes) {
     EXPECT_GT(big.size(), 128u) << what;
     EXPECT_EQ(big, file_bytes(path(std::string("small.") + what + ".npy"))) << what;
   }
+  // --index-dtype int64: the same values in int64, spilled or not.
+  for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {
+    pipeline::FieldOptions o;
+    o.input = tets;
+    o.output = path(share ? "wide-small" : "wide-big");
+    o.neighbours = true;
+    o.neighbour_int64 = true;
+    o.memory_bytes = std::uint64_t(256) << 20;
+    o.batch_tets = 5000;
+    o.neighbour_memory = share;
+    o.progress = false;
+    o.tmpdir = dir_.string();
+    EXPECT_EQ(pipeline::compute_fields(o).neighbour_dtype, "int64");
+    for (const char* what : {"neighbours.offsets", "neighbours.indices"}) {
+      const auto narrow = load_npy<std::int32_t>(path(std::string("big.") + what + ".npy"));
+      EXPECT_EQ(std::vector<std::int64_t>(narrow.begin(), narrow.end()),
+                load_npy<std::int64_t>(path(std::string(share ? "wide-small." : "wide-big.") + what + ".npy")))
+          << what;
+    }
+  }
 }
 
 // The writer on its own: rows in any order, originals with gaps (merged duplicates),
@@ -512,9 +541,9 @@ TEST_F(FieldTest, NeighbourRowsBucketsAndParts) {
   std::vector<std::uint64_t> shuffled = originals;
   for (std::size_t i = 0; i < shuffled.size(); ++i) std::swap(shuffled[i], shuffled[(i * 7919) % shuffled.size()]);
   auto row = [](std::uint64_t o) {
-    std::vector<std::uint64_t> r;
+    std::vector<std::uint32_t> r;
     const std::uint64_t degree = o < 600 ? 200 : o % 5;
-    for (std::uint64_t k = 0; k < degree; ++k) r.push_back(o * 3 + k * 11);
+    for (std::uint64_t k = 0; k < degree; ++k) r.push_back(std::uint32_t(o * 3 + k * 11));
     return r;
   };
   std::uint64_t entries = 0;
@@ -524,21 +553,27 @@ TEST_F(FieldTest, NeighbourRowsBucketsAndParts) {
     std::uint64_t bound, memory;
   };
   for (const Case c : {Case{"mem", entries, std::uint64_t(1) << 30}, Case{"low", 5 * originals.size(), 0},
-                       Case{"buckets", entries, 0}}) {
+                       Case{"buckets", entries, 0}, Case{"wide", entries, 0}}) {
     pipeline::NeighbourRows rows(end, originals.size(), c.bound, c.memory, path(std::string(c.name) + ".rows"));
     for (const std::uint64_t o : shuffled) {
       const auto r = row(o);
       rows.add(o, r);
     }
     EXPECT_EQ(rows.spilled(), std::string(c.name) != "mem") << c.name;
-    if (std::string(c.name) == "buckets") {
+    if (std::string(c.name) == "buckets" || std::string(c.name) == "wide") {
       EXPECT_GT(rows.buckets(), 1u);
     }
-    rows.write(path(std::string(c.name) + ".off.npy"), path(std::string(c.name) + ".idx.npy"));
+    EXPECT_FALSE(rows.needs_int64());
+    rows.write(path(std::string(c.name) + ".off.npy"), path(std::string(c.name) + ".idx.npy"), std::string(c.name) == "wide");
     EXPECT_EQ(rows.entries(), entries);
   }
-  const auto off = load_npy<std::int64_t>(path("mem.off.npy"));
-  const auto idx = load_npy<std::int64_t>(path("mem.idx.npy"));
+  const auto off = load_npy<std::int32_t>(path("mem.off.npy"));
+  const auto idx = load_npy<std::int32_t>(path("mem.idx.npy"));
+  // int64 on request (spilled, in buckets): the same values.
+  const auto off64 = load_npy<std::int64_t>(path("wide.off.npy"));
+  const auto idx64 = load_npy<std::int64_t>(path("wide.idx.npy"));
+  EXPECT_EQ(std::vector<std::int64_t>(off.begin(), off.end()), off64);
+  EXPECT_EQ(std::vector<std::int64_t>(idx.begin(), idx.end()), idx64);
   ASSERT_EQ(off.size(), originals.size() + 1);
   for (std::size_t i = 0; i < originals.size(); ++i) {
     const auto want = row(originals[i]);
