@@ -491,42 +491,36 @@ TEST_F(FieldTest, PointsPlacedOrSortedSameBytes) {
 // original index; the CSR files are the same bytes as when they stay in memory.
 TEST_F(FieldTest, NeighbourRowsSpillSameBytes) {
   const std::string tets = container(io::Distribution::kUniform, 10000, 23, 1500);
-  for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {  // 0: from the budget; 1: the least
+  // share 0: from the budget; 1: the least (every row spills). wide: --index-dtype int64.
+  auto neighbours = [&](const std::string& name, std::uint64_t share, bool wide) {
     pipeline::FieldOptions o;
     o.input = tets;
-    o.output = path(share ? "small" : "big");
+    o.output = path(name);
     o.neighbours = true;
+    o.neighbour_int64 = wide;
     o.memory_bytes = std::uint64_t(256) << 20;
     o.batch_tets = 5000;
     o.neighbour_memory = share;
     o.progress = false;
     o.tmpdir = dir_.string();
-    pipeline::compute_fields(o);
-  }
+    EXPECT_EQ(pipeline::compute_fields(o).neighbour_dtype, wide ? "int64" : "int32") << name;
+  };
+  neighbours("big", 0, false);
+  neighbours("small", 1, false);
   for (const char* what : {"neighbours.offsets", "neighbours.indices"}) {
     const auto big = file_bytes(path(std::string("big.") + what + ".npy"));
     EXPECT_GT(big.size(), 128u) << what;
     EXPECT_EQ(big, file_bytes(path(std::string("small.") + what + ".npy"))) << what;
   }
   // --index-dtype int64: the same values in int64, spilled or not.
-  for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {
-    pipeline::FieldOptions o;
-    o.input = tets;
-    o.output = path(share ? "wide-small" : "wide-big");
-    o.neighbours = true;
-    o.neighbour_int64 = true;
-    o.memory_bytes = std::uint64_t(256) << 20;
-    o.batch_tets = 5000;
-    o.neighbour_memory = share;
-    o.progress = false;
-    o.tmpdir = dir_.string();
-    EXPECT_EQ(pipeline::compute_fields(o).neighbour_dtype, "int64");
-    for (const char* what : {"neighbours.offsets", "neighbours.indices"}) {
-      const auto narrow = load_npy<std::int32_t>(path(std::string("big.") + what + ".npy"));
+  neighbours("wide-big", 0, true);
+  neighbours("wide-small", 1, true);
+  for (const char* what : {"neighbours.offsets", "neighbours.indices"}) {
+    const auto narrow = load_npy<std::int32_t>(path(std::string("big.") + what + ".npy"));
+    for (const char* wide : {"wide-big.", "wide-small."})
       EXPECT_EQ(std::vector<std::int64_t>(narrow.begin(), narrow.end()),
-                load_npy<std::int64_t>(path(std::string(share ? "wide-small." : "wide-big.") + what + ".npy")))
-          << what;
-    }
+                load_npy<std::int64_t>(path(std::string(wide) + what + ".npy")))
+          << wide << what;
   }
 }
 
