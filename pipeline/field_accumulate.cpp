@@ -119,10 +119,10 @@ class Accumulator {
   }
 
   // The batch's edges, radix-sorted and made unique, then both directions as (label,
-  // neighbour's original) entries, behind the entries of the labels not retired yet.
-  // Sorted by label, a retiring label's entries are contiguous: sorted by original and
-  // made unique (an edge whose tets lie in several batches came once per batch) they
-  // are its row. Rows are whole and sorted here, so the output only has to place them
+  // neighbour's original) entries sorted by label, beside the entries of the labels
+  // not retired yet (sorted by label too). A retiring label's entries are a run of
+  // each: together, sorted by original and made unique (an edge whose tets lie in
+  // several batches came once per batch) they are its row. Rows are whole and sorted here, so the output only has to place them
   // (field_neighbours.hpp).
   //
   // An edge is keyed (a - lo) << dbits | (c - a) (a < c its labels): the labels of a
@@ -201,14 +201,12 @@ class Accumulator {
     const std::size_t short_edges = std::size_t(std::unique(edges_.data(), edges_.data() + kept) - edges_.data());
     stats_.batch_edges += short_edges + long_.size();
 
-    // Pending entries (labels >= retired_ == lo) stay in front; the new ones follow.
-    // An entry is label << 32 | other (labels and originals are below 2^32, checked by
-    // the caller): 8 bytes instead of 16, half the radix sort's traffic.
-    const std::size_t pending = directed_size_;
-    std::uint64_t reach = top;
-    for (std::size_t i = 0; i < pending; ++i) reach = std::max(reach, (directed_[i] >> 32) - lo);
-    directed_size_ = pending + 2 * (short_edges + long_.size());
-    directed_.reserve(directed_size_);  // grows only; never zeroed (every entry is written first)
+    // The batch's entries, label << 32 | the neighbour's original (labels and originals
+    // are below 2^32, checked by the caller: 8 bytes instead of 16, half the sort's
+    // traffic), both directions of each edge, sorted by label alone: radix on the
+    // label's offset from lo, which is at most top.
+    const std::size_t fresh = 2 * (short_edges + long_.size());
+    fresh_.reserve(fresh);  // grows only; never zeroed (every entry is written first)
     const std::int64_t ne = std::int64_t(short_edges + long_.size());
 #pragma omp parallel for schedule(dynamic, 16384)
     for (std::int64_t i = 0; i < ne; ++i) {
@@ -220,38 +218,56 @@ class Accumulator {
         const std::uint64_t e = long_[std::size_t(i) - short_edges];
         a = lo + (e >> 32), c = lo + (e & 0xffffffffu);
       }
-      directed_[pending + 2 * std::size_t(i)] = a << 32 | points_.original(c);
-      directed_[pending + 2 * std::size_t(i) + 1] = c << 32 | points_.original(a);
+      fresh_[2 * std::size_t(i)] = a << 32 | points_.original(c);
+      fresh_[2 * std::size_t(i) + 1] = c << 32 | points_.original(a);
     }
-    radix_sort(directed_.data(), directed_size_, directed_tmp_, std::bit_width(reach),
-               [lo](std::uint64_t d) { return (d >> 32) - lo; });
+    radix_sort(fresh_.data(), fresh, radix_tmp_, std::bit_width(top), [lo](std::uint64_t d) { return (d >> 32) - lo; });
 
-    // The rows of the labels retired after this batch: [retired_, below).
+    // The rows of the labels retired after this batch, [retired_, below): each label's
+    // entries are a run of the pending ones (sorted by label, all >= retired_ == lo)
+    // and a run of the batch's. Nothing is merged for them: a row gathers its two runs.
+    const std::uint64_t* pending = pending_[current_].data();
+    const std::uint64_t* batch = fresh_.data();
     const std::uint64_t below = b.retire_below;
     const std::size_t labels = std::size_t(below - retired_);
-    row_start_.assign(labels + 1, 0);
-    std::size_t cut = 0;
+    pending_start_.assign(labels + 1, 0);
+    fresh_start_.assign(labels + 1, 0);
+    std::size_t pc = 0, fc = 0;
     for (std::size_t l = 0; l < labels; ++l) {
-      row_start_[l] = cut;
-      while (cut < directed_size_ && directed_[cut] >> 32 == retired_ + l) ++cut;
+      pending_start_[l] = pc, fresh_start_[l] = fc;
+      while (pc < pending_size_ && pending[pc] >> 32 == retired_ + l) ++pc;
+      while (fc < fresh && batch[fc] >> 32 == retired_ + l) ++fc;
     }
-    row_start_[labels] = cut;
-    row_others_.resize(cut);
+    pending_start_[labels] = pc, fresh_start_[labels] = fc;
+    row_others_.resize(pc + fc);
     row_length_.resize(labels);
     const std::int64_t nl = std::int64_t(labels);
 #pragma omp parallel for schedule(dynamic, 1024)
     for (std::int64_t l = 0; l < nl; ++l) {
-      const std::size_t s = row_start_[std::size_t(l)], e = row_start_[std::size_t(l) + 1];
-      std::uint32_t* o = row_others_.data() + s;
-      for (std::size_t i = s; i < e; ++i) o[i - s] = std::uint32_t(directed_[i]);  // the original (low word)
-      std::sort(o, o + (e - s));
-      row_length_[std::size_t(l)] = std::size_t(std::unique(o, o + (e - s)) - o);
+      const std::size_t ps = pending_start_[std::size_t(l)], pe = pending_start_[std::size_t(l) + 1];
+      const std::size_t fs = fresh_start_[std::size_t(l)], fe = fresh_start_[std::size_t(l) + 1];
+      std::uint32_t* const row = row_others_.data() + ps + fs;
+      std::uint32_t* o = row;
+      for (std::size_t i = ps; i < pe; ++i) *o++ = std::uint32_t(pending[i]);  // the original (low word)
+      for (std::size_t i = fs; i < fe; ++i) *o++ = std::uint32_t(batch[i]);
+      std::sort(row, o);
+      row_length_[std::size_t(l)] = std::size_t(std::unique(row, o) - row);
     }
     for (std::size_t l = 0; l < labels; ++l)
       sinks_.row(points_.original(retired_ + l),
-                 std::span<const std::uint32_t>(row_others_.data() + row_start_[l], row_length_[l]));
-    std::copy(directed_.data() + cut, directed_.data() + directed_size_, directed_.data());
-    directed_size_ -= cut;
+                 std::span<const std::uint32_t>(row_others_.data() + pending_start_[l] + fresh_start_[l], row_length_[l]));
+
+    // What stays pending (labels >= below) is the two runs' tails, merged by label into
+    // the other pending buffer: each entry is sorted once, in its batch, and merged
+    // once a batch until its label retires (sorting the pending entries again with
+    // every batch was the first line of the profile at 10^8 points).
+    const std::size_t rest = (pending_size_ - pc) + (fresh - fc);
+    core::PageArray<std::uint64_t>& next = pending_[1 - current_];
+    next.reserve(rest);
+    std::merge(pending + pc, pending + pending_size_, batch + fc, batch + fresh, next.data(),
+               [](std::uint64_t x, std::uint64_t y) { return x >> 32 < y >> 32; });
+    current_ = 1 - current_;
+    pending_size_ = rest;
   }
 
   void retire(std::uint64_t below) {
@@ -296,11 +312,14 @@ class Accumulator {
   std::vector<std::uint64_t> seen_;            // the threads' tables of emitted edges
   std::vector<std::size_t> block_short_, block_long_;
   // Entries (label << 32 | the neighbour's original index) of the labels not retired
-  // yet, then the batch's: [0, directed_size_).
-  core::PageArray<std::uint64_t> directed_;
-  std::size_t directed_size_ = 0;
-  std::vector<std::uint64_t> directed_tmp_;
-  std::vector<std::size_t> row_start_, row_length_;
+  // yet, sorted by label: pending_[current_][0, pending_size_) (the other buffer takes
+  // the next batch's merge); and the batch's own, fresh_.
+  core::PageArray<std::uint64_t> pending_[2], fresh_;
+  std::size_t pending_size_ = 0;
+  int current_ = 0;
+  // A retiring label's runs: [pending_start_[l], pending_start_[l + 1]) of the pending
+  // entries, [fresh_start_[l], fresh_start_[l + 1]) of the batch's.
+  std::vector<std::size_t> pending_start_, fresh_start_, row_length_;
   std::vector<std::uint32_t> row_others_;  // originals: below 2^32 (field.cpp)
   std::uint64_t retired_ = 0;
   AccumulateStats stats_;
