@@ -126,9 +126,9 @@ FieldSummary compute_fields(const FieldOptions& options) {
   std::uint64_t max_tets = budget_tets;
   // Scratch reused, not re-faulted; at most 2^20 tets (the neighbours may take more,
   // below): fewer batches are fewer parallel regions (on a loaded machine an idle
-  // OpenMP thread spins through every serial step between them), fewer re-sorts of the
-  // pending entries, and several frames a batch to
-  // decode in parallel. `run`'s frames hold a little over 2^18 tets, so at 2^19 nearly
+  // OpenMP thread spins through every serial step between them), fewer merges of the
+  // pending entries, and several frames a batch to decode in parallel. `run`'s frames
+  // hold a little over 2^18 tets, so at 2^19 nearly
   // every batch was one frame, decoded by one thread while the others waited (10^6
   // uniform points, 1G, --neighbours alone: 23 batches at 2^19, 9 at 2^20, 2.4-2.5 s of
   // CPU against 3.1-3.9 s; 10^7, --density: 226 batches -> 77, 8.4-8.6 -> 7.6 s; 2^21
@@ -144,10 +144,12 @@ FieldSummary compute_fields(const FieldOptions& options) {
     throw UsageError("field: --neighbours handles up to 2^32 points");
   BatchPlan plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
   // With neighbours, the entries of the unretired labels (about 16 a window label) are
-  // sorted again with every batch: batches of 2^20 tets, whose new entries are fewer
-  // than those, spend most of the sort on old ones. Larger batches, as the budget
-  // allows, keep the new entries the larger part (10^8 uniform points, 8G: 763 batches
-  // of 2^20 tets and a 258,333-label window; 167 of 2^22: 248.8 s -> 215.6 s).
+  // carried from batch to batch (merged with each batch's, field_accumulate.cpp):
+  // batches of 2^20 tets, whose new entries are fewer than those, spend most of that
+  // work on old ones. Larger batches, as the budget allows, keep the new entries the
+  // larger part (10^8 uniform points, 8G, when the pending entries were still sorted
+  // again: 763 batches of 2^20 tets and a 258,333-label window; 167 of 2^22: 248.8 s ->
+  // 215.6 s).
   if (options.neighbours && !options.batch_tets) {
     const std::uint64_t wanted = std::min(std::bit_ceil(16 * plan.window_labels), budget_tets);
     if (wanted > max_tets) plan = plan_batches(reader.frames(), n, max_tets = wanted, max_labels, options.input);

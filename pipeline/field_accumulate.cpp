@@ -122,8 +122,8 @@ class Accumulator {
   // neighbour's original) entries sorted by label, beside the entries of the labels
   // not retired yet (sorted by label too). A retiring label's entries are a run of
   // each: together, sorted by original and made unique (an edge whose tets lie in
-  // several batches came once per batch) they are its row. Rows are whole and sorted here, so the output only has to place them
-  // (field_neighbours.hpp).
+  // several batches came once per batch) they are its row. Rows are whole and sorted
+  // here, so the output only has to place them (field_neighbours.hpp).
   //
   // An edge is keyed (a - lo) << dbits | (c - a) (a < c its labels): the labels of a
   // tet are a few slabs apart, so c - a is small and the key fits in about 33 bits,

@@ -158,7 +158,7 @@ void NeighbourRows::add(std::uint64_t original, std::span<const std::uint32_t> n
   if (!buf.empty() && buf.size() + row > words_per_bucket_) spill(b);
   // Reserved once: a doubling vector would hold one and a half buffers while it grows.
   if (buf.capacity() == 0) buf.reserve(std::size_t(words_per_bucket_));
-  buf.push_back(std::uint32_t(original));  // originals and degrees are below 2^32 (the header)
+  buf.push_back(std::uint32_t(original));  // below 2^32: field.cpp refuses more points
   buf.push_back(std::uint32_t(neighbours.size()));
   buf.insert(buf.end(), neighbours.begin(), neighbours.end());
   bucket_words_[b] += row;
