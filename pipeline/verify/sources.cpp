@@ -4,8 +4,6 @@
 #include "core/error.hpp"
 #include "io/tet_reader.hpp"
 
-#include <sys/mman.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdint>
