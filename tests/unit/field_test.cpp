@@ -25,6 +25,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <set>
@@ -578,6 +579,22 @@ TEST_F(FieldTest, NeighbourRowsBucketsAndParts) {
   for (const char* name : {"low", "buckets"})
     for (const char* what : {".off.npy", ".idx.npy"})
       EXPECT_EQ(file_bytes(path(std::string("mem") + what)), file_bytes(path(std::string(name) + what))) << name << what;
+}
+
+// int32 holds the CSR pair while the largest index (original_end - 1) and the entry
+// count are at most INT32_MAX; past it the writer needs int64 and refuses int32.
+TEST_F(FieldTest, NeighbourRowsInt32Limit) {
+  const std::uint64_t int32_max = std::uint64_t(std::numeric_limits<std::int32_t>::max());
+  const std::uint32_t row[] = {0, 1};
+  {
+    pipeline::NeighbourRows rows(int32_max + 1, 1, 2, std::uint64_t(1) << 30, path("at.rows"));
+    rows.add(int32_max, row);  // the largest index int32 holds
+    EXPECT_FALSE(rows.needs_int64());
+  }
+  pipeline::NeighbourRows rows(int32_max + 2, 1, 2, std::uint64_t(1) << 30, path("past.rows"));
+  rows.add(int32_max + 1, row);
+  EXPECT_TRUE(rows.needs_int64());
+  EXPECT_THROW(rows.write(path("past.off.npy"), path("past.idx.npy"), false), std::logic_error);
 }
 
 TEST_F(FieldTest, PerturbedLocationIsExclusive) {
