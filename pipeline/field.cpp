@@ -67,9 +67,10 @@ double parse_double(const std::string& s, const std::string& what) {
 // and the external sorts of the outputs their share. The ring is a power of two.
 constexpr std::uint64_t kReserve = std::uint64_t(40) << 20;  // code, decoders, I/O buffers
 std::uint64_t label_bytes(const FieldOptions&) { return 64; }
-// With neighbours: 6 packed edges and their radix buffer (96), the directed entries,
-// about 3 a tet after the batch's de-duplication, 16 bytes, twice (96), and the rows
-// cut from them, 8 bytes an entry plus their starts and lengths (32).
+// With neighbours: 6 packed edges and their radix buffer (96), the batch's entries,
+// about 3 a tet after the batch's de-duplication, and their radix buffer (96 when an
+// entry was 16 bytes; 8 since session 32), and the rows cut from them plus their
+// starts and lengths (32 with 8-byte entries; 4 now). The 224 are kept as a bound.
 // The neighbours alone keep a volume a tet (8) instead of the contributions (72).
 bool volumes_only(const FieldOptions& o) { return o.neighbours && !o.density && !o.voronoi && !o.grid_wanted(); }
 std::uint64_t tet_bytes(const FieldOptions& o) { return (volumes_only(o) ? 40 : 104) + (o.neighbours ? 224 : 0); }
@@ -160,7 +161,8 @@ FieldSummary compute_fields(const FieldOptions& options) {
   // The output sorts take what the window and the batches leave (at least 20%): the
   // window is usually far below its cap, and a sort that fits in memory never spills.
   // With neighbours, the entries of the window's unretired labels stay pending from
-  // batch to batch: about 16 of 16 bytes a label, and their radix buffer.
+  // batch to batch: about 16 of 8 bytes a label, in two buffers (the merge writes the
+  // next batch's into the other); 512 bytes a label bound them with room to spare.
   const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options) +
                              (options.neighbours ? plan.window_labels * 512 : 0);
   const std::uint64_t sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
