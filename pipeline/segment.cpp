@@ -430,9 +430,11 @@ bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
 bool SegmentWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs) {
   const TetId t = q.tet;
   // A tet proved empty stays empty for the rest of the segment: later repairs insert
-  // only points that were missing, and none of those is in its ball.
+  // only points that were missing, and none of those is in its ball. (In the first
+  // round the table is empty and each queued tet unique: no lookup, a cache miss each
+  // on a table of millions of tets.)
   const auto [key_a, key_b] = tet_key(t);
-  if (proved_empty_.contains(key_a, key_b)) return true;
+  if (stats_.rounds > 1 && proved_empty_.contains(key_a, key_b)) return true;
   const ConflictBall& query_ball = q.ball;
   const double lo = q.lo, hi = q.hi;
   const bool outside_clear = q.outside_clear, strip_clear = q.strip_clear;
