@@ -8,6 +8,8 @@
 #include "core/spatial_sort.hpp"
 #include "pipeline/temp_files.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -281,6 +283,16 @@ class SegmentWorker {
   TetSet proved_empty_;
   static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
   SegmentStats stats_;
+  // One round's work, for the debug log (`--log-level debug`, scripts/plot-rounds): on
+  // a terrain the rounds after the first, the window's ragged edge, cost more than the
+  // first. queries: those run in the round (the queued tets not proved before, and the
+  // hull facets', which run with the range tests and count in their seconds);
+  // conflicts: queued tets a missing point was found in.
+  struct RoundWork {
+    std::uint64_t checked = 0, queued = 0, queries = 0, conflicts = 0;
+    double seconds_range = 0, seconds_queries = 0;
+  };
+  RoundWork round_;
 };
 
 void SegmentWorker::load_window(bool with_hull) {
@@ -412,6 +424,7 @@ bool SegmentWorker::query_extent(TetId t, ConflictBall& ball, double& lo, double
 }
 
 bool SegmentWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
+  ++round_.checked;
   if (dt_.is_infinite(t)) return check_hull_facet(t, repairs);
   QueuedTet q;
   q.tet = t;
@@ -537,6 +550,9 @@ bool SegmentWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repair
 // star never changes again (no later repair point lies in any of its tets' balls),
 // so its tets can be emitted after the last round.
 std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
+  round_ = RoundWork{};
+  const std::uint64_t queries_before = stats_.queries;
+  auto t0 = Clock::now();
   auto block_pending = [&](TetId t) {
     for (int i = 0; i < 4; ++i) {
       const VertexId v = dt_.vertex(t, i);
@@ -564,11 +580,16 @@ std::size_t SegmentWorker::check_round(std::vector<std::uint64_t>& repairs) {
         if (!check_tet(t, repairs)) block_pending(t);
     }
   }
+  round_.seconds_range = since(t0);
+  t0 = Clock::now();
   // The queries, along the sort axis (a tet of several pending stars once).
   std::sort(queued_.begin(), queued_.end());
   queued_.erase(std::unique(queued_.begin(), queued_.end()), queued_.end());
+  round_.queued = queued_.size();
   for (const QueuedTet& q : queued_)
-    if (!query_tet(q, repairs)) block_pending(q.tet);
+    if (!query_tet(q, repairs)) block_pending(q.tet), ++round_.conflicts;
+  round_.seconds_queries = since(t0);
+  round_.queries = stats_.queries - queries_before;
   queued_.clear();
   pending_.clear();
   for (std::size_t z = 0; z < zone_state_.size(); ++z) {
@@ -702,10 +723,22 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     zone_state_[z] = kPending;
   }
   std::vector<std::uint64_t> repairs;
+  // (round: its work as check_round counted it; inserted, seconds: the repairs after it.)
+  auto log_round = [&](std::size_t inserted, double seconds) {
+    spdlog::debug("zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
+                  "({} found a conflict, {:.3f} s), {} repair points inserted ({:.3f} s)",
+                  plan_->zone_begin, plan_->zone_end, strip_.lo, strip_.hi, stats_.rounds, round_.checked,
+                  round_.seconds_range, round_.queued, round_.queries, round_.conflicts, round_.seconds_queries,
+                  inserted, seconds);
+  };
   for (;;) {
     ++stats_.rounds;
     repairs.clear();
-    if (check_round(repairs) == 0) break;
+    if (check_round(repairs) == 0) {
+      log_round(0, 0);
+      break;
+    }
+    const auto t_insert = Clock::now();
     std::sort(repairs.begin(), repairs.end());
     repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
     // Append the repair points to the window and insert them.
@@ -721,6 +754,7 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
     stats_.repair_points += repairs.size();
+    log_round(repairs.size(), since(t_insert));
   }
   emit(out);
   stats_.seconds_check = since(t0);
