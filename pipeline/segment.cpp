@@ -742,11 +742,14 @@ SegmentStats SegmentWorker::run(const SegmentPlan& plan, const ZoneStrip& strip,
     zone_state_[z] = kPending;
   }
   std::vector<std::uint64_t> repairs;
-  // (round: its work as check_round counted it; inserted, seconds: the repairs after it.)
+  // (round: its work as check_round counted it; inserted, seconds: the repairs after it.
+  // A zone that is its whole segment spans (-inf, inf) across.)
+  const double inf = std::numeric_limits<double>::infinity();
+  const double strip_lo = strip_.axis >= 0 ? strip_.lo : -inf, strip_hi = strip_.axis >= 0 ? strip_.hi : inf;
   auto log_round = [&](std::size_t inserted, double seconds) {
     spdlog::debug("zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
                   "({} found a conflict, {:.3f} s), {} repair points inserted ({:.3f} s)",
-                  plan_->zone_begin, plan_->zone_end, strip_.lo, strip_.hi, stats_.rounds, round_.checked,
+                  plan_->zone_begin, plan_->zone_end, strip_lo, strip_hi, stats_.rounds, round_.checked,
                   round_.seconds_range, round_.queued, round_.queries, round_.conflicts, round_.seconds_queries,
                   inserted, seconds);
   };

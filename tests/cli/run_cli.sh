@@ -6,6 +6,7 @@
 # Usage: bash run_cli.sh /path/to/tetstream
 set -euo pipefail
 T=$(realpath "${1:?usage: run_cli.sh /path/to/tetstream}")
+scripts=$(realpath "$(dirname "$0")/../../scripts")
 dir=$(mktemp -d)
 trap 'chmod -R u+w "$dir" 2>/dev/null; rm -rf "$dir"' EXIT
 cd "$dir"
@@ -38,6 +39,20 @@ for f in points.ply points.npy points.txt; do
 done
 "$T" -q run - --format f64 -o stdin.tets --memory 64M --tmpdir tmp --zone-points 2000 < points.f64
 cmp -s <("$T" -q cat out.tets) <("$T" -q cat stdin.tets) || fail "stdin gives other tets"
+no_leftovers
+
+# The debug log's check rounds (scripts/plot-rounds reads them): a first round for
+# every zone, and the rounds' queries add up to --json's.
+s=$("$T" --log-level debug --json run points.f64 -o dbg.tets --memory 64M --tmpdir tmp --zone-points 2000 2> debug.log)
+cmp -s out.tets dbg.tets || fail "--log-level debug changed the output"
+zones=$(echo "$s" | json "d['zones']")
+[ "$(grep -c ' round 1: ' debug.log)" = "$zones" ] || fail "debug log: $(grep -c ' round 1: ' debug.log) first rounds for $zones zones"
+queries=$(echo "$s" | json "d['queries']")
+sum=$(grep ' round [0-9]*: ' debug.log | grep -o ' [0-9]* queries (' | awk '{s += $1} END {print s}')
+[ "$sum" = "$queries" ] || fail "debug log: the rounds' queries add up to $sum, --json says $queries"
+"$scripts/plot-rounds" -o rounds.png debug.log:shell > rounds.txt || fail "plot-rounds: $(cat rounds.txt)"
+grep -q "all: $queries queries" rounds.txt || fail "plot-rounds' total: $(grep 'all:' rounds.txt)"
+[ -s rounds.png ] || fail "plot-rounds drew nothing"
 no_leftovers
 
 # Bad input: one line naming the file and offset, exit 1, nothing left behind.
