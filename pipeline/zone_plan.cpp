@@ -143,10 +143,6 @@ std::uint64_t estimate_window(const SortedView& view, const SegmentPlan& p, cons
   return std::uint64_t(double(n) * double(in) / double(seen));
 }
 
-}  // namespace
-
-namespace {
-
 // The segments of segment_points labels each and their zones, with the windows' bytes
 // as their points are estimated: the largest run of `threads` consecutive zones'
 // windows, and the zones' outputs. local_buffers: each segment's buffers at its own
@@ -222,8 +218,11 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
       }
       return false;
     };
+    if (local_buffers) {  // the same size with the plan's buffers, if they fit
+      SegmentCut plain = measure_cut(view, plan, points, false, first_label, t, end_label);
+      if (plain.window_bytes <= plan.available) cut = std::move(plain);
+    }
     std::optional<SegmentCut> found;
-    if (local_buffers && fitting(points, found) && found->plans.size() == cut.plans.size()) cut = std::move(*found);
     for (int more = 0; more < 4; ++more) {
       const std::uint64_t segments = (todo + points - 1) / std::max<std::uint64_t>(points, 1);
       if (segments <= 1) break;
