@@ -5,7 +5,13 @@
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
-set(TETSTREAM_LIBRARIES tetstream_core tetstream_io tetstream_pipeline)
+# tetstream_pipeline is an interface target over the pipeline's rooms (pipeline/CMakeLists.txt),
+# each a static library of its own, installed and exported beside it.
+set(TETSTREAM_PIPELINE_LIBRARIES "")
+foreach(room ${TETSTREAM_PIPELINE_ROOMS})
+  list(APPEND TETSTREAM_PIPELINE_LIBRARIES tetstream_pipeline_${room})
+endforeach()
+set(TETSTREAM_LIBRARIES tetstream_core tetstream_io tetstream_pipeline ${TETSTREAM_PIPELINE_LIBRARIES})
 set(TETSTREAM_PACKAGE_DIR ${CMAKE_INSTALL_LIBDIR}/cmake/tetstream)
 # The libraries include headers from the source root ("io/tet_reader.hpp"); installed,
 # from include/tetstream.
@@ -18,6 +24,15 @@ foreach(lib core io pipeline)
     get_filename_component(dir ${header} DIRECTORY)
     install(FILES ${header} DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/tetstream/${dir} COMPONENT dev)
   endforeach()
+endforeach()
+foreach(room ${TETSTREAM_PIPELINE_ROOMS})
+  set_target_properties(tetstream_pipeline_${room} PROPERTIES EXPORT_NAME pipeline_${room} INTERFACE_INCLUDE_DIRECTORIES
+    "$<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}>;$<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}/tetstream>")
+endforeach()
+# pkg-config lists the rooms from the top down, so that a room's symbols follow their users.
+set(TETSTREAM_PC_PIPELINE "")
+foreach(room ${TETSTREAM_PIPELINE_ROOMS})
+  string(PREPEND TETSTREAM_PC_PIPELINE "-ltetstream_pipeline_${room} ")
 endforeach()
 
 install(TARGETS tetstream RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT bin)

@@ -3,7 +3,7 @@
 // only from the kernel's public accessors and the exact predicates, so it checks the
 // kernel rather than trusting it. Used by the tests and by the pipeline's self-checks.
 //
-// What "valid" means here (DESIGN.md section 2):
+// What "valid" means here (docs/verify.md):
 //   storage      every alive tet has 4 distinct vertices, at most one of them the
 //                infinite vertex, all of them points of the kernel's array;
 //   orientation  every finite tet is positively oriented (exact orient3d > 0);

@@ -5,9 +5,8 @@
 // Why not std::vector: a vector grows by allocating twice its capacity and copying,
 // so a 250 MiB tet array that outgrows its reservation holds 750 MiB for a moment and
 // 500 MiB afterwards; and a kernel reused from window to window keeps the capacity of
-// its largest window for good. On a terrain at 10^7 points those two took the
-// triangulation 50% past its memory budget (heaptrack: 986 MiB in the kernels' tet
-// arrays against a plan of 164 MiB). Here growth is mremap: the pages move, nothing is
+// its largest window for good: both put the triangulation far past its memory
+// budget on windows of uneven size. Here growth is mremap: the pages move, nothing is
 // copied and nothing is held twice; and release_beyond() hands back the pages past
 // what the next window needs, so resident memory follows the window in use, not the
 // largest one ever seen.

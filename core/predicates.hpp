@@ -94,7 +94,7 @@ inline int infinite_conflict_sos(const double* a, const double* b, const double*
 // Circumsphere of a positively oriented tetrahedron, in floating point, with a
 // rigorous bound on its error: the true centre c* and squared radius r2* satisfy
 // |c*_k - center[k]| <= center_error for each k, and |sqrt(r2*) - radius| <= radius_error.
-// Used by the pipeline's window test (DESIGN.md section 3), which treats "too close
+// Used by the pipeline's certificate (docs/certificate.md), which treats "too close
 // to call" as failing, so only soundness of the bound matters, not tightness.
 struct Circumsphere {
   double center[3];

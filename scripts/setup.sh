@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake ninja-build pkg-config
+  build-essential cmake ninja-build pkg-config clang-format
   libboost-iostreams-dev libzstd-dev zlib1g-dev libspdlog-dev libgtest-dev libcli11-dev nlohmann-json3-dev
   # tests and benchmarks only: reference triangulations and independent mesh readers
   libcgal-dev libgmp-dev libmpfr-dev python3 python3-numpy python3-meshio gmsh libgmsh-dev time

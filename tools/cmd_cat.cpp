@@ -18,7 +18,7 @@
 #include "core/error.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_stream_reader.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/util/progress.hpp"
 #include "tools/command.hpp"
 
 #include <algorithm>

@@ -3,7 +3,7 @@
 // whose lock no process holds. Temporary directories go; checkpoints, which a
 // `run --resume` could still continue, are listed and go only with --checkpoints.
 // Only the files a job writes are removed, never anything else in them.
-#include "pipeline/work_dir.hpp"
+#include "pipeline/files/work_dir.hpp"
 #include "tools/command.hpp"
 
 #include <spdlog/spdlog.h>

@@ -5,7 +5,7 @@
 // nothing is left behind on failure.
 #include "io/mesh_export.hpp"
 #include "io/tet_reader.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/util/progress.hpp"
 #include "tools/command.hpp"
 
 #include <spdlog/spdlog.h>

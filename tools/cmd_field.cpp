@@ -1,9 +1,9 @@
 // `tetstream field`: per-point fields from a .tets container, out of core
 // (pipeline/field.hpp, docs/fields.md).
 #include "core/error.hpp"
-#include "pipeline/field.hpp"
-#include "pipeline/progress.hpp"
-#include "pipeline/run.hpp"
+#include "pipeline/field/field.hpp"
+#include "pipeline/util/progress.hpp"
+#include "pipeline/run/run.hpp"
 #include "tools/command.hpp"
 
 #include <spdlog/spdlog.h>

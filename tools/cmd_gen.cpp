@@ -2,8 +2,8 @@
 #include "core/error.hpp"
 #include "io/point_generators.hpp"
 #include "io/point_writer.hpp"
-#include "pipeline/interrupt.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/util/interrupt.hpp"
+#include "pipeline/util/progress.hpp"
 #include "tools/command.hpp"
 #include "tools/count_option.hpp"
 

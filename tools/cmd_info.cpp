@@ -2,7 +2,7 @@
 // so every coordinate is checked finite), or the summary of a .tets container.
 #include "core/error.hpp"
 #include "io/point_reader.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/util/progress.hpp"
 #include "tools/command.hpp"
 #include "tools/info_tets.hpp"
 #include "tools/point_options.hpp"

@@ -2,7 +2,7 @@
 // Reads only the header, index and footer (the open checks them), so it is instant on
 // any size of file; `--check` also reads every point and frame and checks their CRCs.
 #include "io/tet_reader.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/util/progress.hpp"
 #include "tools/info_tets.hpp"
 
 #include <charconv>

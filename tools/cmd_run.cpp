@@ -1,10 +1,10 @@
 // `tetstream run`: triangulate a point file out of core into a .tets container.
 #include "core/error.hpp"
 #include "io/point_format.hpp"
-#include "pipeline/progress.hpp"
-#include "pipeline/run.hpp"
-#include "pipeline/run_distributed.hpp"
-#include "pipeline/summary_json.hpp"
+#include "pipeline/util/progress.hpp"
+#include "pipeline/run/run.hpp"
+#include "pipeline/distributed/run_distributed.hpp"
+#include "pipeline/run/summary_json.hpp"
 #include "tools/command.hpp"
 #include "tools/point_options.hpp"
 #include "tools/world.hpp"
@@ -61,7 +61,7 @@ void setup_run(CLI::App& app, Context& ctx) {
       ->capture_default_str();
   // A segment is a label range of the sorted file, a zone a strip of a segment: the
   // option that sets a segment's size was named --zone-points, which stays an alias.
-  cmd->add_option("--segment-points,--zone-points", args->options.zone_points,
+  cmd->add_option("--segment-points,--zone-points", args->options.segment_points,
                   "Points per segment (default: from --memory; small values force many segments). "
                   "--zone-points is the old name, kept as an alias for one release");
   cmd->add_option("--zones", args->options.zones,

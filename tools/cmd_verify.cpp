@@ -1,10 +1,10 @@
 // `tetstream verify`: check that a .tets container holds the Delaunay triangulation of
 // its points (pipeline/verify.hpp, docs/verify.md).
 #include "core/error.hpp"
-#include "pipeline/progress.hpp"
-#include "pipeline/run.hpp"
-#include "pipeline/summary_json.hpp"
-#include "pipeline/verify.hpp"
+#include "pipeline/util/progress.hpp"
+#include "pipeline/run/run.hpp"
+#include "pipeline/run/summary_json.hpp"
+#include "pipeline/verify/verify.hpp"
 #include "tools/command.hpp"
 #include "tools/world.hpp"
 

@@ -1,7 +1,7 @@
 // tetstream: exact 3D Delaunay triangulation of point sets larger than memory.
 #include "core/error.hpp"
 #include "io/output_file.hpp"
-#include "pipeline/interrupt.hpp"
+#include "pipeline/util/interrupt.hpp"
 #include "tools/command.hpp"
 #include "tools/world.hpp"
 

@@ -2,7 +2,7 @@
 // The processes of this run of the binary: MPI's world when an MPI launcher started it
 // (and the build has MPI: tools/world_mpi.cpp), else one process (tools/world_none.cpp).
 // The libraries know only pipeline::Communicator; MPI is linked into the binary alone.
-#include "pipeline/communicator.hpp"
+#include "pipeline/util/communicator.hpp"
 
 namespace tetstream::cli {
 

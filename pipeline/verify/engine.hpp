@@ -10,19 +10,19 @@
 //   ranks.ipp           a distributed job's hand-overs: the front of records whose keys
 //                       another rank owns, the vertex bitmaps, boundary edges, the report.
 // Internal: included only by pipeline/verify/engine.cpp (it defines non-inline helpers).
-#include "pipeline/verify.hpp"
+#include "pipeline/verify/verify.hpp"
 
-#include "pipeline/communicator.hpp"
-#include "pipeline/interrupt.hpp"
+#include "pipeline/util/communicator.hpp"
+#include "pipeline/util/interrupt.hpp"
 #include "pipeline/verify/exact_sum.hpp"
 #include "pipeline/verify/split.hpp"
 
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "io/tet_reader.hpp"
-#include "pipeline/external_sort.hpp"
-#include "pipeline/progress.hpp"
-#include "pipeline/temp_files.hpp"
+#include "pipeline/files/external_sort.hpp"
+#include "pipeline/util/progress.hpp"
+#include "pipeline/files/temp_files.hpp"
 
 #include <spdlog/spdlog.h>
 #include <sys/mman.h>

@@ -1,8 +1,8 @@
 // verify's options and report: names of the violations, validation, the summary.
-#include "pipeline/verify.hpp"
+#include "pipeline/verify/verify.hpp"
 
 #include "core/error.hpp"
-#include "pipeline/progress.hpp"
+#include "pipeline/util/progress.hpp"
 
 #include <sstream>
 #include <string>

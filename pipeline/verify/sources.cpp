@@ -1,5 +1,5 @@
 // Where verify reads from: points and tets held in memory, or a container.
-#include "pipeline/verify.hpp"
+#include "pipeline/verify/verify.hpp"
 
 #include "core/error.hpp"
 #include "io/tet_reader.hpp"

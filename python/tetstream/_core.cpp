@@ -15,10 +15,10 @@
 #include "core/huge_pages.hpp"
 #include "io/point_format.hpp"
 #include "io/tet_reader.hpp"
-#include "pipeline/interrupt.hpp"
-#include "pipeline/run.hpp"
-#include "pipeline/summary_json.hpp"
-#include "pipeline/verify.hpp"
+#include "pipeline/util/interrupt.hpp"
+#include "pipeline/run/run.hpp"
+#include "pipeline/run/summary_json.hpp"
+#include "pipeline/verify/verify.hpp"
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
@@ -271,7 +271,7 @@ void apply_run_options(pipeline::RunOptions& o, const py::dict& options) {
     if (value.is_none()) continue;
     if (k == "tmpdir") o.tmpdir = get_string(value);
     else if (k == "buffer") o.buffer_spacings = value.cast<double>();
-    else if (k == "zone_points") o.zone_points = value.cast<std::uint64_t>();
+    else if (k == "segment_points" || k == "zone_points") o.segment_points = value.cast<std::uint64_t>();
     else if (k == "zones") {
       const int z = value.cast<int>();
       if (z < 0 || z > 4096) throw UsageError("zones must be in [0, 4096]");

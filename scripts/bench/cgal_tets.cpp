@@ -5,7 +5,7 @@
 //
 //   PREFIX.x.bin      points sorted along x (the external sort's order);
 //   PREFIX.cells.bin  10 slabs along x, each sorted by cells of about 8 points in
-//                     (y, z, x) order (a slab sorted by cell, DESIGN.md section 3).
+//                     (y, z, x) order (a slab sorted by cell).
 //
 // In both, the tets are sorted by minimum label (stable: within one minimum the
 // order is CGAL's), the order the pipeline's min-vertex filter emits them in.

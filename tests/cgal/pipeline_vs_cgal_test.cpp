@@ -4,7 +4,7 @@
 #include "io/point_generators.hpp"
 #include "io/point_writer.hpp"
 #include "io/tet_reader.hpp"
-#include "pipeline/run.hpp"
+#include "pipeline/run/run.hpp"
 #include "../unit/tet_sets.hpp"
 
 #include <CGAL/Delaunay_triangulation_3.h>
@@ -55,7 +55,7 @@ TEST_P(PipelineVsCgal, SameTets) {
   pipeline::RunOptions o;
   o.input = input;
   o.output = output;
-  o.zone_points = c.zone_points;
+  o.segment_points = c.zone_points;
   o.progress = false;
   const auto summary = pipeline::run_job(o);
   EXPECT_GE(summary.segments, 10u);

@@ -18,7 +18,7 @@ cmake --build "$build" --target tetstream tetstream_man >/dev/null
 cmake --install "$build" --prefix "$prefix" >"$scratch/install.log" || fail "cmake --install: $(tail -5 "$scratch/install.log")"
 T="$prefix/bin/tetstream"
 [ -x "$T" ] || fail "no binary in $prefix/bin"
-for f in lib/libtetstream_io.a lib/libtetstream_core.a lib/libtetstream_pipeline.a \
+for f in lib/libtetstream_io.a lib/libtetstream_core.a lib/libtetstream_pipeline_run.a \
   include/tetstream/io/tet_reader.hpp include/tetstream/core/error.hpp \
   lib/cmake/tetstream/tetstreamConfig.cmake lib/cmake/tetstream/tetstreamConfigVersion.cmake \
   lib/cmake/tetstream/tetstreamTargets.cmake lib/pkgconfig/tetstream.pc share/man/man1/tetstream.1 \

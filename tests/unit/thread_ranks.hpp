@@ -2,7 +2,7 @@
 // K ranks as K threads of one process, for tests of distributed code without MPI: a
 // pipeline::Communicator over shared memory (every collective is a barrier, a copy and
 // a barrier). run_ranks(K, f) calls f(comm) on K threads and waits for them.
-#include "pipeline/communicator.hpp"
+#include "pipeline/util/communicator.hpp"
 
 #include <barrier>
 #include <cstring>

@@ -1,0 +1,175 @@
+#include "pipeline/files/work_dir.hpp"
+
+#include "core/error.hpp"
+
+#include <cerrno>
+#include <cstring>
+#include <regex>
+#include <vector>
+#include <dirent.h>
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace tetstream::pipeline {
+
+namespace {
+
+std::string errno_text() { return std::strerror(errno); }
+
+// Opens (creating) DIR/lock and takes it without waiting. The fd, or -1 with errno
+// EWOULDBLOCK when another process holds it. O_NOFOLLOW: a planted link is refused.
+int try_lock(const std::string& dir, bool create) {
+  const std::string lock = dir + "/" + WorkDir::kLock;
+  const int fd = ::open(lock.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | (create ? O_CREAT : 0), 0600);
+  if (fd < 0) return -1;
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    ::close(fd);
+    errno = err;
+    return -1;
+  }
+  return fd;
+}
+
+// PATH is a real directory (lstat: not a link) of this user holding the marker.
+bool is_own_work_dir(const std::string& path) {
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0 || !S_ISDIR(st.st_mode) || st.st_uid != ::geteuid()) return false;
+  struct stat marker {};
+  const std::string m = path + "/" + WorkDir::kMarker;
+  return ::lstat(m.c_str(), &marker) == 0 && S_ISREG(marker.st_mode);
+}
+
+void write_marker(const std::string& dir) {
+  const std::string m = dir + "/" + WorkDir::kMarker;
+  const int fd = ::open(m.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0600);
+  if (fd < 0) throw IoError(m + ": cannot create: " + errno_text());
+  static constexpr char kText[] = "made by tetstream: its working files; removed when the job ends\n";
+  const bool ok = ::write(fd, kText, sizeof kText - 1) == ssize_t(sizeof kText - 1);
+  ::close(fd);
+  if (!ok) throw IoError(m + ": cannot write: " + errno_text());
+}
+
+}  // namespace
+
+bool is_work_file_name(const std::string& name) {
+  static const std::regex kNames(
+      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?)");
+  return std::regex_match(name, kNames);
+}
+
+int work_file_rank(const std::string& name) {
+  static const std::regex kRank(R"(rank-([0-9]{1,9})[-.].*)");
+  std::smatch m;
+  if (!is_work_file_name(name) || !std::regex_match(name, m, kRank)) return -1;
+  return std::stoi(m[1].str());
+}
+
+WorkDir WorkDir::create_unique(const std::string& parent, const std::string& prefix) {
+  std::string templ = (parent.empty() ? std::string(".") : parent) + "/" + prefix + "-XXXXXX";
+  std::vector<char> buf(templ.begin(), templ.end());
+  buf.push_back('\0');
+  if (!::mkdtemp(buf.data())) throw IoError("cannot create a temporary directory in " + parent + ": " + errno_text());
+  WorkDir w(buf.data());
+  w.lock_or_refuse();
+  write_marker(w.dir_);
+  return w;
+}
+
+WorkDir WorkDir::open_or_create(const std::string& path) {
+  WorkDir w(path);
+  struct stat st {};
+  if (::lstat(path.c_str(), &st) != 0) {
+    if (errno != ENOENT) throw IoError(path + ": cannot stat: " + errno_text());
+    // Not its parents: a mistyped --tmpdir is an error, not a tree of new directories.
+    if (::mkdir(path.c_str(), 0700) != 0) throw IoError(path + ": cannot create the work directory: " + errno_text());
+    w.lock_or_refuse();
+    write_marker(path);
+    return w;
+  }
+  if (S_ISLNK(st.st_mode)) throw UsageError(path + " is a symbolic link: tetstream does not follow it (remove it)");
+  if (!S_ISDIR(st.st_mode)) throw UsageError(path + " exists and is not a directory");
+  if (!is_own_work_dir(path))
+    throw UsageError(path + " exists but was not made by tetstream (no " + kMarker +
+                     " in it, or another user's): move it away or choose another directory");
+  w.lock_or_refuse();
+  return w;
+}
+
+void WorkDir::lock_or_refuse() {
+  lock_fd_ = try_lock(dir_, /*create=*/true);
+  if (lock_fd_ >= 0) return;
+  if (errno == EWOULDBLOCK) throw UsageError(dir_ + " is in use: another tetstream process is running this job");
+  throw IoError(dir_ + "/" + kLock + ": cannot lock: " + errno_text());
+}
+
+WorkDir::WorkDir(WorkDir&& other) noexcept : dir_(std::move(other.dir_)), lock_fd_(other.lock_fd_) {
+  other.lock_fd_ = -1;
+}
+
+WorkDir::~WorkDir() {
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+}
+
+void WorkDir::remove_owned(bool keep_lock_and_marker) const {
+  DIR* d = ::opendir(dir_.c_str());
+  if (!d) return;
+  std::vector<std::string> names;
+  while (const dirent* e = ::readdir(d)) {
+    const std::string name = e->d_name;
+    const bool special = name == kLock || name == kMarker;
+    if (special ? !keep_lock_and_marker : is_work_file_name(name)) names.push_back(name);
+  }
+  ::closedir(d);
+  for (const std::string& name : names) {
+    const std::string p = path(name);
+    struct stat st {};
+    // A directory under one of our names is not ours: never recurse.
+    if (::lstat(p.c_str(), &st) == 0 && !S_ISDIR(st.st_mode)) ::unlink(p.c_str());
+  }
+}
+
+void WorkDir::clear() const { remove_owned(/*keep_lock_and_marker=*/true); }
+
+bool WorkDir::remove() noexcept {
+  if (dir_.empty()) return true;
+  remove_owned(/*keep_lock_and_marker=*/false);
+  if (lock_fd_ >= 0) ::close(lock_fd_), lock_fd_ = -1;
+  return ::rmdir(dir_.c_str()) == 0;
+}
+
+std::vector<StaleWorkDir> find_stale_work_dirs(const std::string& parent) {
+  std::vector<StaleWorkDir> found;
+  DIR* d = ::opendir(parent.empty() ? "." : parent.c_str());
+  if (!d) throw IoError(parent + ": cannot list: " + errno_text());
+  std::vector<std::string> candidates;
+  while (const dirent* e = ::readdir(d)) {
+    const std::string name = e->d_name;
+    if (name != "." && name != "..") candidates.push_back((parent.empty() ? "." : parent) + "/" + name);
+  }
+  ::closedir(d);
+  for (const std::string& path : candidates) {
+    if (!is_own_work_dir(path)) continue;
+    const int fd = try_lock(path, /*create=*/false);
+    // No lock file: the process died between mkdtemp and its lock; the marker is
+    // written after the lock, so a marked directory without one is not a live job's.
+    if (fd < 0 && errno == EWOULDBLOCK) continue;
+    if (fd >= 0) ::close(fd);
+    struct stat st {};
+    found.push_back({path, ::lstat((path + "/state.json").c_str(), &st) == 0});
+  }
+  return found;
+}
+
+bool remove_stale_work_dir(const StaleWorkDir& stale) {
+  try {
+    WorkDir w = WorkDir::open_or_create(stale.path);  // refuses a link or a directory not ours, or a live job's
+    return w.remove();
+  } catch (const Error&) {
+    return false;
+  }
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,146 @@
+#include "pipeline/run/stage_index.hpp"
+
+#include "core/error.hpp"
+#include "pipeline/sort/hull.hpp"
+#include "pipeline/run/stage.hpp"
+#include "pipeline/files/temp_files.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <exception>
+#include <fcntl.h>
+#include <unistd.h>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+void IndexStage::prepare() {
+  try {
+    // From the file's start to the records' end: a points section inside the partial
+    // output is mapped with the header before it (a few hundred bytes), so that the
+    // mapping's offsets are the file's (MappedRegions reads by them), and without
+    // the frames the writer appends after it.
+    mapping_.open(sorted_.path, std::size_t(sorted_.offset + sorted_.count * sorted_.layout.bytes()));
+  } catch (const std::exception& e) {
+    throw IoError(sorted_.path + ": cannot map: " + e.what());
+  }
+  view_.points = PointRecords(mapping_.data() + sorted_.offset, sorted_.layout);
+  view_.count = sorted_.count;
+  view_.axis = sorted_.axis;
+  for (int k = 0; k < 3; ++k) view_.bbox_min[k] = sorted_.bbox_min[k], view_.bbox_max[k] = sorted_.bbox_max[k];
+}
+
+std::uint32_t IndexStage::block_points(std::uint64_t count) const {
+  double volume = 1;
+  for (int k = 0; k < 3; ++k) volume *= view_.bbox_max[k] - view_.bbox_min[k];
+  return PointIndex::block_points_for(count, view_.bbox_max[view_.axis] - view_.bbox_min[view_.axis], volume);
+}
+
+void IndexStage::run() {
+  const ScopedThreads threads(threads_);
+  SortedView& view = view_;
+  view.sample_keys(/*release_file_pages=*/true);
+  index_.build(view.points, view.count, view.axis, block_points(view.count), /*release_pages=*/true);
+  view.index = &index_;
+  find_hull();
+}
+
+std::uint64_t IndexStage::build_shared_part(int rank, int ranks) {
+  const ScopedThreads threads(threads_);
+  view_.sample_keys(/*release_file_pages=*/true);
+  const std::uint64_t blocks = PointIndex::blocks_for(view_.count, block_points(view_.count));
+  const std::uint64_t k = std::uint64_t(std::max(ranks, 1)), r = std::uint64_t(rank);
+  index_.build_part(view_.points, view_.count, view_.axis, block_points(view_.count), blocks * r / k,
+                    blocks * (r + 1) / k, /*release_file_pages=*/true);
+  return index_.part_nodes();
+}
+
+namespace {
+// The shared index file, opened without following a link (it is in the job's own work
+// directory, which rank 0 holds locked).
+int open_shared(const std::string& path, int flags) {
+  const int fd = ::open(path.c_str(), flags | O_NOFOLLOW | O_CLOEXEC, 0600);
+  if (fd < 0) throw IoError(path + ": cannot open the shared point index: " + std::strerror(errno));
+  return fd;
+}
+}  // namespace
+
+void IndexStage::create_shared_file(const std::string& path, std::uint64_t total_nodes) const {
+  // A stopped job's file is rebuilt, never trusted (nothing records it).
+  if (::unlink(path.c_str()) != 0 && errno != ENOENT) throw IoError(path + ": cannot remove: " + std::strerror(errno));
+  const int fd = open_shared(path, O_RDWR | O_CREAT | O_EXCL);
+  const PointIndex::FileLayout layout = PointIndex::file_layout(
+      view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
+  const int rc = ::ftruncate(fd, off_t(layout.bytes));
+  const int saved = errno;
+  ::close(fd);
+  if (rc != 0) throw IoError(path + ": cannot size the shared point index: " + std::strerror(saved));
+}
+
+void IndexStage::write_shared_part(const std::string& path, std::uint64_t total_nodes, std::uint64_t first_node) {
+  const int fd = open_shared(path, O_RDWR);
+  try {
+    index_.write_part(fd, path, total_nodes, first_node);
+    if (::fdatasync(fd) != 0) throw IoError(path + ": fdatasync failed: " + std::strerror(errno));
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  ::close(fd);
+}
+
+void IndexStage::attach_shared(const std::string& path, std::uint64_t total_nodes, int ranks) {
+  const ScopedThreads threads(threads_);
+  const PointIndex::FileLayout layout = PointIndex::file_layout(
+      view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
+  try {
+    index_mapping_.open(path, std::size_t(layout.bytes));
+  } catch (const std::exception& e) {
+    throw IoError(path + ": cannot map: " + e.what());
+  }
+  if (index_mapping_.size() != layout.bytes) throw IoError(path + ": the shared point index has the wrong size");
+  // Planned as a rank's share: its queries read mostly its own labels' blocks, and
+  // the triangulation hands the mapping's pages back after every segment (release_pages).
+  index_.attach(reinterpret_cast<const std::byte*>(index_mapping_.data()), view_.points, view_.count, view_.axis,
+                block_points(view_.count), total_nodes, layout.bytes / std::uint64_t(std::max(ranks, 1)));
+  view_.index = &index_;
+  find_hull();
+}
+
+void IndexStage::release_pages() const {
+  release_mapped_pages(mapping_.data(), mapping_.size());
+  if (index_mapping_.is_open()) release_mapped_pages(index_mapping_.data(), index_mapping_.size());
+}
+
+void IndexStage::find_hull() {
+  SortedView& view = view_;
+  // The global hull: the hull of the runs' candidates.
+  {
+    std::vector<double> xyz;
+    // In label order, handing the pages back behind: a shell's hull candidates are
+    // all over the file.
+    ReleaseBehind release(view.points, 0, true);
+    for (std::uint64_t label : sorted_.hull_labels) {
+      double p[3];
+      view.points.xyz(label, p);
+      xyz.insert(xyz.end(), p, p + 3);
+      release.reached(label);
+    }
+    std::vector<std::uint32_t> hull = hull_vertex_candidates(xyz.data(), sorted_.hull_labels.size());
+    std::sort(hull.begin(), hull.end());  // candidates are sorted by label: so are these
+    for (std::uint32_t i : hull) {
+      SortedPoint p;
+      std::copy_n(&xyz[3 * std::size_t(i)], 3, p.xyz);
+      p.original = sorted_.hull_labels[i];
+      view.hull_points.push_back(p);
+    }
+    release_mapped_pages(mapping_.data(), mapping_.size());
+  }
+  if (!view.hull_points.empty())
+    hull_index_.build(records_of(view.hull_points.data()), view.hull_points.size(), view.axis,
+                      block_points(view.hull_points.size()), false);
+  view.hull_index = &hull_index_;
+}
+
+}  // namespace tetstream::pipeline

@@ -1,0 +1,277 @@
+#include "pipeline/run/stage_write.hpp"
+
+#include "core/error.hpp"
+#include "io/tet_container.hpp"
+#include "pipeline/util/fault.hpp"
+#include "pipeline/util/interrupt.hpp"
+#include "pipeline/util/progress.hpp"
+#include "pipeline/files/temp_files.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <string>
+#include <system_error>
+
+namespace tetstream::pipeline {
+
+using nlohmann::json;
+
+namespace {
+
+// The segments' integer counters, by their name in the record, with the summary's
+// field for each: one table, so saving, loading and reporting cannot disagree.
+struct Counter {
+  const char* name;
+  std::uint64_t SegmentStats::*stat;
+  std::uint64_t RunSummary::*summary;
+};
+constexpr Counter kCounters[] = {
+    {"window_points", &SegmentStats::window_points, &RunSummary::window_points},
+    {"repair_points", &SegmentStats::repair_points, &RunSummary::repair_points},
+    {"segment_buffer_points", &SegmentStats::segment_buffer_points, &RunSummary::segment_buffer_points},
+    {"zone_buffer_points", &SegmentStats::zone_buffer_points, &RunSummary::zone_buffer_points},
+    {"hull_points", &SegmentStats::hull_points, &RunSummary::hull_window_points},
+    {"range_failures", &SegmentStats::range_failures, &RunSummary::range_failures},
+    {"queries", &SegmentStats::queries, &RunSummary::queries},
+    {"query_points", &SegmentStats::query_points, &RunSummary::query_points},
+    {"rounds", &SegmentStats::rounds, &RunSummary::rounds_max},
+    {"tets", &SegmentStats::tets, &RunSummary::tets},
+};
+
+// The points section from the sorted file's records, in label order, in the header's
+// coord_type (the records' own: a float32 record goes out as the float it is), the
+// file's pages handed back behind.
+template <class R>
+void write_points(io::TetWriter& w, const SortedView& view, const R* records) {
+  using Coord = typename R::Coord;
+  constexpr std::size_t kChunk = 1 << 16;
+  std::vector<Coord> xyz(3 * kChunk);
+  std::vector<std::uint64_t> ids(kChunk);
+  for (std::uint64_t first = 0; first < view.count; first += kChunk) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(kChunk, view.count - first));
+    for (std::size_t i = 0; i < n; ++i) {
+      const R& p = records[first + i];
+      for (int k = 0; k < 3; ++k) xyz[3 * i + std::size_t(k)] = p.c[k];
+      ids[i] = p.original();
+    }
+    w.add_points(xyz.data(), ids.data(), n);
+    release_mapped_pages(records + first, n * sizeof(R));
+    check_interrupted();
+  }
+}
+
+}  // namespace
+
+json counters_json(const WrittenWork& work) {
+  json j = {{"zone_points", work.segment_labels},
+            {"seconds_build", work.stats.seconds_build},
+            {"seconds_check", work.stats.seconds_check}};
+  for (const Counter& c : kCounters) j[c.name] = work.stats.*c.stat;
+  return j;
+}
+
+WrittenWork counters_from(const json& j) {
+  WrittenWork work;
+  work.segment_labels = j.at("zone_points").get<std::uint64_t>();
+  for (const Counter& c : kCounters) work.stats.*c.stat = j.at(c.name).get<std::uint64_t>();
+  work.stats.seconds_build = j.at("seconds_build").get<double>();
+  work.stats.seconds_check = j.at("seconds_check").get<double>();
+  return work;
+}
+
+void record_work(const WrittenWork& work, RunSummary& s) {
+  s.segment_labels = work.segment_labels;
+  for (const Counter& c : kCounters) s.*c.summary = work.stats.*c.stat;
+  s.seconds_build = work.stats.seconds_build;
+  s.seconds_check = work.stats.seconds_check;
+  s.seconds_segments = work.stats.seconds_build + work.stats.seconds_check;
+}
+
+std::uint64_t header_memory(json& state, const RunOptions& options) {
+  if (!state.contains("header_memory")) state["header_memory"] = options.memory_bytes;
+  return state["header_memory"].get<std::uint64_t>();
+}
+
+io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memory, const SortedPoints& sorted) {
+  io::TetFileHeader header;
+  header.point_count = sorted.count;
+  header.input_count = sorted.input_count;
+  // The sorted records' precision: float32 input stays float32 (docs/format.md 3.4).
+  header.coord_type = sorted.layout.float32 ? io::CoordType::kFloat32 : io::CoordType::kFloat64;
+  for (int k = 0; k < 3; ++k) header.bbox_min[k] = sorted.bbox_min[k], header.bbox_max[k] = sorted.bbox_max[k];
+  header.tool = "tetstream 0.1.0";
+  header.options = json{{"command", "run"},
+                        {"input", options.input},
+                        {"memory", memory},
+                        {"buffer_spacings", options.buffer_spacings},
+                        {"axis", std::string(1, "xyz"[sorted.axis])},
+                        {"duplicates_merged", sorted.duplicates}}
+                       .dump();
+  return header;
+}
+
+void WriteStage::prepare() {
+  const RunOptions& options = context_.options;
+  json& state = context_.state;
+  const std::uint64_t memory = header_memory(state, options);
+  if (memory != options.memory_bytes)
+    spdlog::info("resumed with --memory {}: the output keeps the budget it was started with, {}",
+                 human_bytes(double(options.memory_bytes)), human_bytes(double(memory)));
+  const io::TetFileHeader header = container_header(options, memory, sorted_);
+  io::TetWriterOptions writer_options;
+  writer_options.threads = encoders_;  // the writer stage's own team
+  // Frames are cut here (FrameCutter), not by the writer: a batch is one frame.
+  writer_options.frame_tets = std::uint32_t(2 * kFrameTets);
+  writer_options.buffer_bytes = file_buffer_bytes_;
+  writer_options.keep_partial = context_.checkpoint != nullptr;
+  writer_options.claim = claim_;
+  const bool fragment = !fragment_path_.empty();
+  if (fragment) writer_options.claim = nullptr;  // a file of the job's own, in its work directory
+  resumed_ = state.contains("output");
+  if (fragment && !resumed_) {
+    writer_ = io::TetWriter::fragment(fragment_path_, header, writer_options);
+    return;
+  }
+  points_in_output_ = !fragment && sorted_.offset != 0;
+  // The sort checked (resumed) or wrote (new) the points section's bytes: their CRC.
+  if (points_in_output_) writer_options.points_crc = sorted_.crc32c;
+  if (!resumed_ && !points_in_output_) {
+    writer_ = std::make_unique<io::TetWriter>(options.output, header, writer_options);
+    return;
+  }
+  if (!resumed_) {
+    // The merge wrote the points section into the partial output: the writer goes on
+    // after it (checking its bytes against the header and its checksum).
+    const std::uint64_t points_end = sorted_.offset + sorted_.count * sorted_.layout.bytes() + io::kSectionTrailerSize;
+    try {
+      writer_ = io::TetWriter::resume(options.output, header, points_end, writer_options);
+    } catch (const InputError& e) {
+      throw DamagedCheckpoint(std::string(e.what()) + " (the points section the sort wrote)");
+    }
+    return;
+  }
+  const json& out = state["output"];
+  const std::uint64_t committed = out.at("committed").get<std::uint64_t>();
+  std::error_code ec;
+  const std::string target = fragment ? fragment_path_ : options.output;
+  const std::string partial = target + ".partial";
+  const std::uintmax_t have = std::filesystem::file_size(partial, ec);
+  if (ec || have < committed)
+    throw DamagedCheckpoint(partial + ": " + (ec ? std::string("missing") : std::to_string(have) + " bytes") +
+                            ", but the checkpoint committed " + std::to_string(committed) + " (damaged checkpoint)");
+  try {
+    writer_ = fragment ? io::TetWriter::resume_fragment(target, header, committed, writer_options)
+                       : io::TetWriter::resume(target, header, committed, writer_options);
+  } catch (const InputError& e) {
+    throw DamagedCheckpoint(std::string(e.what()) + " (damaged checkpoint)");
+  }
+  first_label_ = out.at("next_label").get<std::uint64_t>();
+  pending_.resize(4 * out.at("pending_tets").get<std::size_t>());
+  if (!pending_.empty())
+    read_file_exactly(context_.checkpoint->path(out.at("pending_file").get<std::string>()), pending_.data(),
+                      pending_.size() * sizeof(std::uint64_t), out.at("pending_crc32c").get<std::uint32_t>());
+  work_ = counters_from(out.at("counters"));
+  segments_resumed_ = segments_done_ = out.at("segments").get<std::uint64_t>();
+  spdlog::info("resuming after {} segments: labels from {} of {}, {} tets written", segments_resumed_, first_label_,
+               view_.count, work_.stats.tets);
+}
+
+void WriteStage::run() {
+  const std::size_t encoders = std::size_t(encoders_);
+  async_.emplace(*writer_, encoders, encoders);
+  if (!resumed_ && !points_in_output_ && fragment_path_.empty()) {
+    // The points section, in label order, on the writer's thread while the first
+    // zones are triangulated (a pass over the whole sorted file, which used to hold
+    // the first segment back).
+    async_->add_task([&view = view_](io::TetWriter& w) {
+      view.points.visit([&](const auto* records) { write_points(w, view, records); });
+    });
+  }
+  cutter_.emplace(*async_, MemoryBudget::frame_tets_for(header_memory(context_.state, context_.options)));
+  cutter_->restore(std::move(pending_));
+  if (!resumed_) record(0, false);
+}
+
+void WriteStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentStats& work, std::uint64_t points,
+                             std::uint64_t next_label) {
+  const auto t0 = StageClock::now();
+  maybe_inject_fault("write", segments_done_);
+  merge_by_min_label(parts, [this](const ZoneTets& part, std::size_t b, std::size_t e) { cutter_->add(part, b, e); });
+  work_.stats += work;
+  work_.segment_labels += points;
+  ++segments_done_;
+  record(next_label, false);
+  seconds_ += seconds_since(t0);
+}
+
+// Records that the output holds every tet of the labels below `next_label`: the
+// writer's committed bytes, the tets of the frame being filled, the counters. The
+// frame being filled is saved at once (under a name of its own); the state that names
+// it is saved by the writer's thread once the frames before it are on disk, so the
+// segments never wait for the writer. A crash in between leaves the previous state,
+// which names the previous pending file: that one is removed only after.
+// `wait`: return only when the state is saved (the job's last record).
+void WriteStage::record(std::uint64_t next_label, bool wait) {
+  Checkpoint* checkpoint = context_.checkpoint;
+  if (!checkpoint) return;
+  json& state = context_.state;
+  const std::string pending_file = pending_prefix_ + std::to_string(segments_done_) + ".tets";
+  const auto& p = cutter_->pending();
+  if (!p.empty()) write_file_atomically(context_.dir, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
+  const std::string old_pending = state.contains("output") ? state["output"].value("pending_file", "") : "";
+  state["output"] = {{"committed", 0},
+                     {"next_label", next_label},
+                     {"pending_file", pending_file},
+                     {"pending_tets", p.size() / 4},
+                     {"pending_crc32c", io::crc32c(p.data(), p.size() * sizeof(std::uint64_t))},
+                     {"segments", segments_done_},
+                     {"counters", counters_json(work_)}};
+  const std::string old_path = old_pending.empty() || old_pending == pending_file ? "" : checkpoint->path(old_pending);
+  auto persist = [checkpoint, old_path, disk = context_.disk](json saved, std::uint64_t committed) {
+    saved["output"]["committed"] = committed;
+    checkpoint->save(std::move(saved));
+    if (!old_path.empty()) remove_file(old_path);
+    if (disk) disk->sample();
+  };
+  if (wait) {
+    state["output"]["committed"] = async_->checkpoint();  // drains first
+    persist(state, state["output"]["committed"].get<std::uint64_t>());
+  } else {
+    async_->add_checkpoint([persist, saved = state](std::uint64_t committed) { persist(saved, committed); });
+  }
+}
+
+void WriteStage::commit(std::uint64_t end_label) {
+  const auto t0 = StageClock::now();
+  cutter_->flush();
+  // Every tet is in the partial output; what is left is its index and footer and
+  // the rename. A crash after the rename but before the checkpoint is removed
+  // leaves this mark, and a resumed job then finds the output complete.
+  record(std::min(end_label, view_.count), true);
+  if (context_.checkpoint) {
+    context_.state["output"]["finishing"] = true;
+    context_.save();
+  }
+  seconds_ += seconds_since(t0);
+}
+
+std::uint64_t WriteStage::fragments_offset() {
+  const auto t0 = StageClock::now();
+  const std::uint64_t at = async_->checkpoint();  // drains first
+  seconds_ += seconds_since(t0);
+  return at;
+}
+
+void WriteStage::adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes) {
+  async_->add_task([frames = std::move(frames), bytes](io::TetWriter& w) { w.adopt_placed_frames(frames, bytes); });
+}
+
+void WriteStage::finish() {
+  const auto t0 = StageClock::now();
+  async_->finish();
+  seconds_ += seconds_since(t0);
+}
+
+}  // namespace tetstream::pipeline

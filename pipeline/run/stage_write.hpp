@@ -1,0 +1,141 @@
+#pragma once
+// The write stage of `run`: the output container. The tets of each finished segment, merged
+// by minimum label into frames (pipeline/frame_cutter.hpp), go to the writer on its
+// own thread (pipeline/async_tet_writer.hpp) behind a bounded queue of frames, so
+// compression and I/O overlap the triangulation.
+//
+// Its records in the checkpoint state: "header_memory", the budget the output's
+// header names (the first process's: a resumed job may run with another, and the
+// frames' size depends on this one only, MemoryBudget::frame_tets_for); and "output", replaced after each segment: the partial
+// file's committed bytes, the label below which every tet is written (`next_label`),
+// the tets of the frame being filled (a file `pending-K.tets` of its own), the
+// segments written and their counters. The triangulation's progress is this record:
+// the labels below next_label are done exactly when their tets are committed, so the
+// two are recorded as one.
+#include "io/output_file.hpp"
+#include "io/tet_writer.hpp"
+#include "pipeline/write/async_tet_writer.hpp"
+#include "pipeline/write/frame_cutter.hpp"
+#include "pipeline/sort/point_sort.hpp"
+#include "pipeline/window/zone_triangulator.hpp"
+#include "pipeline/run/stage.hpp"
+#include "pipeline/run/stage_triangulate.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// The work of the segments written so far, this process's and earlier ones': the
+// record's "counters", so that a resumed job's summary describes the whole job.
+struct WrittenWork {
+  SegmentStats stats;
+  std::uint64_t segment_labels = 0;  // labels of the segments written (checkpoint key "zone_points")
+};
+nlohmann::json counters_json(const WrittenWork& w);
+WrittenWork counters_from(const nlohmann::json& j);
+// The summary's counters of the segments' work.
+void record_work(const WrittenWork& w, RunSummary& s);
+
+// The budget the output's header names: the first process's, recorded in the state
+// ("header_memory") by whichever stage asks first; a resumed job may run with another.
+std::uint64_t header_memory(nlohmann::json& state, const RunOptions& options);
+// The container's header for the sorted points (the sort's merge writes it first when
+// the points go straight into the output: pipeline/points_in_output.hpp).
+io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memory, const SortedPoints& sorted);
+
+class WriteStage final : public SegmentSink {
+ public:
+  // `shares`: the writer's compression threads and its file buffer, its memory share
+  // with the frames in flight (MemoryBudget::plan_triangulate). `claim`: the output, locked for this
+  // job since it began (null for standard output).
+  WriteStage(const StageContext& context, const SortedPoints& sorted, const SortedView& view,
+             const TriangulateShares& shares, const io::OutputClaim* claim)
+      : context_(context),
+        sorted_(sorted),
+        view_(view),
+        encoders_(shares.encoders),
+        file_buffer_bytes_(shares.file_buffer_bytes),
+        claim_(claim) {}
+
+
+  // The frames of this process's label range go to a fragment file at `path`
+  // (io::TetWriter::fragment) instead of the container, which another process
+  // assembles (a rank other than 0 under MPI: pipeline/run_distributed.cpp); the
+  // checkpoint's files of the frame being filled are named `prefix`N.tets. Before
+  // prepare().
+  void write_fragment(std::string path, std::string prefix) {
+    fragment_path_ = std::move(path);
+    pending_prefix_ = std::move(prefix);
+  }
+  // Opens the output: a new container, or the checkpoint's partial output reopened at
+  // its last commit with the frame that was being filled and the counters
+  // (DamagedCheckpoint when the partial file or the pending tets disagree with it).
+  void prepare();
+  // Starts the writer's thread: the points section of a new output (a pass over the
+  // sorted file, overlapped with the first zones), and the first record.
+  void run();
+  // One more segment, its zones' tets in plan order: merged by minimum label into the
+  // frames, its counters added, and the record says the labels below `next_label` are
+  // written. The record is saved by the writer's thread once the frames before it are
+  // on disk, so the triangulation never waits for the writer.
+  void add_segment(const std::vector<ZoneTets>& parts, const SegmentStats& work, std::uint64_t points,
+                   std::uint64_t next_label) override;
+  // Every tet of the labels below `end_label` (all of them; a rank's: the end of its
+  // range) is in: the last frame, the last record (waiting for the writer), and the
+  // mark that only the container's index, footer and rename are left.
+  void commit(std::uint64_t end_label = ~std::uint64_t(0));
+  // After commit(), on the process that writes the container: flushes (and syncs) its
+  // frames and returns the output's size, where the other ranks' frames go, their
+  // label ranges in label order (io::place_fragment), before adopt_fragments()
+  // indexes them.
+  std::uint64_t fragments_offset();
+  // The frames others placed after fragments_offset(), `bytes` of them, in order.
+  void adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes);
+  // The index, footer and rename (a fragment: its rename). Nothing may follow it.
+  void finish();
+
+  // From the record prepare read: the label the triangulation goes on from, and the
+  // segments an earlier process wrote.
+  std::uint64_t first_label() const { return first_label_; }
+  std::uint64_t segments_resumed() const { return segments_resumed_; }
+  std::uint64_t segments_done() const { return segments_done_; }
+  const WrittenWork& work() const { return work_; }
+  // The triangulation waiting on this stage (merges, records, a full queue) and the
+  // commit and finish: the summary's seconds_write.
+  double seconds() const { return seconds_; }
+  double busy_seconds() const { return async_->busy_seconds(); }
+  double producer_wait_seconds() const { return async_->producer_wait_seconds(); }
+  std::uint64_t bytes_written() const { return writer_->bytes_written(); }
+  std::uint64_t tet_bytes() const { return writer_->tet_bytes(); }
+
+ private:
+  void record(std::uint64_t next_label, bool wait);
+
+  StageContext context_;
+  const SortedPoints& sorted_;
+  const SortedView& view_;
+  const int encoders_;
+  const std::size_t file_buffer_bytes_;
+  const io::OutputClaim* claim_;
+  std::string fragment_path_;  // write_fragment()
+  std::string pending_prefix_ = "pending-";
+  bool resumed_ = false;  // the state held an "output" record
+  bool points_in_output_ = false;  // the sort merged the points into the partial output
+  std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
+  WrittenWork work_;
+  std::vector<std::uint64_t> pending_;  // the resumed frame, until the cutter takes it
+  double seconds_ = 0;
+  // In this order: the cutter feeds the queue, which feeds the writer, so on the way
+  // out of a failure the queue is cancelled and its thread joined before the writer
+  // goes.
+  std::unique_ptr<io::TetWriter> writer_;
+  std::optional<AsyncTetWriter> async_;
+  std::optional<FrameCutter> cutter_;
+};
+
+}  // namespace tetstream::pipeline

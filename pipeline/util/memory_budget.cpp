@@ -1,0 +1,144 @@
+#include "pipeline/util/memory_budget.hpp"
+
+#include "core/error.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tetstream::pipeline {
+
+namespace {
+
+constexpr std::uint64_t kMiB = std::uint64_t(1) << 20;
+// Bytes a point of a sorted run holds: its 32-byte record and the 24-byte coordinate
+// copy that the hull candidates are computed from.
+constexpr std::uint64_t kRunBytesPerPoint = 32 + 24;
+// The hull pieces' kernels, per point of a piece (measured on a thin shell, where
+// most of a piece survives the filters).
+constexpr std::uint64_t kHullBytesPerPoint = 320;
+// Tets per point, for the size of the output before it exists: 6.7 on uniform points,
+// about 6.3 on shells and clusters, 6 on grids; 8 leaves room.
+constexpr double kTetsPerPoint = 8;
+// A frame's tets are 4 8-byte labels while they wait for the writer, and an
+// encoder's scratch takes about 40 bytes a tet (io/tet_writer.hpp).
+constexpr double kFrameBytesPerTet = 32, kEncoderBytesPerTet = 40;
+// The smallest piece the hull filter works on (below it a piece's kernel is cheap).
+constexpr std::size_t kMinHullPiece = 4096;
+// The smallest sorted run (the reader's chunk).
+constexpr std::size_t kMinRunPoints = std::size_t(1) << 16;
+
+}  // namespace
+
+MemoryBudget::MemoryBudget(std::uint64_t ceiling, std::uint64_t points, int threads, int cores)
+    : ceiling_(ceiling),
+      points_(points),
+      threads_(std::max(1, threads)),
+      cores_(std::max(1, cores)),
+      frame_tets_(frame_tets_for(ceiling)) {
+  // The reserve holds the process itself (the shared libraries' pages), the
+  // allocator's slack and the folios that sequential scans map before they hand them
+  // back (ReleaseBehind: two 4 MiB chunks a thread loading a window): a quarter of the
+  // budget between 20 and 64 MiB, and the threads' chunks; at most 5/8 of the budget.
+  // Smaller floors let small budgets overshoot (scripts/bench-memory checks the peaks).
+  // The chunks: 8 MiB a thread, less at small budgets, whose windows' label ranges
+  // are a few MiB of records at most (a 32nd of the budget a thread).
+  const std::uint64_t chunks = std::min<std::uint64_t>(8 * kMiB, ceiling / 32) * std::uint64_t(threads_);
+  runtime_ = std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) + chunks,
+                                     ceiling / 8 * 5);
+}
+
+void MemoryBudget::record(const std::string& phase, const std::string& name, std::uint64_t bytes) {
+  for (Share& s : shares_)
+    if (s.phase == phase && s.name == name) {
+      s.bytes = bytes;
+      return;
+    }
+  shares_.push_back({phase, name, bytes});
+}
+
+std::uint64_t MemoryBudget::phase_total(const std::string& phase) const {
+  std::uint64_t total = 0;
+  for (const Share& s : shares_)
+    if (s.phase == phase) total += s.bytes;
+  return total;
+}
+
+SortShares MemoryBudget::plan_sort() {
+  // What the reserve leaves, in thirds: the run buffer, the merge, and (a quarter)
+  // the hull pieces; each no larger than this input needs.
+  const std::uint64_t avail = ceiling_ > runtime_ ? ceiling_ - runtime_ : 0;
+  SortShares s;
+  s.run_points = std::size_t(std::clamp<std::uint64_t>(avail / 3 / kRunBytesPerPoint, kMinRunPoints,
+                                                       std::max<std::uint64_t>(points_, kMinRunPoints)));
+  s.hull_piece_points = std::max<std::size_t>(
+      kMinHullPiece, std::min<std::size_t>(std::size_t(avail / 4 / kHullBytesPerPoint / std::uint64_t(threads_)),
+                                           s.run_points));
+  // What a run of this input holds (the buffer is reserved for the points it will
+  // hold, not the share), and the pieces at once: no more than a run has, and no more
+  // than the quarter holds (many threads and a small budget: fewer than threads).
+  const std::uint64_t run_used = std::min<std::uint64_t>(s.run_points, std::max<std::uint64_t>(points_, 1));
+  const std::uint64_t piece_used = std::min<std::uint64_t>(s.hull_piece_points, run_used);
+  const std::uint64_t piece_bytes = std::uint64_t(s.hull_piece_points) * kHullBytesPerPoint;
+  const std::uint64_t pieces = (run_used + s.hull_piece_points - 1) / s.hull_piece_points;
+  s.hull_threads = int(std::max<std::uint64_t>(
+      1, std::min<std::uint64_t>({std::uint64_t(threads_), pieces, avail / 4 / piece_bytes})));
+  // The merge needs no more than the runs hold (ExternalSorter caps each run's block
+  // by the run's size): the whole input's records at most.
+  s.merge_bytes = std::size_t(std::min<std::uint64_t>(avail / 3, std::max<std::uint64_t>(points_ * 32, kMiB)));
+  record("sort", "runtime", runtime_);
+  record("sort", "run_buffer", run_used * kRunBytesPerPoint);
+  record("sort", "hull_pieces", piece_used * kHullBytesPerPoint * std::uint64_t(s.hull_threads));
+  record("sort", "merge", s.merge_bytes);
+  return s;
+}
+
+int MemoryBudget::encoders_for(std::uint64_t ceiling, int cores) {
+  // As many as the machine has cores, whatever --threads (one encoder left a core idle
+  // in every burst of a segment's tets), one per 512 MiB of budget, at most 4.
+  return std::clamp(std::min<int>(cores, int(std::min<std::uint64_t>(ceiling >> 29, 1 << 20))), 1, 4);
+}
+
+std::size_t MemoryBudget::frame_tets_for(std::uint64_t ceiling) {
+  std::size_t tets = kSmallestFrameTets;
+  while (tets < kFrameTets && 2 * tets <= ceiling / 1024) tets *= 2;
+  return tets;
+}
+
+std::uint64_t MemoryBudget::writer_bytes_for(int encoders, std::uint64_t tets, std::size_t frame_tets) {
+  // Frames alive: the one being filled, `encoders` queued and `encoders` being
+  // compressed; no more than the output has, and none larger than the output.
+  const double frame = double(std::min<std::uint64_t>(frame_tets, std::max<std::uint64_t>(tets, 1)));
+  const double frames = std::min(2.0 * encoders + 1, std::ceil(double(tets) / double(frame_tets)) + 1);
+  return std::uint64_t((frames * kFrameBytesPerTet + encoders * kEncoderBytesPerTet) * frame * 1.05);
+}
+
+TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, double windows_planned) {
+  TriangulateShares t;
+  t.encoders = encoders_for(ceiling_, cores_);
+  // The output's write buffer: a 64th of the budget and no more than the output's
+  // size (~50 bytes a point), from 64 KiB to 8 MiB (past which larger writes gained
+  // nothing).
+  t.file_buffer_bytes =
+      std::size_t(std::clamp<std::uint64_t>(std::min(ceiling_ / 64, 64 * points_), 64 << 10, 8 * kMiB));
+  t.writer_bytes = writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), frame_tets_) +
+                   t.file_buffer_bytes;
+  t.index_bytes = index_bytes;
+  // What the reserve and the writer leave: 75% for the windows (less the indexes),
+  // 25% for the sorted file's pages that the queries map and the allocator's slack.
+  // The query pages: an eighth of the budget (a smaller share makes the queries fault
+  // the same regions in again and again), no more than the file and one 2 MiB region,
+  // no more than that 25%. So the phase sums to at most the ceiling.
+  const double fixed = double(runtime_) + double(t.writer_bytes);
+  const double rest = std::max(0.0, double(ceiling_) - fixed);
+  t.window_bytes = 0.75 * rest - double(index_bytes);
+  t.query_page_bytes = std::uint64_t(std::min({double(ceiling_ / 8), double(points_) * 32 + 2.0 * kMiB, 0.25 * rest}));
+  record("triangulate", "runtime", runtime_);
+  record("triangulate", "writer", t.writer_bytes);
+  record("triangulate", "query_pages", t.query_page_bytes);
+  record("triangulate", "indexes", index_bytes);
+  const double windows = windows_planned >= 0 ? std::min(windows_planned, t.window_bytes) : t.window_bytes;
+  record("triangulate", "windows", windows > 0 ? std::uint64_t(windows) : 0);
+  return t;
+}
+
+}  // namespace tetstream::pipeline

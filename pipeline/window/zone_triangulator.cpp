@@ -1,0 +1,475 @@
+#include "pipeline/window/zone_triangulator.hpp"
+
+#include "core/error.hpp"
+#include "core/huge_pages.hpp"
+#include "core/spatial_sort.hpp"
+#include "pipeline/window/certificate.hpp"
+#include "pipeline/window/tet_set.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+namespace tetstream::pipeline {
+
+namespace {
+using core::TetId;
+using core::VertexId;
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+}  // namespace
+
+// The state of one thread's zone triangulations. It lives across zones: the kernel
+// and the buffers keep their capacity from one zone to the next, so a thread faults
+// its memory in once.
+class ZoneWorker {
+ public:
+  ZoneWorker(const SortedView& view, OutputPool* pool) : view_(view), pool_(pool), certificate_(view) {}
+
+  SegmentStats run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out);
+
+ private:
+  // The zone's window: its label range's points inside the strip's window; with
+  // `with_hull`, also the global hull's vertices (only for a window too flat for a
+  // triangulation of its own).
+  void load_window(bool with_hull);
+  // One round: marks the pending zone vertices whose stars hold a tet that is not
+  // certified (collecting repair points), declares the others final, and returns how
+  // many zone vertices remain pending.
+  std::size_t check_round(std::vector<std::uint64_t>& repairs);
+  void emit(ZoneTets& out);
+  // Tet t's range test (a hull facet's is followed by its query at once, or a memo of
+  // an earlier one). A finite tet that fails it goes to queued_, and query_tet()
+  // settles it once the round has queued all of them. False: t is not certified, and
+  // the repair point is pushed.
+  bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
+  // A round's finite tets that failed the range test, by the low end of their extent
+  // along the sort axis: queried in that order, they read the file from one end to
+  // the other. Each keeps the ball and extent of its range test: on a surface nearly
+  // every tet fails the range test, most of them flat, and their circumspheres are
+  // costly to compute again (exactly, for the flattest).
+  struct QueuedTet {
+    RangeTest range;
+    TetId tet;
+    bool operator<(const QueuedTet& o) const { return range.lo < o.range.lo || (range.lo == o.range.lo && tet < o.tet); }
+    bool operator==(const QueuedTet& o) const { return tet == o.tet; }
+  };
+  bool query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs);
+  bool check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs);
+  // The tet's key in proved_empty_: its sorted vertex ids, 128 bits.
+  std::pair<std::uint64_t, std::uint64_t> tet_key(TetId t) const {
+    std::array<VertexId, 4> v;
+    for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
+    std::sort(v.begin(), v.end());
+    return {std::uint64_t(v[1]) << 32 | v[0], std::uint64_t(v[3]) << 32 | v[2]};
+  }
+  // Zone index of local vertex v (its label minus label_begin), or -1 outside the zone
+  // (outside the segment's labels, or in another worker's strip). One 4-byte load:
+  // zone_of_ is filled once in run(), so the rounds' hot loops read no labels or
+  // coordinates.
+  std::int64_t zone_index(VertexId v) const {
+    const std::uint32_t z = zone_of_[v];
+    return z == kNoZone ? -1 : std::int64_t(z);
+  }
+
+  static constexpr std::uint32_t kNoZone = 0xFFFFFFFFu;
+  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
+
+  const SortedView& view_;
+  OutputPool* const pool_;
+  Certificate certificate_;
+  const SegmentPlan* plan_ = nullptr;  // of the zone being triangulated
+  Zone zone_;
+  core::Delaunay dt_;
+  std::vector<double> xyz_;
+  std::vector<std::uint64_t> labels_;
+  std::vector<std::size_t> hull_extra_;  // load_window's scratch
+  std::vector<std::uint64_t> held_;  // labels outside the window range held anyway (hull, repairs), sorted
+  std::vector<QueuedTet> queued_;
+  std::vector<std::uint32_t> zone_of_;  // by local vertex: zone index or kNoZone
+  // Per zone vertex (by zone index): kPending until it is final and its tets
+  // are emitted, then kDone.
+  std::vector<std::uint8_t> zone_state_;
+  std::vector<VertexId> zone_vertex_;  // by zone index: the local vertex (kNoVertex: another strip's)
+  std::vector<VertexId> pending_;      // the zone vertices still pending after a round
+  std::vector<TetId> star_;            // scratch for a pending vertex's star
+  TetSet proved_empty_;                // the tets the queries proved empty
+  SegmentStats stats_;
+  // One round's work, for the debug log (`--log-level debug`, scripts/plot-rounds).
+  // queries: those run in the round (the queued tets not proved before, and the hull
+  // facets', which run with the range tests and count in their seconds); conflicts:
+  // queued tets a missing point was found in.
+  struct RoundWork {
+    std::uint64_t checked = 0, queued = 0, queries = 0, conflicts = 0;
+    double seconds_range = 0, seconds_queries = 0;
+  };
+  RoundWork round_;
+};
+
+void ZoneWorker::load_window(bool with_hull) {
+  const std::uint64_t w0 = plan_->window_begin, w1 = plan_->window_end;
+  // held_: labels held although outside the window proper (the label range, and the
+  // strip's window inside it): the repair points, and in a flat window the hull's
+  // vertices. The hull's coordinates come from the view, not the file: a shell's
+  // hull has points all over the file, and reading them mapped every page of it.
+  held_.clear();
+  std::vector<std::size_t>& hull_extra = hull_extra_;  // indices into view_.hull_points
+  hull_extra.clear();
+  for (std::size_t i = 0; with_hull && i < view_.hull_points.size(); ++i) {
+    const SortedPoint& h = view_.hull_points[i];
+    if (!certificate_.in_window(h.original, h.xyz)) held_.push_back(h.original), hull_extra.push_back(i);
+  }
+  xyz_.clear();
+  labels_.clear();
+  // A strip reads its segment's whole window range to pick its points: the pages of
+  // that range are handed back as the copy goes (two threads loading 50 MiB windows at
+  // once took the mapped pages past their share of the budget). One loop per record
+  // type: each point is converted to doubles once, here.
+  view_.points.visit([&](const auto* records) {
+    ReleaseBehind release(view_.points, w0, view_.query_regions != nullptr);
+    for (std::uint64_t label = w0; label < w1; ++label) {
+      double p[3];
+      records[label].xyz(p);
+      if (certificate_.in_strip_window(p)) {
+        xyz_.insert(xyz_.end(), p, p + 3);
+        labels_.push_back(label);
+      }
+      release.reached(label);
+    }
+  });
+  for (std::size_t i : hull_extra) {
+    xyz_.insert(xyz_.end(), view_.hull_points[i].xyz, view_.hull_points[i].xyz + 3);
+    labels_.push_back(view_.hull_points[i].original);
+  }
+  const std::size_t total = labels_.size();
+  // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
+  // spatially coherent numbering keeps those accesses in cache (the labels, not the
+  // local ids, carry the order of the sorted file).
+  const std::vector<std::uint32_t> order = core::hilbert_order(xyz_.data(), total);
+  std::vector<double> xyz(3 * total);
+  std::vector<std::uint64_t> labels(total);
+  for (std::size_t i = 0; i < total; ++i) {
+    std::copy_n(&xyz_[3 * std::size_t(order[i])], 3, &xyz[3 * i]);
+    labels[i] = labels_[order[i]];
+  }
+  // The arrays in Hilbert order are kept (with their capacity, for the next zone);
+  // the unordered ones go (not worth holding while the kernel builds).
+  xyz_.swap(xyz);
+  labels_.swap(labels);
+  stats_.window_points = total;
+}
+
+bool ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
+  ++round_.checked;
+  if (dt_.is_infinite(t)) return check_hull_facet(t, repairs);
+  QueuedTet q{certificate_.range_test(dt_, t), t};
+  if (q.range.clears()) return true;
+  ++stats_.range_failures;
+  queued_.push_back(q);
+  return true;
+}
+
+bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs) {
+  // A tet proved empty stays empty for the rest of the zone: later repairs insert
+  // only points that were missing, and none of those is in its ball. (In the first
+  // round the table is empty and each queued tet unique: no lookup.)
+  const auto [key_a, key_b] = tet_key(q.tet);
+  if (stats_.rounds > 1 && proved_empty_.contains(key_a, key_b)) return true;
+  const std::uint64_t deepest = certificate_.query(dt_, q.tet, q.range, stats_);
+  if (deepest == Certificate::kNone) {
+    proved_empty_.insert(key_a, key_b);
+    return true;
+  }
+  repairs.push_back(deepest);
+  return false;
+}
+
+// An infinite tet of the window is a hull facet of the window's points. It is one of
+// the global hull when no missing point conflicts with it; otherwise the missing
+// points beyond it are what the window lacks there, and the one nearest the facet is
+// inserted.
+bool ZoneWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs) {
+  if (certificate_.hull_facet_range_test(dt_, t)) return true;
+  ++stats_.range_failures;
+  const auto [key_a, key_b] = tet_key(t);
+  if (proved_empty_.contains(key_a, key_b)) return true;
+  const std::uint64_t nearest = certificate_.hull_facet_query(dt_, t, stats_);
+  if (nearest == Certificate::kNone) {
+    proved_empty_.insert(key_a, key_b);
+    return true;
+  }
+  repairs.push_back(nearest);
+  return false;
+}
+
+// A zone vertex is final when no tet incident to it is unsafe. The first round, with
+// every zone vertex pending, scans the tet array in memory order (a tet belongs to
+// the star of each of its vertices, so one pass marks the blocked vertices); later
+// rounds, with few vertices left, walk the stars of those alone. A final vertex's
+// star never changes again (no later repair point lies in any of its tets' balls),
+// so its tets can be emitted after the last round.
+std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
+  round_ = RoundWork{};
+  const std::uint64_t queries_before = stats_.queries;
+  auto t0 = Clock::now();
+  // The states of tet t's vertices in this zone (other vertices have none).
+  auto zone_states = [&](TetId t, auto&& visit) {
+    for (int i = 0; i < 4; ++i) {
+      const VertexId v = dt_.vertex(t, i);
+      if (v == core::kInfiniteVertex) continue;
+      const std::int64_t z = zone_index(v);
+      if (z >= 0) visit(zone_state_[std::size_t(z)]);
+    }
+  };
+  auto block_pending = [&](TetId t) {
+    zone_states(t, [](std::uint8_t& state) {
+      if (state != kDone) state = kBlocked;
+    });
+  };
+  if (stats_.rounds == 1) {
+    const std::size_t slots = dt_.num_tet_slots();
+    for (std::size_t t = 0; t < slots; ++t) {
+      if (!dt_.is_alive(TetId(t))) continue;
+      bool touches_zone = false;
+      for (int i = 0; i < 4; ++i) {
+        const VertexId v = dt_.vertex(TetId(t), i);
+        touches_zone |= v != core::kInfiniteVertex && zone_of_[v] != kNoZone;
+      }
+      if (touches_zone && !check_tet(TetId(t), repairs)) block_pending(TetId(t));
+    }
+  } else {
+    for (VertexId v : pending_) {
+      star_.clear();
+      dt_.star(v, star_);
+      for (TetId t : star_)
+        if (!check_tet(t, repairs)) block_pending(t);
+    }
+  }
+  round_.seconds_range = since(t0);
+  t0 = Clock::now();
+  // The queries, along the sort axis (a tet of several pending stars once).
+  std::sort(queued_.begin(), queued_.end());
+  queued_.erase(std::unique(queued_.begin(), queued_.end()), queued_.end());
+  round_.queued = queued_.size();
+  // In the first two rounds, a tet whose zone vertices a conflict has already blocked
+  // in this round waits: its vertices stay pending, so the next round checks it again
+  // if the repairs leave it (near the window's ragged edge they often do not). No
+  // vertex becomes final with a tet of its star unchecked. On surfaces this saves
+  // queries of tets the first round's repairs remove. Not in later rounds: there a
+  // zone's last few conflicts would then be repaired one a round, and each round
+  // checks the remaining stars' range tests again.
+  constexpr std::uint64_t kDeferRounds = 2;
+  auto blocks_nothing_new = [&](TetId t) {
+    bool pending = false;
+    zone_states(t, [&](std::uint8_t state) { pending |= state == kPending; });
+    return !pending;
+  };
+  for (const QueuedTet& q : queued_) {
+    if (stats_.rounds <= kDeferRounds && blocks_nothing_new(q.tet)) continue;
+    if (!query_tet(q, repairs)) block_pending(q.tet), ++round_.conflicts;
+  }
+  round_.seconds_queries = since(t0);
+  round_.queries = stats_.queries - queries_before;
+  queued_.clear();
+  pending_.clear();
+  for (std::size_t z = 0; z < zone_state_.size(); ++z) {
+    std::uint8_t& state = zone_state_[z];
+    if (state == kPending) state = kDone;
+    else if (state == kBlocked) state = kPending, pending_.push_back(zone_vertex_[z]);
+  }
+  return pending_.size();
+}
+
+// Minimum vertex filter, once every zone vertex is final: each finite tet whose
+// smallest label is a zone vertex is emitted, grouped by that label in increasing
+// order. The stream of a whole job is then ordered by minimum label whatever the
+// segment plan, which lets the writer cut identical frames for any budget split or
+// thread count.
+//
+// The grouping is a two-level counting sort. Placing each tet straight at its
+// label's position would scatter writes over the whole output (100+ MiB, a cache
+// miss each: the tets come in the kernel's spatial order, the labels follow the sort
+// axis); instead the tets go to at most 2048 buckets of consecutive zone indices (one
+// write stream per bucket, all of them cache-resident), and each bucket, small enough
+// for the cache, is then ordered in place by its own counting sort.
+void ZoneWorker::emit(ZoneTets& out) {
+  const std::size_t slots = dt_.num_tet_slots();
+  const std::size_t zone_size = zone_state_.size();
+  const int shift = std::max(0, int(std::bit_width(zone_size)) - 11);
+  const std::size_t buckets = (zone_size >> shift) + 1;
+  // Pass 1: each tet's owner (the zone index of its smallest label, or kNoZone),
+  // counted per bucket.
+  std::vector<std::uint32_t> owner(slots, kNoZone);
+  std::vector<std::size_t> bucket_start(buckets + 1, 0);
+  for (std::size_t t = 0; t < slots; ++t) {
+    if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
+    VertexId m = dt_.vertex(TetId(t), 0);
+    std::uint64_t lm = labels_[m];
+    for (int i = 1; i < 4; ++i) {
+      const VertexId v = dt_.vertex(TetId(t), i);
+      if (labels_[v] < lm) lm = labels_[v], m = v;
+    }
+    const std::uint32_t z = zone_of_[m];
+    owner[t] = z;
+    if (z != kNoZone) ++bucket_start[(z >> shift) + 1];
+  }
+  for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
+  const std::size_t total = bucket_start[buckets];
+  stats_.tets += total;
+  if (pool_) out = pool_->take();
+  std::vector<VertexId>& tets = out.tets;
+  tets.reserve(4 * total);
+  core::advise_huge_pages(tets.data(), tets.capacity() * sizeof(VertexId));
+  tets.resize(4 * total);
+  // Pass 2: into the buckets, in the kernel's order.
+  std::vector<std::size_t> fill(bucket_start.begin(), bucket_start.end() - 1);
+  for (std::size_t t = 0; t < slots; ++t) {
+    const std::uint32_t z = owner[t];
+    if (z == kNoZone) continue;
+    VertexId* q = &tets[4 * fill[z >> shift]++];
+    for (int i = 0; i < 4; ++i) q[i] = dt_.vertex(TetId(t), i);
+  }
+  std::vector<std::uint32_t>().swap(owner);
+  // Pass 3: each bucket by zone index (its minimum label minus label_begin).
+  std::vector<VertexId> scratch;
+  std::vector<std::size_t> count(std::size_t(1) << shift);
+  const std::uint64_t low_mask = (std::uint64_t(1) << shift) - 1;
+  for (std::size_t b = 0; shift > 0 && b < buckets; ++b) {  // shift 0: one zone index a bucket
+    const std::size_t first = bucket_start[b], n = bucket_start[b + 1] - first;
+    if (n < 2) continue;
+    scratch.assign(tets.begin() + std::ptrdiff_t(4 * first), tets.begin() + std::ptrdiff_t(4 * (first + n)));
+    std::fill(count.begin(), count.end(), 0);
+    auto key = [&](std::size_t i) {
+      const VertexId* q = &scratch[4 * i];
+      const std::uint64_t m = std::min(std::min(labels_[q[0]], labels_[q[1]]), std::min(labels_[q[2]], labels_[q[3]]));
+      return (m - plan_->label_begin) & low_mask;
+    };
+    for (std::size_t i = 0; i < n; ++i) ++count[key(i)];
+    std::size_t at = first;
+    for (std::size_t& c : count) {
+      const std::size_t k = c;
+      c = at;
+      at += k;
+    }
+    for (std::size_t i = 0; i < n; ++i) std::copy_n(&scratch[4 * i], 4, &tets[4 * count[key(i)]++]);
+  }
+  // The local ids' labels go with the tets (the worker's table is refilled by the
+  // next zone's load_window anyway).
+  out.labels.swap(labels_);
+}
+
+SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out) {
+  plan_ = &plan;
+  zone_ = zone;
+  certificate_.start_zone(plan, zone, held_);
+  stats_ = SegmentStats{};
+  pending_.clear();
+  proved_empty_.clear();
+  auto t0 = Clock::now();
+  // A window is triangulated on its own points; its hull facets are checked like its
+  // other tets. A window too flat for a triangulation (a slab of a planar region)
+  // takes the global hull's vertices, which make it solid.
+  load_window(/*with_hull=*/false);
+  if (dt_.build(xyz_.data(), labels_.data(), labels_.size()) != core::BuildStatus::kOk) {
+    load_window(/*with_hull=*/true);
+    if (dt_.build(xyz_.data(), labels_.data(), labels_.size()) != core::BuildStatus::kOk)
+      throw InputError("the input has fewer than 4 affinely independent distinct points");
+  }
+  stats_.seconds_build = since(t0);
+
+  t0 = Clock::now();
+  // The zone vertices: the window's points with a label in the segment's zone and,
+  // with strips, a coordinate in this strip. Every other label of the zone is
+  // another strip's (kDone here from the start).
+  zone_state_.assign(plan_->label_end - plan_->label_begin, kDone);
+  zone_vertex_.assign(plan_->label_end - plan_->label_begin, core::kNoVertex);
+  zone_of_.assign(labels_.size(), kNoZone);
+  for (VertexId v = 0; v < labels_.size(); ++v) {
+    const std::uint64_t l = labels_[v];
+    const bool in_strip =
+        zone_.axis < 0 || (xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] >= zone_.lo &&
+                            xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] < zone_.hi);
+    const bool in_range = l >= plan_->label_begin && l < plan_->label_end;
+    if (!in_range || !in_strip) {
+      if (std::binary_search(held_.begin(), held_.end(), l)) ++stats_.hull_points;
+      else if (!in_strip) ++stats_.zone_buffer_points;
+      else ++stats_.segment_buffer_points;
+      continue;
+    }
+    const std::uint64_t z = l - plan_->label_begin;
+    zone_of_[v] = std::uint32_t(z);
+    zone_vertex_[z] = v;
+    zone_state_[z] = kPending;
+  }
+  std::vector<std::uint64_t> repairs;
+  // (round: its work as check_round counted it; inserted, seconds: the repairs after it.
+  // A zone that is its whole segment spans (-inf, inf) across.)
+  const double inf = std::numeric_limits<double>::infinity();
+  const double strip_lo = zone_.axis >= 0 ? zone_.lo : -inf, strip_hi = zone_.axis >= 0 ? zone_.hi : inf;
+  auto log_round = [&](std::size_t inserted, double seconds) {
+    spdlog::debug("zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
+                  "({} found a conflict, {:.3f} s), {} repair points inserted ({:.3f} s)",
+                  plan_->label_begin, plan_->label_end, strip_lo, strip_hi, stats_.rounds, round_.checked,
+                  round_.seconds_range, round_.queued, round_.queries, round_.conflicts, round_.seconds_queries,
+                  inserted, seconds);
+  };
+  for (;;) {
+    ++stats_.rounds;
+    repairs.clear();
+    if (check_round(repairs) == 0) {
+      log_round(0, 0);
+      break;
+    }
+    const auto t_insert = Clock::now();
+    std::sort(repairs.begin(), repairs.end());
+    repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
+    // Append the repair points to the window and insert them.
+    const std::size_t old_n = labels_.size();
+    QueryScratch scratch;
+    for (std::uint64_t label : repairs) {
+      const double* p = certificate_.read_point(label, scratch);
+      xyz_.insert(xyz_.end(), p, p + 3);
+      labels_.push_back(label);
+      held_.insert(std::upper_bound(held_.begin(), held_.end(), label), label);
+    }
+    zone_of_.resize(labels_.size(), kNoZone);  // repair points are never zone points
+    dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
+    dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
+    stats_.repair_points += repairs.size();
+    log_round(repairs.size(), since(t_insert));
+  }
+  emit(out);
+  stats_.seconds_check = since(t0);
+  stats_.kernel_bytes = dt_.memory_bytes();
+  return stats_;
+}
+
+ZoneTets OutputPool::take() {
+  std::lock_guard lock(mutex_);
+  if (spare_.empty()) return {};
+  ZoneTets v = std::move(spare_.back());
+  spare_.pop_back();
+  return v;
+}
+
+void OutputPool::give(ZoneTets&& v) {
+  v.tets.clear();
+  v.labels.clear();
+  std::lock_guard lock(mutex_);
+  spare_.push_back(std::move(v));
+}
+
+ZoneTriangulator::ZoneTriangulator(const SortedView& view, OutputPool* pool)
+    : worker_(std::make_unique<ZoneWorker>(view, pool)) {}
+ZoneTriangulator::~ZoneTriangulator() = default;
+
+SegmentStats ZoneTriangulator::run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out) {
+  return worker_->run(plan, zone, out);
+}
+
+}  // namespace tetstream::pipeline

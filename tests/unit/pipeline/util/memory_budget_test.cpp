@@ -1,0 +1,124 @@
+// The memory ledger (pipeline/memory_budget.hpp): a phase's shares never exceed the
+// ceiling, and a small input takes little of a large budget.
+#include "pipeline/util/memory_budget.hpp"
+
+#include "core/error.hpp"
+#include "pipeline/run/run.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <string>
+
+namespace tetstream::pipeline {
+namespace {
+
+constexpr std::uint64_t kMiB = std::uint64_t(1) << 20;
+
+TEST(MemoryBudget, PhasesNeverExceedTheCeiling) {
+  for (std::uint64_t ceiling : {32 * kMiB, 48 * kMiB, 64 * kMiB, 96 * kMiB, 128 * kMiB, 1024 * kMiB, 16384 * kMiB,
+                                kMiB << 20}) {
+    for (std::uint64_t points : {std::uint64_t(4), std::uint64_t(1000), std::uint64_t(100000), std::uint64_t(10000000),
+                                 std::uint64_t(1000000000), std::uint64_t(100000000000)}) {
+      for (int threads : {1, 2, 16, 256}) {
+        SCOPED_TRACE("ceiling " + std::to_string(ceiling >> 20) + " MiB, " + std::to_string(points) + " points, " +
+                     std::to_string(threads) + " threads");
+        MemoryBudget budget(ceiling, points, threads, 16);
+        budget.plan_sort();
+        EXPECT_LE(budget.phase_total("sort"), ceiling);
+        for (double index_per_point : {0.0, 4.0, 12.0}) {
+          const TriangulateShares t = budget.plan_triangulate(std::uint64_t(index_per_point * double(points)));
+          // A budget whose windows get nothing is refused by the plan; otherwise the
+          // phase, its reserve included, fits.
+          if (t.window_bytes > 0) {
+            EXPECT_LE(budget.phase_total("triangulate"), ceiling);
+          }
+          EXPECT_GE(t.encoders, 1);
+          EXPECT_LE(t.encoders, 4);
+        }
+      }
+    }
+  }
+}
+
+TEST(MemoryBudget, SmallInputsTakeLittleOfALargeBudget) {
+  for (std::uint64_t ceiling : {1024 * kMiB, kMiB << 20}) {
+    MemoryBudget budget(ceiling, 1000, 2, 16);
+    const SortShares sort = budget.plan_sort();
+    EXPECT_LE(sort.run_points, std::size_t(1) << 16);  // one read chunk
+    EXPECT_LE(sort.merge_bytes, kMiB);
+    const TriangulateShares t = budget.plan_triangulate(16 * 1000, 480.0 * 1000);
+    EXPECT_LT(t.writer_bytes, 2 * kMiB);  // 8,000 tets at most in flight, not 2^18-tet frames
+    EXPECT_LE(t.query_page_bytes, 1000 * 32 + 2 * kMiB);
+    // Everything but the fixed reserve is what 1,000 points need.
+    // (The query pages' one 2 MiB region and the writer's few frames dominate.)
+    EXPECT_LT(budget.phase_total("triangulate") - budget.runtime_bytes(), 8 * kMiB);
+    EXPECT_LT(budget.phase_total("sort") - budget.runtime_bytes(), 4 * kMiB);
+  }
+}
+
+TEST(MemoryBudget, SharesAreNamedOncePerPhase) {
+  MemoryBudget budget(256 * kMiB, 1000000, 2, 2);
+  budget.plan_sort();
+  budget.plan_triangulate(12000000);
+  budget.plan_triangulate(12000000, 1e6);  // planned again: replaced, not added
+  int windows = 0;
+  for (const MemoryBudget::Share& s : budget.shares())
+    if (s.phase == "triangulate" && s.name == "windows") {
+      ++windows;
+      EXPECT_EQ(s.bytes, 1000000u);
+    }
+  EXPECT_EQ(windows, 1);
+  EXPECT_LE(budget.phase_total("triangulate"), 256 * kMiB);
+}
+
+TEST(MemoryBudget, WriterFramesFollowTheOutput) {
+  // Frames of 2^18 tets: a small output has one small frame in flight, a large one
+  // 2 * encoders + 1 full frames.
+  const std::uint64_t small = MemoryBudget::writer_bytes_for(1, 1000, 1 << 18);
+  const std::uint64_t large = MemoryBudget::writer_bytes_for(4, 100000000, 1 << 18);
+  EXPECT_LT(small, 200000u);
+  EXPECT_GE(large, std::uint64_t((9 * 32 + 4 * 40) * (1 << 18)));
+  EXPECT_EQ(MemoryBudget::encoders_for(64 * kMiB, 16), 1);
+  EXPECT_EQ(MemoryBudget::encoders_for(kMiB << 20, 16), 4);
+  EXPECT_EQ(MemoryBudget::encoders_for(kMiB << 20, 2), 2);
+}
+
+TEST(MemoryBudget, FramesAndTheFileBufferShrinkWithTheBudget) {
+  // Frames of a 1024th of the budget in tets, powers of two from 2^12 to 2^18: a
+  // small budget is not taken by the writer (2^18-tet frames were 37 MiB in flight,
+  // more than all of --memory 32M), and from 256M up the frames are the largest.
+  EXPECT_EQ(MemoryBudget::frame_tets_for(kMiB), kSmallestFrameTets);
+  EXPECT_EQ(MemoryBudget::frame_tets_for(32 * kMiB), std::size_t(1) << 15);
+  EXPECT_EQ(MemoryBudget::frame_tets_for(64 * kMiB), std::size_t(1) << 16);
+  EXPECT_EQ(MemoryBudget::frame_tets_for(100 * kMiB), std::size_t(1) << 16);
+  EXPECT_EQ(MemoryBudget::frame_tets_for(256 * kMiB), kFrameTets);
+  EXPECT_EQ(MemoryBudget::frame_tets_for(kMiB << 20), kFrameTets);
+  for (std::uint64_t ceiling : {32 * kMiB, 64 * kMiB, 256 * kMiB, 1024 * kMiB}) {
+    MemoryBudget budget(ceiling, 1000000, 2, 16);
+    const TriangulateShares t = budget.plan_triangulate(4000000);
+    EXPECT_LE(t.writer_bytes, ceiling / 6) << (ceiling >> 20) << " MiB";
+    EXPECT_LE(t.file_buffer_bytes, t.writer_bytes);
+    EXPECT_GE(t.file_buffer_bytes, std::size_t(64) << 10);
+  }
+}
+
+// --memory as people write it: every unit binary, any case, with or without B / iB.
+TEST(MemorySize, ParsedAsPeopleWriteIt) {
+  EXPECT_EQ(parse_memory_size("512M"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512m"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512MB"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512MiB"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("512mb"), 512 * kMiB);
+  EXPECT_EQ(parse_memory_size("1g"), 1024 * kMiB);
+  EXPECT_EQ(parse_memory_size("1GiB"), 1024 * kMiB);
+  EXPECT_EQ(parse_memory_size("1.5G"), 1536 * kMiB);
+  EXPECT_EQ(parse_memory_size("4096K"), 4 * kMiB);
+  EXPECT_EQ(parse_memory_size("2T"), 2 * (kMiB << 20));
+  EXPECT_EQ(parse_memory_size("100000"), 100000u);
+  for (const char* bad : {"", "G", "12Q", "-1G", "0", "nan", "inf", "1e30T", "5 G", "1.5GG"})
+    EXPECT_THROW(parse_memory_size(bad), UsageError) << bad;
+}
+
+}  // namespace
+}  // namespace tetstream::pipeline
