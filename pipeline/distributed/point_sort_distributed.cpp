@@ -211,20 +211,27 @@ bool sorts_by_ranges(const std::string& input, const io::PointReadOptions& read_
   return io::open_points(input, read_options)->count().has_value();
 }
 
-SortedPoints sort_points_distributed(Communicator& comm, const std::string& input,
-                                     const io::PointReadOptions& read_options, const PointSortOptions& options,
-                                     const std::string& dir, const std::string& runs_name,
-                                     const DistributedSortTarget& target) {
-  const std::size_t ranks = std::size_t(comm.size()), me = std::size_t(comm.rank());
-  const bool root = me == 0;
-  SortedPoints result;
-  auto t0 = Clock::now();
+namespace {
 
-  // ---- scan: this rank's records for the bounding box and a sample of keys ----
+// Reads this rank's K-th of the input once: its bounding box, whether it is float32,
+// and a sample of its points for the splitters.
+struct RankScan {
   InputRange range;
   double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   bool float32 = false;
   std::vector<double> sample;  // xyz of sampled points
+};
+
+RankScan scan_rank_range(Communicator& comm, const std::string& input, const io::PointReadOptions& read_options,
+                         const PointSortOptions& options) {
+  const std::size_t ranks = std::size_t(comm.size()), me = std::size_t(comm.rank());
+  const bool root = me == 0;
+  RankScan scan;
+  InputRange& range = scan.range;
+  double* lo = scan.lo;
+  double* hi = scan.hi;
+  bool& float32 = scan.float32;
+  std::vector<double>& sample = scan.sample;
   together(comm, [&] {
     auto reader = io::open_points(input, read_options);
     if (!reader->count()) throw std::logic_error("sort_points_distributed: an input without a count");
@@ -254,39 +261,20 @@ SortedPoints sort_points_distributed(Communicator& comm, const std::string& inpu
     progress.finish();
     float32 = reader->float32_input();
   });
-  SortProgress scanned;
-  scanned.scanned = true;
-  scanned.input_count = range.count;
-  scanned.float32 = true;
-  for (std::uint64_t f : comm.all_gather(float32)) scanned.float32 = scanned.float32 && f != 0;
-  double extent[3];
-  for (int k = 0; k < 3; ++k) {
-    scanned.bbox_min[k] = INFINITY, scanned.bbox_max[k] = -INFINITY;
-    for (std::uint64_t v : comm.all_gather(std::bit_cast<std::uint64_t>(lo[k])))
-      scanned.bbox_min[k] = std::min(scanned.bbox_min[k], std::bit_cast<double>(v));
-    for (std::uint64_t v : comm.all_gather(std::bit_cast<std::uint64_t>(hi[k])))
-      scanned.bbox_max[k] = std::max(scanned.bbox_max[k], std::bit_cast<double>(v));
-    extent[k] = scanned.bbox_max[k] - scanned.bbox_min[k];
-    result.bbox_min[k] = scanned.bbox_min[k], result.bbox_max[k] = scanned.bbox_max[k];
-  }
-  scanned.axis = int(std::max_element(extent, extent + 3) - extent);
-  result.input_count = range.count;
-  result.axis = scanned.axis;
-  result.layout = RecordLayout::for_input(scanned.float32, range.count);
-  result.seconds_scan = since(t0);
-  // Every rank the same answer (the same figures): rank 0's line if refused.
-  together(comm, [&] {
-    if (options.on_scanned) options.on_scanned(scanned);
-  });
+  return scan;
+}
 
-  // ---- splitters: rank 0 cuts the sorted sample into K ranges ----
+// Rank 0 cuts the ranks' sorted samples into K key ranges of about equal counts.
+std::vector<Key> choose_splitters(Communicator& comm, const RankScan& scan, int axis) {
+  const std::size_t ranks = std::size_t(comm.size());
+  const bool root = comm.rank() == 0;
   std::vector<Key> keys;
-  for (std::size_t i = 0; i + 3 <= sample.size(); i += 3) keys.push_back(key_of(&sample[i], result.axis));
-  const std::vector<std::string> samples = comm.gather(to_bytes(keys), 0);
+  for (std::size_t i = 0; i + 3 <= scan.sample.size(); i += 3) keys.push_back(key_of(&scan.sample[i], axis));
+  const std::vector<std::string> scan.samples = comm.gather(to_bytes(keys), 0);
   std::string chosen;
   if (root) {
     std::vector<Key> all;
-    for (const std::string& s : samples) {
+    for (const std::string& s : scan.samples) {
       const std::vector<Key> theirs = from_bytes<Key>(s);
       all.insert(all.end(), theirs.begin(), theirs.end());
     }
@@ -295,20 +283,17 @@ SortedPoints sort_points_distributed(Communicator& comm, const std::string& inpu
     for (std::size_t r = 1; r < ranks && !all.empty(); ++r) splitters.push_back(all[all.size() * r / ranks]);
     chosen = to_bytes(splitters);
   }
-  const std::vector<Key> splitters = from_bytes<Key>(comm.broadcast(chosen, 0));
+  return from_bytes<Key>(comm.broadcast(chosen, 0));
+}
 
-  // ---- exchange and merge, each rank into its place ----
-  t0 = Clock::now();
-  std::optional<io::OutputPart> out;
-  together(comm, [&] { out.emplace(target.partial, target.identity); });
-  std::uint64_t written_at = 0;
-  with_record(result.layout, [&](auto r) {
-    written_at = exchange_and_merge<decltype(r)>(comm, input, read_options, options, dir, runs_name, range,
-                                                 splitters, *out, target, result);
-  });
+// The ranks' parts into one points section: each part moved to where its labels
+// begin, then rank 0 writes the section's lead and trailer (the CRC of the parts
+// combined) and gathers the hull's labels.
+SortedPoints close_parts(Communicator& comm, io::OutputPart* out, const DistributedSortTarget& target,
+                         const SortedPoints& result, std::uint64_t written_at) {
+  const std::size_t ranks = std::size_t(comm.size()), me = std::size_t(comm.rank());
+  const bool root = me == 0;
   const std::size_t record_bytes = result.layout.bytes();
-
-  // ---- close: the ranks' parts into one section ----
   const std::vector<std::uint64_t> counts = comm.all_gather(result.count);
   const std::vector<std::uint64_t> duplicates = comm.all_gather(result.duplicates);
   const std::vector<std::uint64_t> crcs = comm.all_gather(result.crc32c);
@@ -367,6 +352,64 @@ SortedPoints sort_points_distributed(Communicator& comm, const std::string& inpu
       whole.hull_labels.insert(whole.hull_labels.end(), theirs.begin(), theirs.end());
     }
   });
+  return whole;
+}
+
+}  // namespace
+
+SortedPoints sort_points_distributed(Communicator& comm, const std::string& input,
+                                     const io::PointReadOptions& read_options, const PointSortOptions& options,
+                                     const std::string& dir, const std::string& runs_name,
+                                     const DistributedSortTarget& target) {
+  SortedPoints result;
+  auto t0 = Clock::now();
+
+  // ---- scan: this rank's records for the bounding box and a sample of keys ----
+  const RankScan scan = scan_rank_range(comm, input, read_options, options);
+  const InputRange& range = scan.range;
+  const double* lo = scan.lo;
+  const double* hi = scan.hi;
+  const bool float32 = scan.float32;
+  SortProgress scanned;
+  scanned.scanned = true;
+  scanned.input_count = range.count;
+  scanned.float32 = true;
+  for (std::uint64_t f : comm.all_gather(float32)) scanned.float32 = scanned.float32 && f != 0;
+  double extent[3];
+  for (int k = 0; k < 3; ++k) {
+    scanned.bbox_min[k] = INFINITY, scanned.bbox_max[k] = -INFINITY;
+    for (std::uint64_t v : comm.all_gather(std::bit_cast<std::uint64_t>(lo[k])))
+      scanned.bbox_min[k] = std::min(scanned.bbox_min[k], std::bit_cast<double>(v));
+    for (std::uint64_t v : comm.all_gather(std::bit_cast<std::uint64_t>(hi[k])))
+      scanned.bbox_max[k] = std::max(scanned.bbox_max[k], std::bit_cast<double>(v));
+    extent[k] = scanned.bbox_max[k] - scanned.bbox_min[k];
+    result.bbox_min[k] = scanned.bbox_min[k], result.bbox_max[k] = scanned.bbox_max[k];
+  }
+  scanned.axis = int(std::max_element(extent, extent + 3) - extent);
+  result.input_count = range.count;
+  result.axis = scanned.axis;
+  result.layout = RecordLayout::for_input(scanned.float32, range.count);
+  result.seconds_scan = since(t0);
+  // Every rank the same answer (the same figures): rank 0's line if refused.
+  together(comm, [&] {
+    if (options.on_scanned) options.on_scanned(scanned);
+  });
+
+  // ---- splitters: rank 0 cuts the sorted sample into K ranges ----
+  const std::vector<Key> splitters = choose_splitters(comm, scan, result.axis);
+
+  // ---- exchange and merge, each rank into its place ----
+  t0 = Clock::now();
+  std::optional<io::OutputPart> out;
+  together(comm, [&] { out.emplace(target.partial, target.identity); });
+  std::uint64_t written_at = 0;
+  with_record(result.layout, [&](auto r) {
+    written_at = exchange_and_merge<decltype(r)>(comm, input, read_options, options, dir, runs_name, range,
+                                                 splitters, *out, target, result);
+  });
+
+  // ---- close: the ranks' parts into one section ----
+  SortedPoints whole = close_parts(comm, &*out, target, result, written_at);
   whole.seconds_runs = since(t0);  // the exchange, the merge and the close
   return whole;
 }
