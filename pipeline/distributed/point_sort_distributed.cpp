@@ -270,11 +270,11 @@ std::vector<Key> choose_splitters(Communicator& comm, const RankScan& scan, int 
   const bool root = comm.rank() == 0;
   std::vector<Key> keys;
   for (std::size_t i = 0; i + 3 <= scan.sample.size(); i += 3) keys.push_back(key_of(&scan.sample[i], axis));
-  const std::vector<std::string> scan.samples = comm.gather(to_bytes(keys), 0);
+  const std::vector<std::string> samples = comm.gather(to_bytes(keys), 0);
   std::string chosen;
   if (root) {
     std::vector<Key> all;
-    for (const std::string& s : scan.samples) {
+    for (const std::string& s : samples) {
       const std::vector<Key> theirs = from_bytes<Key>(s);
       all.insert(all.end(), theirs.begin(), theirs.end());
     }
