@@ -1,7 +1,8 @@
 # `cmake --install`: the binary, the static libraries and their public headers, a CMake
-# package (find_package(tetstream) with imported targets tetstream::core, ::io and
-# ::pipeline), a pkg-config file, the man page (generated from --help at build time),
-# bash and zsh completions; and CPack's Debian package (`cpack -G DEB`).
+# package (find_package(tetstream) with imported targets tetstream::tetstream (the
+# public API), tetstream::core, ::io and ::pipeline), a pkg-config file, the man page
+# (generated from --help at build time), bash and zsh completions; and CPack's Debian
+# package (`cpack -G DEB`).
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
@@ -34,6 +35,13 @@ set(TETSTREAM_PC_PIPELINE "")
 foreach(room ${TETSTREAM_PIPELINE_ROOMS})
   string(PREPEND TETSTREAM_PC_PIPELINE "-ltetstream_pipeline_${room} ")
 endforeach()
+
+# The public API (api/, docs/cpp.md): tetstream::tetstream, #include <tetstream/tetstream.hpp>.
+set_target_properties(tetstream_api PROPERTIES EXPORT_NAME tetstream INTERFACE_INCLUDE_DIRECTORIES
+  "$<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}/api>;$<INSTALL_INTERFACE:${CMAKE_INSTALL_INCLUDEDIR}>")
+install(FILES ${PROJECT_SOURCE_DIR}/api/tetstream/tetstream.hpp DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/tetstream
+        COMPONENT dev)
+list(APPEND TETSTREAM_LIBRARIES tetstream_api)
 
 install(TARGETS tetstream RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR} COMPONENT bin)
 install(TARGETS ${TETSTREAM_LIBRARIES} EXPORT tetstreamTargets

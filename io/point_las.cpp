@@ -89,9 +89,14 @@ class LasPointReader final : public PointReader {
 
   std::vector<std::pair<std::string, std::string>> details() const override {
     auto triple = [](const double* v) { return shortest(v[0]) + " " + shortest(v[1]) + " " + shortest(v[2]); };
+    // A decimal scale (0.01, 0.001) is no binary fraction, so X * scale + offset is
+    // usually not a double: the nearest one is read. That is the tile's quantisation as
+    // every LAS reader sees it, not a fault, and it is said so in the same line.
     std::string exact = rounded_ == 0 ? "yes (every X * scale + offset is exact)"
                                       : "no (" + std::to_string(rounded_) + " of " + std::to_string(3 * points_read_) +
-                                            " coordinates rounded)";
+                                            " coordinates are X * scale + offset rounded to the nearest double: the "
+                                            "file's own quantisation, as with any decimal scale; not damage, and the "
+                                            "points read are triangulated exactly)";
     return {{"scale", triple(scale_)}, {"offset", triple(offset_)}, {"exact", exact}};
   }
 

@@ -15,7 +15,7 @@ packages=(
   # runs under mpirun (optional at build time: -DTETSTREAM_MPI) and their tests
   libopenmpi-dev openmpi-bin
   # the Python package (optional at build time: -DTETSTREAM_PYTHON) and its tests
-  pybind11-dev python3-pybind11 python3-dev python3-pytest python3-setuptools python3-pip python3-wheel
+  pybind11-dev python3-pybind11 python3-dev python3-pytest python3-setuptools python3-pip python3-wheel python3-venv
 )
 
 missing=()

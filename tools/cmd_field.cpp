@@ -32,8 +32,25 @@ struct FieldArgs {
   std::string memory = "1G", density, grid, box, hull = "nan", dtype = "float64", index_dtype = "auto";
 };
 
+// -o is a prefix for several files; a user who names one (f.npy, f.density.npy) means
+// the prefix before it: f.density.npy, never f.npy.density.npy.
+std::string field_prefix(std::string out) {
+  const auto strip = [&out](const std::string& suffix) {
+    if (out.size() > suffix.size() && out.compare(out.size() - suffix.size(), suffix.size(), suffix) == 0) {
+      out.resize(out.size() - suffix.size());
+      return true;
+    }
+    return false;
+  };
+  if (strip(".npy"))
+    for (const char* what : {".density", ".voronoi", ".grid", ".neighbours.offsets", ".neighbours.indices"})
+      if (strip(what)) break;
+  return out;
+}
+
 void run_field(FieldArgs& args, Context& ctx) {
   auto& o = args.options;
+  o.output = field_prefix(o.output);
   o.memory_bytes = pipeline::parse_memory_size(args.memory);
   o.progress = !ctx.global.quiet;
   if (!args.density.empty() && args.density != "dtfe")
@@ -87,7 +104,9 @@ void setup_field(CLI::App& app, Context& ctx) {
   CLI::App* cmd = app.add_subcommand("field", "Per-point fields from a .tets container: DTFE density, Voronoi volumes, neighbours, grids");
   cmd->footer(kFieldHelp);
   cmd->add_option("input", args->options.input, "The container (.tets)")->required();
-  cmd->add_option("-o,--output", args->options.output, "Output prefix: writes PREFIX.density.npy, ...")->required();
+  cmd->add_option("-o,--output", args->options.output,
+                  "Output prefix: writes PREFIX.density.npy, ... (a trailing .npy, or .density.npy etc., is dropped)")
+      ->required();
   cmd->add_option("--density", args->density, "Per-point density estimator: dtfe");
   cmd->add_flag("--voronoi-volume", args->options.voronoi, "Per-point Voronoi cell volume");
   cmd->add_flag("--neighbours,--neighbors", args->options.neighbours, "Delaunay neighbours of each point (CSR)");

@@ -2,6 +2,7 @@
 // so every coordinate is checked finite), or the summary of a .tets container.
 #include "core/error.hpp"
 #include "io/point_reader.hpp"
+#include "io/tet_container.hpp"
 #include "pipeline/util/progress.hpp"
 #include "tools/command.hpp"
 #include "tools/info_tets.hpp"
@@ -12,6 +13,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cstdio>
+#include <filesystem>
 #include <limits>
 #include <memory>
 #include <vector>
@@ -24,10 +26,6 @@ struct InfoArgs {
   io::PointReadOptions read;
   bool check = false;  // containers: read and check every point and frame
 };
-
-bool ends_with(const std::string& s, const std::string& suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
 
 std::string shortest(double v) {
   char buf[32];
@@ -55,6 +53,18 @@ void bbox_update(const double* p, std::size_t n, double* lo, double* hi) {
     }
   }
   for (int k = 0; k < 12; ++k) lo[k % 3] = std::min(lo[k % 3], l[k]), hi[k % 3] = std::max(hi[k % 3], h[k]);
+}
+
+// A .tets container, known by its magic number whatever its name (a point format
+// named with --format is read as points).
+bool is_container(const std::string& path, const io::PointReadOptions& read) {
+  if (read.format != io::PointFormat::kAuto || io::is_std_stream(path)) return false;
+  unsigned char magic[io::kFileMagic.size()] = {};
+  FILE* f = std::fopen(path.c_str(), "rb");
+  if (!f) return std::filesystem::path(path).extension() == ".tets";  // the container reader says why
+  const std::size_t n = std::fread(magic, 1, sizeof magic, f);
+  std::fclose(f);
+  return n == sizeof magic && std::equal(magic, magic + n, io::kFileMagic.begin());
 }
 
 // An HDF5 file named by extension, --format or its signature.
@@ -154,7 +164,7 @@ void setup_info(CLI::App& app, Context& ctx) {
   add_point_input_options(cmd, args->read);
   cmd->add_flag("--check", args->check, "For a .tets container: also read every point and frame and check their CRCs");
   cmd->callback([args, &ctx] {
-    if (ends_with(args->path, ".tets") && args->read.more_inputs.empty()) {
+    if (args->read.more_inputs.empty() && is_container(args->path, args->read)) {
       info_tets(args->path, ctx, args->check);
     } else if (args->read.datasets.empty() && args->read.more_inputs.empty() && is_hdf5(args->path, args->read)) {
       info_hdf5(args->path, ctx);

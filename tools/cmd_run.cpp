@@ -1,6 +1,8 @@
 // `tetstream run`: triangulate a point file out of core into a .tets container.
 #include "core/error.hpp"
+#include "io/mesh_export.hpp"
 #include "io/point_format.hpp"
+#include "io/tet_reader.hpp"
 #include "pipeline/util/progress.hpp"
 #include "pipeline/run/run.hpp"
 #include "pipeline/distributed/run_distributed.hpp"
@@ -11,6 +13,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <filesystem>
+#include <optional>
+
 namespace tetstream::cli {
 namespace {
 
@@ -19,8 +24,24 @@ struct RunArgs {
   std::string memory = "1G";
 };
 
+// The mesh format an output name asks for (.vtu, .vtk, .mesh, .msh, .node, .xdmf); none
+// for a container (.tets, -, or any other name).
+std::optional<io::MeshFormat> mesh_output(const std::string& path) {
+  if (io::is_std_stream(path) || std::filesystem::path(path).extension() == ".tets") return std::nullopt;
+  try {
+    return io::mesh_format_for(path);
+  } catch (const UsageError&) {
+    return std::nullopt;
+  }
+}
+
 void run_run(RunArgs& args, Context& ctx) {
   auto& o = args.options;
+  // `-o out.vtu`: the job writes the container out.vtu.tets (checkpointed and resumable
+  // under that name, as any output), then converts it and removes it.
+  const std::optional<io::MeshFormat> mesh = mesh_output(o.output);
+  const std::string mesh_path = o.output;
+  if (mesh) o.output += ".tets";
   o.memory_bytes = pipeline::parse_memory_size(args.memory);
   o.threads = ctx.global.threads;
   o.progress = !ctx.global.quiet;
@@ -42,6 +63,24 @@ void run_run(RunArgs& args, Context& ctx) {
                s.zone_buffer_points, 100 * s.zone_buffer_share(), s.hull_window_points, s.repair_points, s.queries,
                s.query_points, s.seconds_build, s.seconds_check);
   ctx.summary = pipeline::run_summary_json(o, s);
+  if (!mesh) return;
+  std::vector<std::string> files;
+  {
+    const io::TetReader reader(o.output);
+    pipeline::Progress points("converting points", "points", reader.point_count(), o.progress);
+    pipeline::Progress tets("converting tets", "tets", reader.tet_count(), o.progress);
+    io::MeshExportOptions options;
+    options.on_points = [&points](std::uint64_t n) { points.add(n); };
+    options.on_tets = [&tets](std::uint64_t n) { tets.add(n); };
+    files = io::export_mesh(reader, mesh_path, *mesh, options).files;
+    points.finish();
+    tets.finish();
+  }
+  std::filesystem::remove(o.output);
+  for (const auto& f : files) spdlog::info("wrote {}", f);
+  ctx.summary["mesh"] = mesh_path;
+  ctx.summary["mesh_format"] = io::mesh_format_name(*mesh);
+  ctx.summary["mesh_files"] = files;
 }
 
 void setup_run(CLI::App& app, Context& ctx) {
@@ -51,7 +90,8 @@ void setup_run(CLI::App& app, Context& ctx) {
                         "Point file (raw, PLY, .npy, text, LAS, HDF5) or - for stdin; several files (or a quoted glob) "
                         "are read in order as one input");
   cmd->add_option("-o,--output", args->options.output,
-                  "Output container (.tets), or - to stream it to standard output (a pipe; not resumable)")
+                  "Output container (.tets), or - to stream it to standard output (a pipe; not resumable);\n"
+                  "a mesh name (.vtu .vtk .mesh .msh .node .xdmf) writes that format (through OUT.tets, removed)")
       ->required();
   cmd->add_option("--memory", args->memory, "Memory budget, e.g. 512M, 4G (peak resident memory stays below it)")
       ->capture_default_str();

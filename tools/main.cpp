@@ -17,6 +17,8 @@
 #include <string>
 #include <vector>
 #include <omp.h>
+#include <poll.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace tetstream::cli {
@@ -100,6 +102,16 @@ std::string unknown_subcommand(const CLI::App& app, int argc, char** argv) {
     return "unknown subcommand '" + a + "'" + (best.empty() ? "" : "; did you mean '" + best + "'?");
   }
   return "";
+}
+
+// Whether standard output is a pipe or socket whose reader has gone (`| head`): a
+// write to it failed with EPIPE, which for a filter is the end of the job, not an
+// error (cat and seq stop quietly). Linux's poll() reports POLLERR for such a pipe.
+bool stdout_reader_gone() {
+  struct stat st {};
+  if (::fstat(STDOUT_FILENO, &st) != 0 || !(S_ISFIFO(st.st_mode) || S_ISSOCK(st.st_mode))) return false;
+  pollfd p{STDOUT_FILENO, POLLOUT, 0};
+  return ::poll(&p, 1, 0) == 1 && (p.revents & POLLERR) != 0;
 }
 
 void configure_logging(const GlobalOptions& g) {
@@ -193,6 +205,9 @@ int main(int argc, char** argv) {
   } catch (const pipeline::PeerFailed& e) {
     return static_cast<int>(e.code());  // the failing rank printed the job's error line
   } catch (const Error& e) {
+    // A write to standard output that failed because its reader closed the pipe: the
+    // job has unwound through its cleanup; nothing more to say.
+    if (ctx.stdout_is_data && e.code() == ExitCode::kIoFailure && stdout_reader_gone()) return 0;
     std::fflush(stdout);
     std::cerr << "tetstream: error: " << e.what() << '\n';
     return static_cast<int>(e.code());

@@ -5,31 +5,46 @@
 //   run(input, output, options)    the out-of-core job (pipeline::run_job), its --json summary
 //   Reader(path)                   a .tets container (io::TetReader): points, frames, tets
 //   verify(path, ...)              pipeline::verify_file, its --json report
+//   field(...), field_memory(...)  pipeline::compute_fields over a container; the same
+//                                  sums over an in-memory triangulation
+//   convert, expand_inputs, read_points   io::export_mesh, the CLI's globs, a point file
+//   find_simplex, ...              scipy.spatial.Delaunay's queries (_geometry.cpp)
 //
 // Every long computation runs with the GIL released. Arrays handed to Python are not
 // copied: each owns a heap buffer through a capsule (its .base) that frees it.
 // Exceptions: tetstream's InputError/UsageError -> ValueError subclasses, IoError ->
 // an OSError subclass, Interrupted -> KeyboardInterrupt (see register_exceptions).
+// Log lines (spdlog) are queued and handed to a Python callable on the calling thread
+// (the package passes them to `logging`), never written to file descriptor 2.
 #include "core/delaunay.hpp"
 #include "core/error.hpp"
 #include "core/huge_pages.hpp"
+#include "core/spatial_sort.hpp"
+#include "io/mesh_export.hpp"
 #include "io/point_format.hpp"
+#include "io/point_reader.hpp"
 #include "io/tet_reader.hpp"
-#include "pipeline/util/interrupt.hpp"
+#include "pipeline/field/field.hpp"
+#include "pipeline/field/geometry.hpp"
 #include "pipeline/run/run.hpp"
 #include "pipeline/run/summary_json.hpp"
+#include "pipeline/util/interrupt.hpp"
 #include "pipeline/verify/verify.hpp"
+#include "python/tetstream/_geometry.hpp"
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
-#include <spdlog/sinks/stdout_color_sinks.h>
+
+#include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
 
 #include <omp.h>
 #include <sys/mman.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -44,6 +59,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace py = pybind11;
@@ -111,19 +127,75 @@ py::array_t<T> vector_to_array(std::vector<T>&& v, std::vector<py::ssize_t> shap
   return py::array_t<T>(shape, owned->empty() ? nullptr : owned->data(), owner);
 }
 
-// ---- logging: the pipeline logs through spdlog; here to stderr, like the CLI ----
+// ---- logging: the pipeline logs through spdlog; the lines wait in a queue for the ----
+// calling thread, which hands them to Python (a job's worker threads never take the GIL).
+
+class QueueSink final : public spdlog::sinks::base_sink<std::mutex> {
+ public:
+  std::vector<std::pair<int, std::string>> take() {
+    std::lock_guard<std::mutex> lock(this->mutex_);
+    return std::exchange(lines_, {});
+  }
+
+ protected:
+  void sink_it_(const spdlog::details::log_msg& msg) override {
+    lines_.emplace_back(int(msg.level), std::string(msg.payload.data(), msg.payload.size()));
+  }
+  void flush_() override {}
+
+ private:
+  std::vector<std::pair<int, std::string>> lines_;
+};
+
+QueueSink& log_queue() {
+  static const std::shared_ptr<QueueSink> sink = [] {
+    auto q = std::make_shared<QueueSink>();
+    auto logger = std::make_shared<spdlog::logger>("tetstream", q);
+    spdlog::set_default_logger(logger);
+    return q;
+  }();
+  return *sink;
+}
 
 void configure_logging(bool verbose) {
-  static std::shared_ptr<spdlog::logger> logger = [] {
-    auto l = spdlog::get("tetstream");
-    if (!l) {
-      l = spdlog::stderr_color_mt("tetstream");
-      l->set_pattern("[%H:%M:%S.%e] [%^%l%$] %v");
-    }
-    spdlog::set_default_logger(l);
-    return l;
-  }();
+  log_queue();
   spdlog::set_level(verbose ? spdlog::level::info : spdlog::level::warn);
+}
+
+// Hands the queued lines to `emit(level, message)` (spdlog's level numbers). Needs the GIL.
+void drain_log(const py::object& emit) {
+  for (auto& [level, line] : log_queue().take())
+    if (!emit.is_none()) emit(level, line);
+}
+
+// Waits for `done` with the GIL released, waking ten times a second to hand the queued
+// log lines to `emit` and to let Python run its signal handlers. On a signal (Ctrl-C:
+// KeyboardInterrupt from Python's handler) it calls `stop`, waits for the work to
+// unwind, and returns the Python error, fetched (and cleared), for the caller to raise.
+template <class R>
+std::optional<py::error_already_set> wait_for_work(std::future<R>& done, const std::function<void()>& stop,
+                                                   const py::object& emit) {
+  std::optional<py::error_already_set> pending;
+  for (;;) {
+    bool ready;
+    {
+      py::gil_scoped_release release;
+      ready = done.wait_for(std::chrono::milliseconds(100)) == std::future_status::ready;
+    }
+    drain_log(emit);
+    if (ready) break;
+    if (PyErr_CheckSignals() != 0) {
+      pending.emplace();
+      stop();
+      {
+        py::gil_scoped_release release;
+        done.wait();
+      }
+      break;
+    }
+  }
+  drain_log(emit);
+  return pending;
 }
 
 // ---- in core: the kernel ----
@@ -132,8 +204,13 @@ void configure_logging(bool verbose) {
 // 2^30 at the kernel's estimate of 6.9 tets per point, with some headroom).
 constexpr std::size_t kMaxInCorePoints = std::size_t(150'000'000);
 
+// The kernel's answer in the caller's terms. The kernel numbers points by their
+// position in its input, a permutation of the caller's array: input[k] is the caller's
+// index of the kernel's point k. Of several exact copies of a point, the first in the
+// caller's order stands for all of them (the vertex), as `run` keeps the first.
 template <class I>
-py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threads) {
+py::dict triangulation_arrays(const core::Delaunay& dt, const std::vector<std::uint32_t>& input, int threads) {
+  const std::size_t n = input.size();
   // Output index of each finite tet slot: counted per block, then numbered, in parallel.
   const std::size_t slots = dt.num_tet_slots();
   constexpr std::uint32_t kNone = 0xFFFFFFFFu;
@@ -141,6 +218,21 @@ py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threa
   std::size_t m = 0, h = 0, d = 0;
   {
     py::gil_scoped_release release;
+    // name[k]: the caller's index that kernel point k's vertex goes by (the smallest of
+    // its copies); rows of `duplicates` for every other copy.
+    std::vector<std::uint32_t> name(n);
+    for (std::size_t k = 0; k < n; ++k) name[k] = input[k];
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> merged;  // (kernel point, its vertex)
+    for (std::size_t k = 0; k < n; ++k)
+      if (dt.incident_tet(core::VertexId(k)) == core::kNoTet) {
+        core::VertexId to = dt.duplicate_of(core::VertexId(k));
+        // (the first point with these coordinates; follow it to the vertex if need be)
+        for (int guard = 0; guard < 64 && dt.incident_tet(to) == core::kNoTet && dt.duplicate_of(to) != to; ++guard)
+          to = dt.duplicate_of(to);
+        merged.emplace_back(std::uint32_t(k), std::uint32_t(to));
+        name[to] = std::min(name[to], input[k]);
+      }
+    d = merged.size();
     const auto finite = [&dt](std::size_t t) { return dt.is_alive(core::TetId(t)) && !dt.is_infinite(core::TetId(t)); };
     constexpr std::size_t kBlock = std::size_t(1) << 16;
     const std::size_t blocks = (slots + kBlock - 1) / kBlock;
@@ -183,7 +275,7 @@ py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threa
       std::size_t i = first[b];
       for (std::size_t t = b * kBlock, e = std::min(slots, t + kBlock); t < e; ++t) {
         if (!finite(t)) continue;
-        for (int j = 0; j < 4; ++j) s[4 * i + j] = I(dt.vertex(core::TetId(t), j));
+        for (int j = 0; j < 4; ++j) s[4 * i + j] = I(name[dt.vertex(core::TetId(t), j)]);
         ++i;
       }
     }
@@ -202,22 +294,22 @@ py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threa
           f[3 * k + 2] = v[core::kFacetVertex[j][1]];
           ++k;
         }
-    // Duplicates: every input point that is not a vertex, and the vertex it merged into.
-    for (std::size_t v = 0; v < n; ++v)
-      if (dt.incident_tet(core::VertexId(v)) == core::kNoTet) ++d;
+    // Duplicates: every copy but the first of each point, and the first, sorted by the
+    // copy's index. (The kernel kept whichever copy it inserted first: the vertex's
+    // own point is a duplicate row when an earlier copy names the vertex.)
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> rows;
+    rows.reserve(d);
+    for (const auto& [copy, vertex] : merged) {
+      const std::uint32_t keep = name[vertex];
+      if (input[copy] != keep) rows.emplace_back(input[copy], keep);
+      if (input[vertex] != keep) rows.emplace_back(input[vertex], keep);
+    }
+    std::sort(rows.begin(), rows.end());
+    rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
+    d = rows.size();
     duplicates = Buffer<I>(2 * d);
     I* dp = duplicates.get();
-    k = 0;
-    for (std::size_t v = 0; v < n; ++v)
-      if (dt.incident_tet(core::VertexId(v)) == core::kNoTet) {
-        core::VertexId to = dt.duplicate_of(core::VertexId(v));
-        // (the first point with these coordinates; follow it to the vertex if need be)
-        for (int guard = 0; guard < 64 && dt.incident_tet(to) == core::kNoTet && dt.duplicate_of(to) != to; ++guard)
-          to = dt.duplicate_of(to);
-        dp[2 * k] = I(v);
-        dp[2 * k + 1] = I(to);
-        ++k;
-      }
+    for (std::size_t r = 0; r < d; ++r) dp[2 * r] = I(rows[r].first), dp[2 * r + 1] = I(rows[r].second);
   }
   py::dict out;
   out["simplices"] = to_array(std::move(simplices), {py::ssize_t(m), 4});
@@ -225,6 +317,44 @@ py::dict triangulation_arrays(const core::Delaunay& dt, std::size_t n, int threa
   out["convex_hull"] = to_array(std::move(hull), {py::ssize_t(h), 3});
   out["duplicates"] = to_array(std::move(duplicates), {py::ssize_t(d), 2});
   return out;
+}
+
+// The kernel's build, in pieces so that it can stop between them: the points in the
+// kernel's biased randomized order (core::brio_order, what build() uses), copied in
+// that order with their caller indices as labels (the symbolic perturbation stays
+// keyed by the input index); build() on the first piece, then insert_range() on the
+// next ones, which takes each piece in Hilbert order, as build() sorts a round. Sets
+// `input` (kernel point -> caller index). Returns false when `stop` was raised.
+bool build_in_pieces(core::Delaunay& dt, const double* xyz, std::size_t n, std::vector<std::uint32_t>& input,
+                     const std::atomic<bool>& stop, core::BuildStatus& status) {
+  input = core::brio_order(xyz, n);
+  std::vector<double> sorted(3 * n);
+  std::vector<std::uint64_t> labels(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const double* p = xyz + 3 * std::size_t(input[k]);
+    sorted[3 * k] = p[0], sorted[3 * k + 1] = p[1], sorted[3 * k + 2] = p[2];
+    labels[k] = input[k];
+  }
+  constexpr std::size_t kPiece = std::size_t(1) << 16;
+  std::size_t done = std::min(n, kPiece);
+  status = dt.build(sorted.data(), labels.data(), done);
+  if (status != core::BuildStatus::kOk && done < n) {
+    // Too few independent points in the first piece (a nearly flat input): all at once.
+    done = n;
+    status = dt.build(sorted.data(), labels.data(), n);
+  }
+  if (status != core::BuildStatus::kOk) return true;
+  dt.reserve(n);
+  dt.set_points(sorted.data(), labels.data(), n);
+  while (done < n) {
+    if (stop.load(std::memory_order_relaxed)) return false;
+    const std::size_t next = std::min(n, done + kPiece);
+    dt.insert_range(core::VertexId(done), core::VertexId(next));
+    done = next;
+  }
+  // The kernel keeps its own copy of the coordinates; its point() and label() are not
+  // asked again, so the sorted copies go with this function.
+  return true;
 }
 
 // points: a C-contiguous (N, 3) float64 array (the Python side converts others).
@@ -237,21 +367,47 @@ py::dict delaunay(py::array_t<double, py::array::c_style> points, const std::str
                      std::to_string(kMaxInCorePoints) + "); use tetstream.run(), which works out of core");
   if (index_dtype == "int32" && n > std::size_t(0x7FFFFFFF)) throw UsageError("int32 indices cannot hold N points");
   const double* xyz = points.data();
-  auto dt = std::make_unique<core::Delaunay>();
-  core::BuildStatus status;
   {
     py::gil_scoped_release release;
     for (std::size_t i = 0; i < 3 * n; ++i)
       if (!std::isfinite(xyz[i]))
         throw InputError("points: row " + std::to_string(i / 3) + ": a coordinate is not finite");
-    status = dt->build(xyz, nullptr, n);
   }
+  auto dt = std::make_unique<core::Delaunay>();
+  std::vector<std::uint32_t> input;
+  core::BuildStatus status = core::BuildStatus::kOk;
+  std::atomic<bool> stop{false};
+  // On a thread of its own, so that this one can run Python's signal handlers (Ctrl-C
+  // raises KeyboardInterrupt once the build has stopped at the end of a piece).
+  std::packaged_task<bool()> task([&] { return build_in_pieces(*dt, xyz, n, input, stop, status); });
+  std::future<bool> done = task.get_future();
+  std::thread worker(std::move(task));
+  std::optional<py::error_already_set> pending;
+  try {
+    pending = wait_for_work(done, [&stop] { stop.store(true); }, py::none());
+  } catch (...) {
+    stop.store(true);
+    py::gil_scoped_release release;
+    worker.join();
+    throw;
+  }
+  {
+    py::gil_scoped_release release;
+    worker.join();
+  }
+  const bool finished = done.get();  // rethrows the build's own failure (std::bad_alloc)
+  if (pending) {
+    py::gil_scoped_release release;
+    dt.reset();
+  }
+  if (pending) throw *pending;
+  if (!finished) throw std::logic_error("the triangulation stopped without a signal");
   if (status != core::BuildStatus::kOk)
     throw InputError("points: fewer than 4 affinely independent distinct points (" + std::to_string(n) +
                      " given): no tetrahedron");
   const int team = threads > 0 ? threads : omp_get_max_threads();
-  py::dict out = index_dtype == "int32" ? triangulation_arrays<std::int32_t>(*dt, n, team)
-                                        : triangulation_arrays<std::int64_t>(*dt, n, team);
+  py::dict out = index_dtype == "int32" ? triangulation_arrays<std::int32_t>(*dt, input, team)
+                                        : triangulation_arrays<std::int64_t>(*dt, input, team);
   {
     py::gil_scoped_release release;
     dt.reset();  // the kernel's arrays go before Python sees the result
@@ -302,39 +458,32 @@ void apply_run_options(pipeline::RunOptions& o, const py::dict& options) {
   }
 }
 
-// Runs `work` on a thread of its own with the GIL released, while this thread wakes up
-// ten times a second to let Python run its signal handlers: Ctrl-C (KeyboardInterrupt
-// from Python's handler) asks the job to stop (pipeline::request_interrupt), the job
-// unwinds through its cleanup (a checkpointed run keeps its checkpoint), and the Python
-// exception is raised here once it has.
-// One job (run or verify) at a time per process: they share the interrupt flag and
-// the log level.
+// Runs `work` on a thread of its own (wait_for_work above): Ctrl-C asks the job to
+// stop (pipeline::request_interrupt), the job unwinds through its cleanup (a
+// checkpointed run keeps its checkpoint), and the Python exception is raised here once
+// it has.
+// One job (run, verify or field) at a time per process: they share the interrupt flag
+// and the log level.
 std::mutex g_job_mutex;
 
 template <class R>
-R run_interruptible(std::function<R()> work) {
+R run_interruptible(std::function<R()> work, const py::object& emit) {
   std::unique_lock<std::mutex> one_job(g_job_mutex, std::try_to_lock);
   if (!one_job.owns_lock())
-    throw UsageError("another tetstream.run() or verify() is running in this process: one at a time");
+    throw UsageError("another tetstream.run(), verify() or field() is running in this process: one at a time");
   pipeline::clear_interrupt();
   std::packaged_task<R()> task(std::move(work));
   std::future<R> done = task.get_future();
   std::thread worker(std::move(task));
   std::optional<py::error_already_set> pending;
-  for (;;) {
-    bool ready;
-    {
-      py::gil_scoped_release release;
-      ready = done.wait_for(std::chrono::milliseconds(100)) == std::future_status::ready;
-    }
-    if (ready) break;
-    if (PyErr_CheckSignals() != 0) {
-      pending.emplace();  // fetches (and clears) the Python error
-      pipeline::request_interrupt(SIGINT);
-      py::gil_scoped_release release;
-      done.wait();
-      break;
-    }
+  try {
+    pending = wait_for_work(done, [] { pipeline::request_interrupt(SIGINT); }, emit);
+  } catch (...) {  // an exception from `emit`: the job still has to stop before we leave
+    pipeline::request_interrupt(SIGINT);
+    py::gil_scoped_release release;
+    worker.join();
+    pipeline::clear_interrupt();
+    throw;
   }
   {
     py::gil_scoped_release release;
@@ -356,7 +505,8 @@ R run_interruptible(std::function<R()> work) {
 }
 
 std::string run(const std::string& input, const std::vector<std::string>& more_inputs, const std::string& output,
-                std::uint64_t memory_bytes, int threads, bool progress, bool resume, const py::dict& options) {
+                std::uint64_t memory_bytes, int threads, bool progress, bool resume, const py::dict& options,
+                const py::object& emit) {
   pipeline::RunOptions o;
   o.input = input;
   o.read.more_inputs = more_inputs;
@@ -375,7 +525,7 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
     if (o.threads > 0) omp_set_num_threads(o.threads);
     const pipeline::RunSummary s = pipeline::run_job(o);
     return pipeline::run_summary_json(o, s).dump();
-  });
+  }, emit);
 }
 
 std::uint64_t memory_size(const py::object& memory) {
@@ -391,7 +541,7 @@ std::uint64_t memory_size(const py::object& memory) {
 
 std::string verify(const std::string& path, const py::object& memory, double sample, std::uint64_t seed,
                    const std::string& tmpdir, double volume_tolerance, std::size_t max_listed, bool progress,
-                   int threads) {
+                   int threads, const py::object& emit) {
   if (threads < 0 || threads > 1024) throw UsageError("threads must be in [1, 1024] (or None: all cores)");
   pipeline::VerifyOptions o;
   o.memory_bytes = memory_size(memory);
@@ -406,7 +556,145 @@ std::string verify(const std::string& path, const py::object& memory, double sam
     configure_logging(o.progress);
     if (threads > 0) omp_set_num_threads(threads);
     return pipeline::verify_report_json(pipeline::verify_file(path, o), path).dump();
-  });
+  }, emit);
+}
+
+// ---- fields: pipeline::compute_fields over a container, or its sums in memory ----
+
+py::dict field(const std::string& input, const std::string& prefix, bool density, bool voronoi, bool neighbours,
+               std::array<std::uint64_t, 3> grid, const std::optional<std::array<double, 6>>& box,
+               const std::string& hull, const std::string& dtype, bool neighbour_int64, const std::string& mass,
+               const py::object& memory, const std::string& tmpdir, bool progress, int threads, const py::object& emit) {
+  if (threads < 0 || threads > 1024) throw UsageError("threads must be in [1, 1024] (or None: all cores)");
+  pipeline::FieldOptions o;
+  o.input = input;
+  o.output = prefix;
+  o.density = density;
+  o.voronoi = voronoi;
+  o.neighbours = neighbours;
+  o.grid = grid;
+  if (box) o.box = *box, o.has_box = true;
+  if (hull != "nan" && hull != "open") throw UsageError("hull must be 'nan' or 'open', not '" + hull + "'");
+  o.hull = hull == "open" ? pipeline::HullMode::kOpen : pipeline::HullMode::kNan;
+  if (dtype != "float64" && dtype != "float32") throw UsageError("dtype must be float64 or float32, not '" + dtype + "'");
+  o.dtype = dtype == "float32" ? pipeline::FieldType::kFloat32 : pipeline::FieldType::kFloat64;
+  o.neighbour_int64 = neighbour_int64;
+  o.mass = mass;
+  o.memory_bytes = memory_size(memory);
+  o.tmpdir = tmpdir;
+  o.progress = progress;
+  o.validate();
+  const pipeline::FieldSummary sm = run_interruptible<pipeline::FieldSummary>([o, threads] {
+    configure_logging(o.progress);
+    if (threads > 0) omp_set_num_threads(threads);
+    return pipeline::compute_fields(o);
+  }, emit);
+  py::dict files;
+  for (const auto& f : sm.files) files[py::str(f.what)] = f.path;
+  py::dict d;
+  d["files"] = files;
+  d["points"] = sm.points;
+  d["hull_points"] = sm.hull_points;
+  d["tets"] = sm.tets;
+  d["total_mass"] = sm.total_mass;
+  d["hull_volume"] = sm.tet_volume;
+  d["interior_voronoi_volume"] = sm.interior_voronoi;
+  d["voronoi_total_with_hull_pieces"] = sm.voronoi_total;
+  d["neighbour_entries"] = sm.neighbour_entries;
+  d["grid_points"] = sm.grid_points;
+  d["grid_inside"] = sm.grid_inside;
+  d["seconds"] = sm.seconds;
+  return d;
+}
+
+// The per-point sums of `tetstream field` over an in-memory triangulation, with the
+// same per-tet geometry (pipeline::tet_contribution): the volume of each point's star
+// and, with `voronoi`, its Voronoi cell's pieces; and whether it is on the hull (a
+// vertex of a facet without a neighbour). Points that are no vertex get star volume 0.
+template <class I>
+py::tuple field_sums_t(const double* xyz, std::size_t npoints, const py::array& simplices, const py::array& neighbors,
+                       bool voronoi, int threads) {
+  const std::size_t m = std::size_t(simplices.shape(0));
+  const I* s = static_cast<const I*>(simplices.data());
+  const I* nb = static_cast<const I*>(neighbors.data());
+  py::array_t<double> star{py::ssize_t(npoints)}, cell{py::ssize_t(voronoi ? npoints : 0)};
+  py::array_t<bool> on_hull{py::ssize_t(npoints)};
+  double* st = star.mutable_data();
+  double* ce = cell.mutable_data();
+  bool* hu = on_hull.mutable_data();
+  {
+    py::gil_scoped_release release;
+    for (std::size_t i = 0; i < 4 * m; ++i)
+      if (s[i] < 0 || std::size_t(s[i]) >= npoints) throw UsageError("simplices: an index out of range");
+    std::fill(st, st + npoints, 0.0);
+    if (voronoi) std::fill(ce, ce + npoints, 0.0);
+    std::fill(hu, hu + npoints, false);
+    // Contributions in parallel a block at a time, summed in tet order by one thread
+    // (the same sums whatever the thread count).
+    constexpr std::size_t kBlock = std::size_t(1) << 16;
+    std::vector<pipeline::TetContribution> part(std::min(m, kBlock));
+    for (std::size_t b = 0; b < m; b += kBlock) {
+      const std::size_t e = std::min(m, b + kBlock);
+#pragma omp parallel for schedule(static) num_threads(threads)
+      for (std::size_t t = b; t < e; ++t) {
+        const double* p[4];
+        for (int j = 0; j < 4; ++j) p[j] = xyz + 3 * std::size_t(s[4 * t + j]);
+        part[t - b] = pipeline::tet_contribution(p, voronoi);
+      }
+      for (std::size_t t = b; t < e; ++t) {
+        const pipeline::TetContribution& c = part[t - b];
+        for (int j = 0; j < 4; ++j) {
+          const std::size_t v = std::size_t(s[4 * t + j]);
+          st[v] += c.volume;
+          if (voronoi) ce[v] += c.voronoi[j];
+          if (nb[4 * t + j] < 0)
+            for (int k = 0; k < 4; ++k)
+              if (k != j) hu[std::size_t(s[4 * t + k])] = true;
+        }
+      }
+    }
+  }
+  return py::make_tuple(star, cell, on_hull);
+}
+
+py::tuple field_sums(py::array_t<double, py::array::c_style> points, py::array simplices, py::array neighbors,
+                     bool voronoi, int threads) {
+  if (points.ndim() != 2 || points.shape(1) != 3) throw UsageError("points: expected an (N, 3) array");
+  for (const py::array* a : {&simplices, &neighbors})
+    if (a->ndim() != 2 || a->shape(1) != 4 || !(a->flags() & py::array::c_style))
+      throw UsageError("simplices and neighbors: expected C-contiguous (M, 4) arrays");
+  if (simplices.shape(0) != neighbors.shape(0)) throw UsageError("simplices and neighbors differ in length");
+  const int team = threads > 0 ? threads : omp_get_max_threads();
+  const std::size_t n = std::size_t(points.shape(0));
+  if (simplices.dtype().is(py::dtype::of<std::int64_t>()) && neighbors.dtype().is(py::dtype::of<std::int64_t>()))
+    return field_sums_t<std::int64_t>(points.data(), n, simplices, neighbors, voronoi, team);
+  if (simplices.dtype().is(py::dtype::of<std::int32_t>()) && neighbors.dtype().is(py::dtype::of<std::int32_t>()))
+    return field_sums_t<std::int32_t>(points.data(), n, simplices, neighbors, voronoi, team);
+  throw UsageError("simplices and neighbors must both be int32 or int64");
+}
+
+// ---- files: a container to a mesh (`tetstream convert`), the CLI's globs, a point file ----
+
+std::vector<std::string> convert(const std::string& input, const std::string& output, bool binary, int compress) {
+  py::gil_scoped_release release;
+  const io::TetReader reader(input);
+  io::MeshExportOptions options;
+  options.binary = binary;
+  options.compress_level = compress;
+  return io::export_mesh(reader, output, io::mesh_format_for(output), options).files;
+}
+
+py::array_t<double> read_points(const std::string& path) {
+  std::vector<double> xyz;
+  {
+    py::gil_scoped_release release;
+    auto reader = io::open_points(path, io::PointReadOptions{});
+    constexpr std::size_t kChunk = std::size_t(1) << 16;
+    std::vector<double> chunk(3 * kChunk);
+    while (const std::size_t k = reader->read(chunk.data(), kChunk)) xyz.insert(xyz.end(), chunk.begin(), chunk.begin() + 3 * k);
+  }
+  const py::ssize_t n = py::ssize_t(xyz.size() / 3);
+  return vector_to_array(std::move(xyz), {n, 3});
 }
 
 // ---- reading a container ----
@@ -599,12 +887,26 @@ PYBIND11_MODULE(_core, m) {
   m.def("delaunay", &delaunay, py::arg("points"), py::arg("index_dtype") = "int64", py::arg("threads") = 0,
         "In-core Delaunay triangulation of a C-contiguous (N, 3) float64 array; a dict of arrays.");
   m.def("run", &run, py::arg("input"), py::arg("more_inputs"), py::arg("output"), py::arg("memory_bytes"),
-        py::arg("threads"), py::arg("progress"), py::arg("resume"), py::arg("options"),
+        py::arg("threads"), py::arg("progress"), py::arg("resume"), py::arg("options"), py::arg("emit") = py::none(),
         "The out-of-core job; its summary as JSON text (what `tetstream run --json` prints).");
   m.def("parse_memory", &memory_size, py::arg("memory"), "Bytes of a budget such as '4G', '512M' or an int.");
   m.def("verify", &verify, py::arg("path"), py::arg("memory"), py::arg("sample"), py::arg("seed"), py::arg("tmpdir"),
         py::arg("volume_tolerance"), py::arg("max_listed"), py::arg("progress"), py::arg("threads") = 0,
+        py::arg("emit") = py::none(),
         "Verifies a container; the report as JSON text (what `tetstream verify --json` prints).");
+  m.def("field", &field, py::arg("input"), py::arg("prefix"), py::arg("density"), py::arg("voronoi"),
+        py::arg("neighbours"), py::arg("grid"), py::arg("box"), py::arg("hull"), py::arg("dtype"),
+        py::arg("neighbour_int64"), py::arg("mass"), py::arg("memory"), py::arg("tmpdir"), py::arg("progress"),
+        py::arg("threads") = 0, py::arg("emit") = py::none(),
+        "`tetstream field` on a container: writes PREFIX.*.npy; a summary dict with their paths.");
+  m.def("field_sums", &field_sums, py::arg("points"), py::arg("simplices"), py::arg("neighbors"), py::arg("voronoi"),
+        py::arg("threads") = 0, "(star volume, Voronoi volume, on hull) per point of an in-memory triangulation.");
+  m.def("convert", &convert, py::arg("input"), py::arg("output"), py::arg("binary") = false, py::arg("compress") = 0,
+        "A container to a mesh file (`tetstream convert`); the files written.");
+  m.def("expand_inputs", &io::expand_inputs, py::arg("paths"),
+        "The CLI's input list: a path that is no file and holds * ? [ is a glob, its matches in natural order.");
+  m.def("read_points", &read_points, py::arg("path"), "A point file's points as an (N, 3) float64 array.");
+  tetstream::python::register_geometry(m);
   m.attr("max_in_core_points") = kMaxInCorePoints;
   py::class_<Reader>(m, "Reader")
       .def(py::init<const std::string&>(), py::arg("path"))

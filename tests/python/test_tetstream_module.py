@@ -329,6 +329,153 @@ def test_ctrl_c_raises_keyboard_interrupt(tmp_path):
     assert os.path.isdir(out + ".ckpt")
 
 
+# ---- issue 41: what new users met -------------------------------------------------------
+
+def test_duplicates_keep_the_first_copy(tmp_path):
+    """Of several copies of a point, the first in the input is the vertex, as in run()."""
+    p = uniform(300, 21)
+    q = np.vstack([p, p[:60], p[:60]])  # points 0..59 three times each
+    tri = tetstream.delaunay(q)
+    expected = np.array([[300 + i, i] for i in range(60)] + [[360 + i, i] for i in range(60)])
+    assert np.array_equal(tri.duplicates, expected)
+    assert set(np.unique(tri.simplices)) == set(range(300))
+    check_valid(q, tri)
+    out = str(tmp_path / "d.tets")
+    tetstream.run(q, out, memory="64M", progress=False)
+    with tetstream.open(out) as f:
+        assert np.array_equal(np.sort(f.original_ids), np.arange(300))
+        assert np.array_equal(simplex_set(f.tets(0, f.n_tets, original_ids=True)), simplex_set(tri.simplices))
+
+
+def test_run_expands_a_glob_like_the_cli(tmp_path):
+    parts = [uniform(700, 30 + k) for k in range(3)]
+    for name, part in zip(("snap.2.f64", "snap.10.f64", "snap.1.f64"), (parts[1], parts[2], parts[0])):
+        part.tofile(tmp_path / name)
+    s = tetstream.run(str(tmp_path / "snap.*.f64"), str(tmp_path / "g.tets"), memory="64M", progress=False)
+    assert s["points"] == 2100
+    with tetstream.open(tmp_path / "g.tets") as f:
+        # natural order: snap.1, snap.2, snap.10 (input indices follow it)
+        assert np.array_equal(f.points[np.argsort(f.original_ids)], np.vstack(parts))
+    with pytest.raises(tetstream.IoError, match="no file matches"):
+        tetstream.run(str(tmp_path / "none.*.f64"), str(tmp_path / "n.tets"), memory="64M", progress=False)
+
+
+def test_tetfile_indexing_by_int(big_run):
+    _, out, s = big_run
+    with tetstream.open(out) as f:
+        assert np.array_equal(f[5], f.tets(5, 6)[0]) and f[5].shape == (4,)
+        assert np.array_equal(f[-1], f.tets(f.n_tets - 1, f.n_tets)[0])
+        assert np.array_equal(f[np.int64(7)], f.tets(7, 8)[0])
+        with pytest.raises(IndexError):
+            f[f.n_tets]
+        with pytest.raises(TypeError):
+            f["a"]
+
+
+def test_to_meshio_keeps_merged_duplicates_as_points(tmp_path):
+    meshio = pytest.importorskip("meshio")
+    p = uniform(400, 22)
+    q = np.vstack([p[:100], p[:5], p[100:]])  # input rows 100..104 repeat rows 0..4
+    src = tmp_path / "q.f64"
+    q.tofile(src)
+    out = str(tmp_path / "q.tets")
+    tetstream.run(str(src), out, memory="64M", progress=False)
+    with tetstream.open(out) as f:
+        mesh = f.to_meshio(original_ids=True)  # the merged rows read back from q.f64
+        assert mesh.points.shape == q.shape and np.isfinite(mesh.points).all()
+        assert np.array_equal(mesh.points, q)
+        assert np.array_equal(mesh.point_data["original_id"], np.arange(len(q)))
+        tets = mesh.cells[0].data
+        assert (signed_volumes(mesh.points, tets) > 0).all()
+        assert not np.isin(np.arange(100, 105), tets).any()
+        os.remove(src)  # the input gone: the array itself can be passed
+        assert np.array_equal(f.to_meshio(original_ids=True, points=q).points, q)
+        with pytest.raises(tetstream.UsageError, match="points="):
+            f.to_meshio(original_ids=True)
+        data = f.to_meshio(point_data={"x": f.points[:, 0]}).point_data
+        assert np.array_equal(data["x"], f.points[:, 0]) and np.array_equal(data["original_id"], f.original_ids)
+        mesh_path = str(tmp_path / "m.vtu")
+        meshio.write(mesh_path, f.to_meshio(original_ids=True, points=q))
+        assert np.isfinite(meshio.read(mesh_path).points).all()
+
+
+def test_delaunay_stops_on_ctrl_c():
+    """SIGINT during delaunay(): KeyboardInterrupt within a piece of the insertion, long
+    before the triangulation would have finished."""
+    if threading.current_thread() is not threading.main_thread():
+        pytest.skip("signals reach the main thread only")
+    import time
+    pts = uniform(2_000_000, 23)
+    sent = []
+
+    def interrupt():
+        time.sleep(0.5)
+        sent.append(time.monotonic())
+        os.kill(os.getpid(), signal.SIGINT)
+
+    sender = threading.Thread(target=interrupt)
+    start = time.monotonic()
+    sender.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            tetstream.delaunay(pts)
+    finally:
+        sender.join()
+    stopped = time.monotonic()
+    # 2e6 points take several seconds on one core; a piece (65536 insertions) a fraction of one
+    assert sent and stopped - sent[0] < 2.5, f"stopped {stopped - sent[0]:.2f} s after the signal"
+    # and it still works afterwards
+    assert tetstream.delaunay(uniform(1000, 24)).nsimplex > 0
+    del start
+
+
+def test_progress_goes_through_logging(tmp_path):
+    """run(progress=True) logs through `logging` (and sys.stderr as Python sees it), not fd 2."""
+    import contextlib
+    import io
+    import logging
+    pts = uniform(3000, 25)
+    captured = io.StringIO()
+    # As in a script or a notebook, where logging is not configured (pytest puts its
+    # own capturing handler on the root logger, which would take the records instead)
+    root = logging.getLogger()
+    saved = root.handlers[:]
+    root.handlers.clear()
+    try:
+        with contextlib.redirect_stderr(captured):
+            tetstream.run(pts, str(tmp_path / "a.tets"), memory="64M", progress=True)
+    finally:
+        root.handlers[:] = saved
+    assert "sorted 3000 points" in captured.getvalue() and "triangulating" in captured.getvalue(), captured.getvalue()
+    records = []
+
+    class Keep(logging.Handler):
+        def emit(self, record):
+            records.append(record)
+
+    handler = Keep()
+    logging.getLogger("tetstream").addHandler(handler)
+    lines = []
+    try:
+        tetstream.run(pts, str(tmp_path / "b.tets"), memory="64M", progress=lines.append)
+        tetstream.run(pts, str(tmp_path / "c.tets"), memory="64M", progress=False)
+    finally:
+        logging.getLogger("tetstream").removeHandler(handler)
+    infos = [r for r in records if r.levelno == logging.INFO]
+    assert infos and all(r.name == "tetstream" for r in records)
+    assert any("triangulating" in r.getMessage() for r in infos)
+    assert lines and len(lines) == len(infos)  # progress=False added no INFO record
+
+
+def test_run_to_a_mesh_name(tmp_path):
+    meshio = pytest.importorskip("meshio")
+    pts = uniform(2000, 26)
+    s = tetstream.run(pts, str(tmp_path / "m.vtu"), memory="64M", progress=False)
+    mesh = meshio.read(str(tmp_path / "m.vtu"))
+    assert len(mesh.cells_dict["tetra"]) == s["tets"] and s["mesh"].endswith("m.vtu")
+    assert sorted(os.listdir(tmp_path)) == ["m.vtu"]
+
+
 if __name__ == "__main__":
     # ctest's convention for tests/python: the binary's path as the argument (unused here)
     sys.exit(pytest.main([__file__, "-q", "-p", "no:cacheprovider"]))
