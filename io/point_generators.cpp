@@ -1,6 +1,8 @@
 #include "io/point_generators.hpp"
 
 #include "core/error.hpp"
+#include "io/point_rng.hpp"
+#include "io/point_zoo.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -10,66 +12,8 @@ namespace tetstream::io {
 
 namespace {
 
-// splitmix64's finaliser: a bijection on 64-bit words with full avalanche.
-inline std::uint64_t mix64(std::uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
-}
-
-constexpr std::uint64_t kGolden = 0x9e3779b97f4a7c15ULL;
-
-// The random numbers of one point: draw j of point i under key k is
-// mix64(mix64(k ^ mix64(i)) + j * golden), splitmix64's sequence started at a
-// per-point state.
-class PointRng {
- public:
-  PointRng(std::uint64_t key, std::uint64_t index) : state_(mix64(key ^ mix64(index + kGolden))) {}
-  std::uint64_t next() { return mix64(state_ += kGolden); }
-  // Uniform in [0, 1) on the 2^-53 grid.
-  double uniform() { return double(next() >> 11) * 0x1p-53; }
-  // Uniform in [-1, 1), exactly: 2u - 1 loses no bits.
-  double symmetric() { return 2.0 * uniform() - 1.0; }
-  // Standard normal (Box-Muller; u1 in (0, 1] so the log is finite).
-  double normal() {
-    if (have_spare_) {
-      have_spare_ = false;
-      return spare_;
-    }
-    const double u1 = 1.0 - uniform();
-    const double u2 = uniform();
-    const double r = std::sqrt(-2.0 * std::log(u1));
-    spare_ = r * std::sin(2.0 * std::numbers::pi * u2);
-    have_spare_ = true;
-    return r * std::cos(2.0 * std::numbers::pi * u2);
-  }
-  // Uniform direction: a normalised Gaussian vector.
-  void direction(double* d) {
-    for (;;) {
-      d[0] = normal(), d[1] = normal(), d[2] = normal();
-      const double r = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      if (r > 1e-150) {
-        d[0] /= r, d[1] /= r, d[2] /= r;
-        return;
-      }
-    }
-  }
-  // Uniform in the ball of radius 1 by rejection from [-1, 1)^3: x^2 + y^2 + z^2 <= 1
-  // holds exactly as computed here (acceptance 52%; 200 misses in a row has
-  // probability 1e-64, after which the centre is returned).
-  void in_ball(double* p) {
-    for (int attempt = 0; attempt < 200; ++attempt) {
-      p[0] = symmetric(), p[1] = symmetric(), p[2] = symmetric();
-      if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2] <= 1.0) return;
-    }
-    p[0] = p[1] = p[2] = 0.0;
-  }
-
- private:
-  std::uint64_t state_;
-  double spare_ = 0;
-  bool have_spare_ = false;
-};
+using rng::key_for;
+using rng::PointRng;
 
 // Distinct keys for the independent uses of one seed.
 constexpr std::uint64_t kPurposePoint = 0x706f696e74ULL;     // "point"
@@ -77,8 +21,6 @@ constexpr std::uint64_t kPurposeDup = 0x6475706cULL;         // "dupl"
 constexpr std::uint64_t kPurposeClusters = 0x636c7573ULL;    // "clus"
 constexpr std::uint64_t kPurposeTerrain = 0x74657272ULL;     // "terr"
 constexpr std::uint64_t kPurposeBuildings = 0x626c6467ULL;   // "bldg"
-
-std::uint64_t key_for(std::uint64_t seed, std::uint64_t purpose) { return mix64(mix64(seed) ^ purpose); }
 
 // The terrain: a 1 km x 1 km airborne LiDAR tile (see distribution_help).
 constexpr double kTileMetres = 1000, kCellMetres = 40, kFootprintMetres = 24;
@@ -146,21 +88,32 @@ const char* to_string(Distribution d) {
     case Distribution::kSphere: return "sphere";
     case Distribution::kTerrain: return "terrain";
     case Distribution::kTwoPlates: return "two-plates";
+    case Distribution::kHills: return "hills";
+    case Distribution::kRoofs: return "roofs";
+    case Distribution::kCanopy: return "canopy";
+    case Distribution::kWater: return "water";
+    case Distribution::kStrips: return "strips";
+    case Distribution::kScanLines: return "scan-lines";
+    case Distribution::kSurvey: return "survey";
+    case Distribution::kIndoor: return "indoor";
   }
   return "?";
 }
 
 Distribution parse_distribution(std::string_view name) {
-  for (Distribution d : {Distribution::kUniform, Distribution::kBall, Distribution::kEllipsoidShell,
-                         Distribution::kMixed, Distribution::kClusters, Distribution::kGrid,
-                         Distribution::kSphere, Distribution::kTerrain, Distribution::kTwoPlates}) {
+  for (Distribution d :
+       {Distribution::kUniform, Distribution::kBall, Distribution::kEllipsoidShell, Distribution::kMixed,
+        Distribution::kClusters, Distribution::kGrid, Distribution::kSphere, Distribution::kTerrain,
+        Distribution::kTwoPlates, Distribution::kHills, Distribution::kRoofs, Distribution::kCanopy,
+        Distribution::kWater, Distribution::kStrips, Distribution::kScanLines, Distribution::kSurvey,
+        Distribution::kIndoor}) {
     if (name == to_string(d)) return d;
   }
   if (name == "shell" || name == "ellipsoid") return Distribution::kEllipsoidShell;
   if (name == "lidar") return Distribution::kTerrain;
   throw UsageError("unknown distribution '" + std::string(name) +
-                   "' (expected uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain or "
-                   "two-plates)");
+                   "' (expected uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain, "
+                   "two-plates, hills, roofs, canopy, water, strips, scan-lines, survey or indoor)");
 }
 
 const char* distribution_help() {
@@ -197,6 +150,31 @@ const char* distribution_help() {
       "                   file with scale 0.01 holds them. A surface: most tets are flat.\n"
       "  two-plates       two parallel plates, z = 0.25 and z = 0.75 (one point in two on each),\n"
       "                   x, y uniform in [0, 1), z jittered uniformly by +-0.1 * --spread.\n"
+      "The surface zoo: airborne tiles with what real surveys have, x + 500000, y + 5000000,\n"
+      "z + 200, 1 cm quantisation; the square's side follows --n (about 3.3 points a square\n"
+      "metre under one flight strip, at least 100 m), so point i depends on --n too:\n"
+      "  hills            bare ground of steep hills as wide as the tile (+-12% of its side):\n"
+      "                   the hull spans the valleys, long edges under it.\n"
+      "  roofs            gentle ground, buildings on 35% of the 40 m cells, 10-28 m footprints,\n"
+      "                   half flat roofs 4-20 m up, half gable roofs (25-40 degrees); no wall\n"
+      "                   returns, as airborne scanners rarely hit walls.\n"
+      "  canopy           gentle ground under a forest (a tree in 60% of the 8 m cells, crowns\n"
+      "                   1.5-4 m wide, 6-22 m tall): a pulse that meets a crown gives three\n"
+      "                   points (first return near the top, one inside the crown, the ground)\n"
+      "                   along its slanted path: a thick layer of vegetation.\n"
+      "  water            lakes and the scan shadows beyond buildings' +x walls: holes with no\n"
+      "                   returns; buildings on 20% of the cells.\n"
+      "  strips           overlapping flight strips along y (30% of a strip's width shared with\n"
+      "                   the next: bands of double density), on scan lines.\n"
+      "  scan-lines       points on lines across the flight direction, 1 m apart (+-2 cm), about\n"
+      "                   0.3 m apart along a line.\n"
+      "  survey           all of it: hills, flat and gable roofs without walls, trees with multiple\n"
+      "                   returns, lakes and shadows, overlapping strips, scan lines.\n"
+      "  indoor           a terrestrial scan of 3 x 2 closed rooms (5-9 m x 4-7 m, one ceiling\n"
+      "                   height 2.6-3.2 m, walls 0.2 m thick), a scanner 1.5 m up in each:\n"
+      "                   points on floors, walls and ceilings meeting at right angles, their\n"
+      "                   density falling with the square of the distance to the scanner; 2 mm\n"
+      "                   range noise, millimetre quantisation, local coordinates.\n"
       "--duplicates F: each point i > 0 is, with probability F, an exact copy of point\n"
       "floor(v * i) for a uniform v (resolved to an original point), so about F * n points\n"
       "repeat an earlier one.\n";
@@ -212,6 +190,10 @@ void GeneratorOptions::validate() const {
   if (clusters == 0) throw UsageError("--clusters must be at least 1");
   if (!(radius > 0.0 && std::isfinite(radius))) throw UsageError("--radius must be positive");
 }
+
+PointGenerator::~PointGenerator() = default;
+PointGenerator::PointGenerator(const PointGenerator&) = default;
+PointGenerator& PointGenerator::operator=(const PointGenerator&) = default;
 
 PointGenerator::PointGenerator(const GeneratorOptions& options) : opt_(options) {
   opt_.validate();
@@ -262,6 +244,16 @@ PointGenerator::PointGenerator(const GeneratorOptions& options) : opt_(options) 
       key_buildings_ = key_for(opt_.seed, kPurposeBuildings);
       break;
     }
+    case Distribution::kHills: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kHills, opt_.seed, opt_.n); break;
+    case Distribution::kRoofs: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kRoofs, opt_.seed, opt_.n); break;
+    case Distribution::kCanopy: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kCanopy, opt_.seed, opt_.n); break;
+    case Distribution::kWater: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kWater, opt_.seed, opt_.n); break;
+    case Distribution::kStrips: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kStrips, opt_.seed, opt_.n); break;
+    case Distribution::kScanLines:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kScanLines, opt_.seed, opt_.n);
+      break;
+    case Distribution::kSurvey: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kSurvey, opt_.seed, opt_.n); break;
+    case Distribution::kIndoor: indoor_ = std::make_shared<IndoorScan>(opt_.seed); break;
     default: break;
   }
 }
@@ -327,6 +319,18 @@ void PointGenerator::base_point(std::uint64_t i, double* p) const {
       p[0] = rng.uniform(), p[1] = rng.uniform(), p[2] = plate + 0.1 * opt_.spread * rng.symmetric();
       return;
     }
+    case Distribution::kHills:
+    case Distribution::kRoofs:
+    case Distribution::kCanopy:
+    case Distribution::kWater:
+    case Distribution::kStrips:
+    case Distribution::kScanLines:
+    case Distribution::kSurvey:
+      tile_->point(i, p);
+      return;
+    case Distribution::kIndoor:
+      indoor_->point(i, p);
+      return;
     case Distribution::kGrid: {
       const std::uint64_t ix = i % k_, iy = (i / k_) % k_, iz = i / (k_ * k_);
       p[0] = double(ix) * h_, p[1] = double(iy) * h_, p[2] = double(iz) * h_;

@@ -9,6 +9,7 @@
 // same result, and 10^10 points need no memory beyond the caller's chunk.
 // distribution_help() is the exact description of each shape (also in docs/inputs.md).
 #include <array>
+#include <memory>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -17,7 +18,14 @@
 
 namespace tetstream::io {
 
-enum class Distribution { kUniform, kBall, kEllipsoidShell, kMixed, kClusters, kGrid, kSphere, kTerrain, kTwoPlates };
+class LidarTile;
+class IndoorScan;
+
+enum class Distribution {
+  kUniform, kBall, kEllipsoidShell, kMixed, kClusters, kGrid, kSphere, kTerrain, kTwoPlates,
+  // The surface zoo (io/point_zoo.hpp): what real scans have, one feature at a time, then all.
+  kHills, kRoofs, kCanopy, kWater, kStrips, kScanLines, kSurvey, kIndoor
+};
 
 const char* to_string(Distribution d);
 Distribution parse_distribution(std::string_view name);  // throws UsageError
@@ -39,6 +47,10 @@ struct GeneratorOptions {
 class PointGenerator {
  public:
   explicit PointGenerator(const GeneratorOptions& options);
+
+  ~PointGenerator();
+  PointGenerator(const PointGenerator&);
+  PointGenerator& operator=(const PointGenerator&);
 
   // Number of points generated: n, or k^3 for grid.
   std::uint64_t count() const { return count_; }
@@ -67,6 +79,9 @@ class PointGenerator {
   };
   std::vector<Cluster> clusters_;
   std::vector<double> cluster_cdf_;
+  // the zoo
+  std::shared_ptr<const LidarTile> tile_;
+  std::shared_ptr<const IndoorScan> indoor_;
 };
 
 }  // namespace tetstream::io
