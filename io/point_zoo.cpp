@@ -37,7 +37,7 @@ LidarTile::LidarTile(Preset preset, std::uint64_t seed, std::uint64_t n) {
   switch (preset) {
     case Preset::kHills: break;  // relief set below, from the side
     case Preset::kRoofs: f_.building_share = 0.35; break;
-    case Preset::kCanopy: f_.tree_share = 0.6; break;
+    case Preset::kCanopy: f_.tree_share = 0.85; break;
     case Preset::kWater:
       f_.building_share = 0.2;
       f_.lakes = true;
@@ -151,7 +151,7 @@ bool LidarTile::tree_in_cell(std::int64_t cx, std::int64_t cy, Tree* t, bool hei
   if (!(r.uniform() < f_.tree_share)) return false;
   t->centre[0] = (double(cx) + r.uniform()) * kTreeCell;
   t->centre[1] = (double(cy) + r.uniform()) * kTreeCell;
-  t->radius = 1.5 + 2.5 * r.uniform();
+  t->radius = 2 + 2.5 * r.uniform();
   const double rise = 6 + 16 * r.uniform(), depth = 0.4 + 0.3 * r.uniform();
   // Not through a roof nor in a lake: a crown whose disc reaches either is not grown.
   for (int k = 0; k < 5; ++k) {

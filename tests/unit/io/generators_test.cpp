@@ -2,6 +2,7 @@
 // (io/point_generators.hpp, docs/inputs.md). A failing test prints its seed.
 #include "core/error.hpp"
 #include "io/point_generators.hpp"
+#include "io/point_zoo.hpp"
 
 #include <gtest/gtest.h>
 
@@ -29,9 +30,19 @@ std::vector<double> gen(Distribution d, std::uint64_t n, std::uint64_t seed = kS
   return xyz;
 }
 
-const Distribution kAll[] = {Distribution::kUniform,  Distribution::kBall, Distribution::kEllipsoidShell,
+const Distribution kAll[] = {Distribution::kUniform,  Distribution::kBall,     Distribution::kEllipsoidShell,
                              Distribution::kMixed,    Distribution::kClusters, Distribution::kGrid,
-                             Distribution::kSphere,   Distribution::kTerrain, Distribution::kTwoPlates};
+                             Distribution::kSphere,   Distribution::kTerrain,  Distribution::kTwoPlates,
+                             Distribution::kHills,    Distribution::kRoofs,    Distribution::kCanopy,
+                             Distribution::kWater,    Distribution::kStrips,   Distribution::kScanLines,
+                             Distribution::kSurvey,   Distribution::kIndoor};
+
+// The airborne members of the zoo, whose tile's side follows n.
+bool is_tile(Distribution d) {
+  return d == Distribution::kHills || d == Distribution::kRoofs || d == Distribution::kCanopy ||
+         d == Distribution::kWater || d == Distribution::kStrips || d == Distribution::kScanLines ||
+         d == Distribution::kSurvey;
+}
 
 }  // namespace
 
@@ -56,7 +67,7 @@ TEST(Generators, ReproducibleBySeedAndIndependentOfChunking) {
       for (auto [first, n] : chunks) g.generate(first, n, b.data() + 3 * first);
       EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(double)), 0);
       // A prefix of a longer run is the shorter run (point i does not depend on n).
-      if (d != Distribution::kGrid) {
+      if (d != Distribution::kGrid && !is_tile(d)) {
         const auto longer = gen(d, 7000, kSeed, dup);
         EXPECT_TRUE(std::equal(a.begin(), a.end(), longer.begin()));
       }
@@ -261,4 +272,246 @@ TEST(Generators, OptionsAreValidated) {
   EXPECT_THROW(o.validate(), UsageError);
   EXPECT_THROW(parse_distribution("gaussian"), UsageError);
   EXPECT_EQ(parse_distribution("ellipsoid-shell"), Distribution::kEllipsoidShell);
+}
+
+// ---- The surface zoo (io/point_zoo.hpp): each feature checked against the model ----
+
+namespace {
+
+struct TilePoints {
+  LidarTile tile;
+  std::vector<double> xyz;  // local metres: the offsets taken off
+};
+
+LidarTile::Preset preset_of(Distribution d) {
+  switch (d) {
+    case Distribution::kHills: return LidarTile::Preset::kHills;
+    case Distribution::kRoofs: return LidarTile::Preset::kRoofs;
+    case Distribution::kCanopy: return LidarTile::Preset::kCanopy;
+    case Distribution::kWater: return LidarTile::Preset::kWater;
+    case Distribution::kStrips: return LidarTile::Preset::kStrips;
+    case Distribution::kScanLines: return LidarTile::Preset::kScanLines;
+    default: return LidarTile::Preset::kSurvey;
+  }
+}
+
+TilePoints tile_points(Distribution d, std::uint64_t n) {
+  TilePoints t{LidarTile(preset_of(d), kSeed, n), gen(d, n)};
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
+    t.xyz[i] -= LidarTile::kOffsetX, t.xyz[i + 1] -= LidarTile::kOffsetY, t.xyz[i + 2] -= LidarTile::kOffsetZ;
+  }
+  return t;
+}
+
+// Whether (x, y, z), quantised, lies on a roof: a footprint within a centimetre of it
+// and the roof's height there within 2 cm.
+bool on_roof(const LidarTile& tile, double x, double y, double z) {
+  for (double dx : {-0.01, 0.0, 0.01}) {
+    for (double dy : {-0.01, 0.0, 0.01}) {
+      LidarTile::Building b;
+      if (tile.building_at(x + dx, y + dy, &b) && std::fabs(tile.roof(b, x + dx, y + dy) - z) <= 0.02) return true;
+    }
+  }
+  return false;
+}
+
+bool deep_in_hole(const LidarTile& tile, double x, double y) {
+  for (double dx : {-0.01, 0.0, 0.01})
+    for (double dy : {-0.01, 0.0, 0.01})
+      if (!tile.in_hole(x + dx, y + dy)) return false;
+  return true;
+}
+
+}  // namespace
+
+TEST(GeneratorsZoo, TilesAreCentimetreQuantisedInTheirSquare) {
+  for (Distribution d : kAll) {
+    if (!is_tile(d)) continue;
+    SCOPED_TRACE(to_string(d));
+    const auto t = tile_points(d, 20000);
+    ASSERT_EQ(t.xyz.size(), 3u * 20000);
+    EXPECT_EQ(t.tile.side(), 100.0) << "the smallest tile: 20000 points are fewer than 100 m x 100 m holds";
+    const auto p = gen(d, 20000);
+    for (std::size_t i = 0; i < p.size(); i += 3) {
+      ASSERT_GE(t.xyz[i], -1e-6);
+      ASSERT_LE(t.xyz[i], t.tile.side() + 1e-6);
+      ASSERT_GE(t.xyz[i + 1], -1e-6);
+      ASSERT_LE(t.xyz[i + 1], t.tile.side() + 1e-6);
+      ASSERT_GT(t.xyz[i + 2], -100.0);
+      ASSERT_LT(t.xyz[i + 2], 100.0);
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(p[i + c] * 100, std::round(p[i + c] * 100), 1e-3) << "centimetres";
+    }
+  }
+  // The side follows n: 10^6 points at 0.3 m x 1 m a point need 548 m.
+  EXPECT_EQ(LidarTile(LidarTile::Preset::kScanLines, kSeed, 1000000).side(), 548.0);
+}
+
+TEST(GeneratorsZoo, HillsRiseAcrossTheTile) {
+  const auto t = tile_points(Distribution::kHills, 20000);
+  double lo = 1e300, hi = -1e300;
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
+    ASSERT_NEAR(t.xyz[i + 2], t.tile.ground(t.xyz[i], t.xyz[i + 1]), 0.05) << "bare ground";
+    lo = std::min(lo, t.xyz[i + 2]), hi = std::max(hi, t.xyz[i + 2]);
+  }
+  EXPECT_GT(hi - lo, 0.15 * t.tile.side());
+}
+
+// Airborne scanners rarely hit walls: every point is on the ground or on a roof.
+TEST(GeneratorsZoo, RoofsWithoutWallReturns) {
+  const auto t = tile_points(Distribution::kRoofs, 50000);
+  std::size_t roofs = 0, ground = 0;
+  std::set<double> flat_heights;
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
+    const double x = t.xyz[i], y = t.xyz[i + 1], z = t.xyz[i + 2];
+    if (on_roof(t.tile, x, y, z)) ++roofs;
+    else if (std::fabs(z - t.tile.ground(x, y)) <= 0.05) ++ground;
+    else ADD_FAILURE() << "a point neither on the ground nor on a roof (a wall?) at " << x << " " << y << " " << z;
+  }
+  EXPECT_GT(double(roofs) / 50000, 0.05);
+  EXPECT_GT(double(ground) / 50000, 0.5);
+  // Both kinds of roof appear.
+  int flat = 0, gable = 0;
+  for (std::int64_t cx = 0; cx < 3; ++cx) {
+    for (std::int64_t cy = 0; cy < 3; ++cy) {
+      LidarTile::Building b;
+      for (std::uint64_t seed = 1; seed <= 10; ++seed) {
+        if (LidarTile(LidarTile::Preset::kRoofs, seed, 20000).building(cx, cy, &b)) (b.gable ? gable : flat)++;
+      }
+    }
+  }
+  EXPECT_GT(flat, 5);
+  EXPECT_GT(gable, 5);
+}
+
+TEST(GeneratorsZoo, CanopyPulsesHaveSeveralReturns) {
+  const auto t = tile_points(Distribution::kCanopy, 30000);
+  std::size_t multi = 0, high = 0;
+  double lo = 1e300, hi = -1e300;
+  for (std::size_t g = 0; g + 9 <= t.xyz.size(); g += 9) {
+    const double* p = &t.xyz[g];
+    // One pulse: the same y, the first return above the others, the last on the ground.
+    if (p[1] == p[4] && p[1] == p[7] && p[2] >= p[5] && p[5] > p[8] + 0.5 &&
+        std::fabs(p[8] - t.tile.ground(p[6], p[7])) <= 0.02)
+      ++multi;
+  }
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
+    const double above = t.xyz[i + 2] - t.tile.ground(t.xyz[i], t.xyz[i + 1]);
+    if (above > 2) ++high, lo = std::min(lo, above), hi = std::max(hi, above);
+  }
+  EXPECT_GT(double(multi) / 10000, 0.25) << "pulses with three returns through a crown";
+  EXPECT_GT(double(high) / 30000, 0.35) << "vegetation returns";
+  EXPECT_GT(hi - lo, 10.0) << "a thick layer";
+}
+
+TEST(GeneratorsZoo, WaterAndShadowsHaveNoReturns) {
+  const auto t = tile_points(Distribution::kWater, 50000);
+  ASSERT_FALSE(t.tile.lakes().empty());
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3)
+    ASSERT_FALSE(deep_in_hole(t.tile, t.xyz[i], t.xyz[i + 1])) << t.xyz[i] << " " << t.xyz[i + 1];
+  // The holes are there: a fine grid over the tile finds lake and shadow cells, and
+  // without them as many points would fall in them as their area's share.
+  std::size_t cells = 0, lake = 0, shadow = 0;
+  for (double x = 0.25; x < t.tile.side(); x += 0.5) {
+    for (double y = 0.25; y < t.tile.side(); y += 0.5) {
+      ++cells;
+      if (!t.tile.in_hole(x, y)) continue;
+      bool in_lake = false;
+      for (const auto& l : t.tile.lakes()) {
+        const double dx = (x - l.centre[0]) / l.radii[0], dy = (y - l.centre[1]) / l.radii[1];
+        in_lake |= dx * dx + dy * dy <= 1;
+      }
+      (in_lake ? lake : shadow)++;
+    }
+  }
+  EXPECT_GT(double(lake) / double(cells), 0.005);
+  EXPECT_GT(shadow, 0u);
+}
+
+TEST(GeneratorsZoo, OverlappingStripsDoubleTheDensity) {
+  const auto t = tile_points(Distribution::kStrips, 100000);
+  ASSERT_GE(t.tile.strips(), 2);
+  const double w = t.tile.strip_width(), x1 = t.tile.strip_x0(1);
+  // Strip 0 alone on [0, x1), strips 0 and 1 on [x1, w).
+  std::size_t single = 0, both = 0;
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
+    const double x = t.xyz[i];
+    if (x > 1 && x < x1 - 1) ++single;
+    else if (x > x1 + 1 && x < w - 1) ++both;
+  }
+  const double ratio = (double(both) / (w - x1 - 2)) / (double(single) / (x1 - 2));
+  EXPECT_NEAR(ratio, 2.0, 0.15);
+}
+
+TEST(GeneratorsZoo, ScanLinesAreOneMetreApartAndDenseAlong) {
+  const std::uint64_t n = 100000;
+  const auto t = tile_points(Distribution::kScanLines, n);
+  // Every y within 3 cm (2 cm wobble, 1 cm quantisation) of one phase modulo 1 m.
+  std::map<int, std::size_t> phases;  // centimetre of the metre -> points
+  for (std::size_t i = 1; i < t.xyz.size(); i += 3) ++phases[int(std::lround((t.xyz[i] - std::floor(t.xyz[i])) * 100)) % 100];
+  std::size_t best = 0;
+  int phase = 0;
+  for (int c = 0; c < 100; ++c) {
+    std::size_t near = 0;
+    for (int k = -3; k <= 3; ++k) {
+      const auto it = phases.find((c + k + 100) % 100);
+      near += it == phases.end() ? 0 : it->second;
+    }
+    if (near > best) best = near, phase = c;
+  }
+  EXPECT_EQ(best, n);
+  // About 0.3 m between neighbours along a line.
+  std::map<long, std::vector<double>> lines;
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) lines[std::lround(t.xyz[i + 1] - phase / 100.0)].push_back(t.xyz[i]);
+  double gaps = 0, count = 0;
+  for (auto& [k, xs] : lines) {
+    std::sort(xs.begin(), xs.end());
+    gaps += xs.back() - xs.front(), count += double(xs.size() - 1);
+  }
+  EXPECT_NEAR(gaps / count, 0.3, 0.03);
+}
+
+TEST(GeneratorsZoo, SurveyHasEveryFeature) {
+  const auto t = tile_points(Distribution::kSurvey, 100000);
+  EXPECT_GE(t.tile.strips(), 2);
+  EXPECT_FALSE(t.tile.lakes().empty());
+  std::size_t roofs = 0, trees = 0;
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
+    const double x = t.xyz[i], y = t.xyz[i + 1], z = t.xyz[i + 2];
+    ASSERT_FALSE(deep_in_hole(t.tile, x, y));
+    if (on_roof(t.tile, x, y, z)) ++roofs;
+    else if (z - t.tile.ground(x, y) > 2) ++trees;
+  }
+  EXPECT_GT(roofs, 1000u);
+  EXPECT_GT(trees, 2000u);
+}
+
+// Floors, walls and ceilings at right angles: every point within the range noise of a
+// face of its room; the floor's density falls with the distance from the scanner.
+TEST(GeneratorsZoo, IndoorScanIsPlanesAroundScanners) {
+  const auto p = gen(Distribution::kIndoor, 50000);
+  const IndoorScan scan(kSeed);
+  ASSERT_EQ(scan.rooms().size(), 6u);
+  std::size_t near_floor = 0, far_floor = 0;
+  for (std::size_t i = 0; i < p.size(); i += 3) {
+    bool on_face = false;
+    for (const auto& room : scan.rooms()) {
+      bool inside = true;
+      double face = 1e300;
+      for (int c = 0; c < 3; ++c) {
+        inside &= p[i + c] >= room.lo[c] - 0.003 && p[i + c] <= room.hi[c] + 0.003;
+        face = std::min({face, std::fabs(p[i + c] - room.lo[c]), std::fabs(p[i + c] - room.hi[c])});
+      }
+      if (!inside || face > 0.003) continue;
+      on_face = true;
+      if (std::fabs(p[i + 2] - room.lo[2]) <= 0.003) {
+        const double r = std::hypot(p[i] - room.scanner[0], p[i + 1] - room.scanner[1]);
+        near_floor += r >= 0.5 && r < 1.0;
+        far_floor += r >= 2.5 && r < 3.0;
+      }
+    }
+    ASSERT_TRUE(on_face) << p[i] << " " << p[i + 1] << " " << p[i + 2];
+  }
+  // Per square metre (rings of areas 0.75 pi and 2.75 pi), the near ring is denser
+  // (whatever walls cut the far one).
+  EXPECT_GT(double(near_floor) / 0.75, 3 * double(far_floor) / 2.75);
 }
