@@ -97,6 +97,21 @@ TEST_F(PipelineTest, TerrainManySegments) { expect_same_as_incore(dist(io::Distr
 TEST_F(PipelineTest, TwoPlatesManySegments) { expect_same_as_incore(dist(io::Distribution::kTwoPlates, 20000, 8), 1500, 10); }
 TEST_F(PipelineTest, SphereCospherical) { expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 150, 10); }
 
+// The surface zoo (io/point_zoo.hpp): roofs without walls, crowns with several returns,
+// holes, overlapping strips on scan lines, steep hills, closed rooms: small sets, small
+// windows (many segments; then 3 zones a segment on 2 threads), the in-core kernel's tets.
+const io::Distribution kZoo[] = {io::Distribution::kHills,  io::Distribution::kRoofs,     io::Distribution::kCanopy,
+                                 io::Distribution::kWater,  io::Distribution::kStrips,    io::Distribution::kScanLines,
+                                 io::Distribution::kSurvey, io::Distribution::kIndoor};
+
+TEST_F(PipelineTest, ZooManySegments) {
+  for (io::Distribution d : kZoo) expect_same_as_incore(dist(d, 6000, 11), 500, 8);
+}
+
+TEST_F(PipelineTest, ZooZonesOnTwoThreads) {
+  for (io::Distribution d : kZoo) expect_same_as_incore(dist(d, 6000, 12), 2000, 2, 3);
+}
+
 // Parallel zonal insertion: each segment split into 3 strips, whose boundaries are
 // made exact like the segments' (the strip's missing points go through the same range
 // test and emptiness query).
