@@ -26,7 +26,7 @@ zoo_time() {
   timelog=$(mktemp)
   out=$dir/zoo.tets
   json=$(/usr/bin/time -v -o "$timelog" "$ts" -q --json --threads "$threads" run "$input" -o "$out" \
-         --memory "$memory" --tmpdir "$dir" $run_args)
+         --memory "$memory" --tmpdir "$dir" $run_args | tr -d "\n")
   peak=$(awk -F: '/Maximum resident/{print int($2/1024)}' "$timelog")
   cpu=$(awk -F: '/Percent of CPU/{gsub(/[ %]/,"",$2); print $2}' "$timelog")
   rm -f "$out"
