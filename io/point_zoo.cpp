@@ -35,15 +35,24 @@ std::uint64_t cell_id(std::int64_t cx, std::int64_t cy) { return std::uint64_t(c
 
 LidarTile::LidarTile(Preset preset, std::uint64_t seed, std::uint64_t n) {
   switch (preset) {
-    case Preset::kHills: break;  // relief set below, from the side
-    case Preset::kRoofs: f_.building_share = 0.35; break;
-    case Preset::kCanopy: f_.tree_share = 0.85; break;
+    case Preset::kHills:
+      break;  // relief set below, from the side
+    case Preset::kRoofs:
+      f_.building_share = 0.35;
+      break;
+    case Preset::kCanopy:
+      f_.tree_share = 0.85;
+      break;
     case Preset::kWater:
       f_.building_share = 0.2;
       f_.lakes = true;
       break;
-    case Preset::kStrips: f_.strips = f_.scan_lines = true; break;
-    case Preset::kScanLines: f_.scan_lines = true; break;
+    case Preset::kStrips:
+      f_.strips = f_.scan_lines = true;
+      break;
+    case Preset::kScanLines:
+      f_.scan_lines = true;
+      break;
     case Preset::kSurvey:
       f_.building_share = 0.25;
       f_.tree_share = 0.15;
@@ -140,8 +149,8 @@ double LidarTile::roof(const Building& b, double x, double y) const {
   if (!b.gable) return b.eave;
   const double wx = b.hi[0] - b.lo[0], wy = b.hi[1] - b.lo[1];
   // The ridge runs along the longer side; the roof falls to the eaves across it.
-  const double across = wx >= wy ? wy / 2 - std::fabs(y - (b.lo[1] + b.hi[1]) / 2)
-                                 : wx / 2 - std::fabs(x - (b.lo[0] + b.hi[0]) / 2);
+  const double across =
+      wx >= wy ? wy / 2 - std::fabs(y - (b.lo[1] + b.hi[1]) / 2) : wx / 2 - std::fabs(x - (b.lo[0] + b.hi[0]) / 2);
   return b.eave + b.pitch * std::max(0.0, across);
 }
 
@@ -259,8 +268,8 @@ void LidarTile::point(std::uint64_t i, double* p) const {
           z = ground(gx, xy[1]);
         }
       } else {
-        xy[0] = std::clamp(xy[0] + slant * (first - z), 0.0, side_);
-        if (in_hole(xy[0], xy[1]) || building_at(xy[0], xy[1], nullptr)) xy[0] -= slant * (first - z);
+        const double sx = std::clamp(xy[0] + slant * (first - z), 0.0, side_);
+        if (!in_hole(sx, xy[1]) && !building_at(sx, xy[1], nullptr)) xy[0] = sx;
       }
       x = xy[0], y = xy[1], done = true;
     }
@@ -272,9 +281,12 @@ void LidarTile::point(std::uint64_t i, double* p) const {
     x = xy[0], y = xy[1];
     Building b;
     Tree t;
-    if (building_at(x, y, &b)) z = roof(b, x, y);  // no wall returns: roofs and ground only
-    else if (tree_at(x, y, &t)) z = crown_top(t, x, y) - 0.5 * r.uniform() * r.uniform();
-    else z = ground(x, y) + 0.03 * r.symmetric();
+    if (building_at(x, y, &b))
+      z = roof(b, x, y);  // no wall returns: roofs and ground only
+    else if (tree_at(x, y, &t))
+      z = crown_top(t, x, y) - 0.5 * r.uniform() * r.uniform();
+    else
+      z = ground(x, y) + 0.03 * r.symmetric();
   }
   p[0] = centimetres(x) + kOffsetX, p[1] = centimetres(y) + kOffsetY, p[2] = centimetres(z) + kOffsetZ;
 }
@@ -311,8 +323,10 @@ void IndoorScan::point(std::uint64_t i, double* p) const {
   // The first plane the ray meets: the room is a box around the scanner.
   double t = 1e300;
   for (int c = 0; c < 3; ++c) {
-    if (d[c] > 0) t = std::min(t, (room.hi[c] - room.scanner[c]) / d[c]);
-    else if (d[c] < 0) t = std::min(t, (room.lo[c] - room.scanner[c]) / d[c]);
+    if (d[c] > 0)
+      t = std::min(t, (room.hi[c] - room.scanner[c]) / d[c]);
+    else if (d[c] < 0)
+      t = std::min(t, (room.lo[c] - room.scanner[c]) / d[c]);
   }
   t += 0.002 * r.symmetric();  // range noise
   for (int c = 0; c < 3; ++c) p[c] = millimetres(room.scanner[c] + t * d[c]);

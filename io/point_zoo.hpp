@@ -28,8 +28,8 @@ class LidarTile {
   enum class Preset { kHills, kRoofs, kCanopy, kWater, kStrips, kScanLines, kSurvey };
 
   static constexpr double kOffsetX = 500000, kOffsetY = 5000000, kOffsetZ = 200;
-  static constexpr double kLineSpacing = 1.0;  // metres between scan lines
-  static constexpr double kPulseSpacing = 0.3; // metres between pulses along a line
+  static constexpr double kLineSpacing = 1.0;   // metres between scan lines
+  static constexpr double kPulseSpacing = 0.3;  // metres between pulses along a line
 
   struct Features {
     double hill_amplitude = 12;    // metres, of the large waves of the ground
@@ -68,7 +68,7 @@ class LidarTile {
   double ground(double x, double y) const;
   // The building of 40 m cell (cx, cy), if any; eave and shadow only with heights.
   bool building(std::int64_t cx, std::int64_t cy, Building* b, bool heights = true) const;
-  bool building_at(double x, double y, Building* b) const;             // footprint contains (x, y)
+  bool building_at(double x, double y, Building* b) const;  // footprint contains (x, y)
   double roof(const Building& b, double x, double y) const;
   bool tree_at(double x, double y, Tree* t) const;  // the highest crown over (x, y)
   bool in_hole(double x, double y) const;           // a lake or a building's shadow
