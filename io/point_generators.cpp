@@ -118,8 +118,8 @@ Distribution parse_distribution(std::string_view name) {
 
 const char* distribution_help() {
   return
-      "Distributions (point i depends only on --seed and i; any chunking or thread count\n"
-      "gives the same file):\n"
+      "Distributions (point i depends only on --seed and i, and on --n for the zoo's tiles;\n"
+      "any chunking or thread count gives the same file):\n"
       "  uniform          x, y, z uniform in [0, 1) (multiples of 2^-53).\n"
       "  ball             uniform in the unit ball centred at 0: x^2+y^2+z^2 <= 1 exactly\n"
       "                   (rejection sampling from [-1, 1)^3).\n"
