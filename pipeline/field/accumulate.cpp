@@ -131,6 +131,19 @@ class Accumulator {
   // word is as wide as the hull tets' reach. The rare edges that span more (under the
   // hull) skip the batch's de-duplication: the row's does it.
   void gather_rows(const FrameBatch& b) {
+    const EdgeKeys keys = collect_edges(b);
+    const std::size_t fresh = make_entries(keys);
+    emit_rows(b, fresh);
+  }
+
+  // The batch's edges as keys (below), de-duplicated: the short keys sorted and unique
+  // at the front of edges_, the long ones in long_.
+  struct EdgeKeys {
+    std::uint64_t lo, span, top;
+    int dbits;
+    std::size_t short_edges;
+  };
+  EdgeKeys collect_edges(const FrameBatch& b) {
     const std::size_t n = batch_.tets();
     // edges_ only grows, and is never zeroed: every slot is written before it is read.
     edges_.reserve(6 * n);
@@ -201,6 +214,14 @@ class Accumulator {
     const std::size_t short_edges = std::size_t(std::unique(edges_.data(), edges_.data() + kept) - edges_.data());
     stats_.batch_edges += short_edges + long_.size();
 
+    return EdgeKeys{lo, span, top, dbits, short_edges};
+  }
+
+  // Both directions of each edge as entries in fresh_, sorted by label; their count.
+  std::size_t make_entries(const EdgeKeys& keys) {
+    const std::uint64_t lo = keys.lo, span = keys.span, top = keys.top;
+    const int dbits = keys.dbits;
+    const std::size_t short_edges = keys.short_edges;
     // The batch's entries, label << 32 | the neighbour's original (labels and originals
     // are below 2^32, checked by the caller: 8 bytes instead of 16, half the sort's
     // traffic), both directions of each edge, sorted by label alone: radix on the
@@ -222,7 +243,11 @@ class Accumulator {
       fresh_[2 * std::size_t(i) + 1] = c << 32 | points_.original(a);
     }
     radix_sort(fresh_.data(), fresh, radix_tmp_, std::bit_width(top), [lo](std::uint64_t d) { return (d >> 32) - lo; });
+    return fresh;
+  }
 
+  // The rows of the labels this batch retires, to the sink; the rest stays pending.
+  void emit_rows(const FrameBatch& b, std::size_t fresh) {
     // The rows of the labels retired after this batch, [retired_, below): each label's
     // entries are a run of the pending ones (sorted by label, all >= retired_ == lo)
     // and a run of the batch's. Nothing is merged for them: a row gathers its two runs.
@@ -260,7 +285,7 @@ class Accumulator {
     // What stays pending (labels >= below) is the two runs' tails, merged by label into
     // the other pending buffer: each entry is sorted once, in its batch, and merged
     // once a batch until its label retires (sorting the pending entries again with
-    // every batch was the first line of the profile at 10^8 points).
+    // every batch would cost a sort of all of them each time).
     const std::size_t rest = (pending_size_ - pc) + (fresh - fc);
     core::PageArray<std::uint64_t>& next = pending_[1 - current_];
     next.reserve(rest);

@@ -107,20 +107,22 @@ std::array<double, 6> parse_box(const std::string& text) {
   return b;
 }
 
-FieldSummary compute_fields(const FieldOptions& options) {
-  options.validate();
-  const auto t0 = std::chrono::steady_clock::now();
-  const io::TetReader reader(options.input);
+namespace {
+
+// The memory plan of a field job: the window of labels and the batches of tets
+// within their caps, and what is left for the output sorts.
+struct FieldPlan {
+  BatchPlan batches;
+  std::uint64_t window_bytes = 0, batch_bytes = 0, sort_bytes = 0;
+};
+
+FieldPlan plan_field_memory(const FieldOptions& options, const io::TetReader& reader, FieldSummary& summary) {
   const io::TetFileHeader& h = reader.header();
   const std::uint64_t n = reader.point_count();
-  FieldSummary summary;
-  summary.points = n;
-  summary.tets = reader.tet_count();
-  summary.frames = reader.frame_count();
-
+  FieldPlan fp;
   // Budget caps: window 40%, batch 25%; the output sorts get the rest (split between them).
   const std::uint64_t usable = options.memory_bytes - kReserve;
-  const std::uint64_t window_bytes = usable / 100 * 40, batch_bytes = usable / 100 * 25;
+  const std::uint64_t window_bytes = fp.window_bytes = usable / 100 * 40, batch_bytes = fp.batch_bytes = usable / 100 * 25;
   std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
                                                            std::uint64_t(1) << 32);
   const std::uint64_t budget_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
@@ -128,12 +130,9 @@ FieldSummary compute_fields(const FieldOptions& options) {
   // Scratch reused, not re-faulted; at most 2^20 tets (the neighbours may take more,
   // below): fewer batches are fewer parallel regions (on a loaded machine an idle
   // OpenMP thread spins through every serial step between them), fewer merges of the
-  // pending entries, and several frames a batch to decode in parallel. `run`'s frames
-  // hold a little over 2^18 tets, so at 2^19 nearly
-  // every batch was one frame, decoded by one thread while the others waited (10^6
-  // uniform points, 1G, --neighbours alone: 23 batches at 2^19, 9 at 2^20, 2.4-2.5 s of
-  // CPU against 3.1-3.9 s; 10^7, --density: 226 batches -> 77, 8.4-8.6 -> 7.6 s; 2^21
-  // 7.1-7.4 s but 200 MB more resident).
+  // pending entries, and several frames a batch to decode in parallel (`run`'s frames
+  // hold a little over 2^18 tets, so smaller batches are mostly one frame, decoded by
+  // one thread while the others wait). Larger batches cost resident memory.
   max_tets = std::min<std::uint64_t>(max_tets, std::uint64_t(1) << 20);
   if (options.batch_tets) max_tets = options.batch_tets;
   if (options.ring_labels) {
@@ -143,14 +142,13 @@ FieldSummary compute_fields(const FieldOptions& options) {
   // Edges and entries are packed in 64 bits: labels and original indices below 2^32.
   if (options.neighbours && std::max(n, h.input_count) > (std::uint64_t(1) << 32))
     throw UsageError("field: --neighbours handles up to 2^32 points");
-  BatchPlan plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
+  BatchPlan& plan = fp.batches;
+  plan = plan_batches(reader.frames(), n, max_tets, max_labels, options.input);
   // With neighbours, the entries of the unretired labels (about 16 a window label) are
   // carried from batch to batch (merged with each batch's, field_accumulate.cpp):
   // batches of 2^20 tets, whose new entries are fewer than those, spend most of that
   // work on old ones. Larger batches, as the budget allows, keep the new entries the
-  // larger part (10^8 uniform points, 8G, when the pending entries were still sorted
-  // again: 763 batches of 2^20 tets and a 258,333-label window; 167 of 2^22: 248.8 s ->
-  // 215.6 s).
+  // larger part.
   if (options.neighbours && !options.batch_tets) {
     const std::uint64_t wanted = std::min(std::bit_ceil(16 * plan.window_labels), budget_tets);
     if (wanted > max_tets) plan = plan_batches(reader.frames(), n, max_tets = wanted, max_labels, options.input);
@@ -165,11 +163,64 @@ FieldSummary compute_fields(const FieldOptions& options) {
   // next batch's into the other); 512 bytes a label bound them with room to spare.
   const std::uint64_t held = plan.ring_labels * label_bytes(options) + plan.largest_batch_tets * tet_bytes(options) +
                              (options.neighbours ? plan.window_labels * 512 : 0);
-  const std::uint64_t sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
+  const std::uint64_t sort_bytes = fp.sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
   summary.memory_planned = kReserve + held + sort_bytes;
   spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}",
                n, summary.tets, summary.frames, summary.batches, plan.window_labels, plan.ring_labels,
                human_bytes(double(summary.memory_planned)));
+  return fp;
+}
+
+// The neighbour rows as the CSR pair of files.
+void write_neighbours(NeighbourRows& neighbours, const FieldOptions& options, FieldSummary& summary) {
+  // int32 when it holds every offset and index (scipy.sparse makes the same choice),
+  // known only now that the entries are counted.
+  const bool wide = options.neighbour_int64 || neighbours.needs_int64();
+  neighbours.write(field_path(options, "neighbours.offsets"), field_path(options, "neighbours.indices"), wide);
+  summary.neighbour_entries = neighbours.entries();
+  summary.neighbour_dtype = wide ? "int64" : "int32";
+  spdlog::info("field: {} neighbour entries in {} bucket(s){}", neighbours.entries(), neighbours.buckets(),
+               neighbours.spilled() ? ", spilled to disk" : "");
+  summary.files.push_back({"neighbours.offsets", field_path(options, "neighbours.offsets")});
+  summary.files.push_back({"neighbours.indices", field_path(options, "neighbours.indices")});
+}
+
+// The density sampled on the grid, from the densities by label in rho_path.
+void write_grid(const io::TetReader& reader, const BatchPlan& plan, const FieldOptions& options,
+                const std::string& rho_path, std::uint64_t memory_bytes, const std::string& tmpdir, Progress* progress,
+                FieldSummary& summary) {
+  const io::TetFileHeader& h = reader.header();
+  GridSpec g;
+  g.n = options.grid;
+  for (std::size_t k = 0; k < 3; ++k) {
+    g.lo[k] = options.has_box ? options.box[k] : h.bbox_min[k];
+    g.hi[k] = options.has_box ? options.box[k + 3] : h.bbox_max[k];
+    if (!(g.hi[k] > g.lo[k])) throw UsageError("field: the points are flat along axis " + std::to_string(k) + ": give --box");
+  }
+  const double ext[3] = {h.bbox_max[0] - h.bbox_min[0], h.bbox_max[1] - h.bbox_min[1], h.bbox_max[2] - h.bbox_min[2]};
+  const int axis = int(std::max_element(ext, ext + 3) - ext);  // the sort axis of `run` (point_sort.cpp)
+  const GridStats gs = sample_grid(reader, plan, g, axis, rho_path, options, memory_bytes, tmpdir, progress);
+  summary.grid_points = g.n[0] * g.n[1] * g.n[2];
+  summary.grid_inside = gs.inside;
+  summary.files.push_back({"grid", options.output + ".grid.npy"});
+}
+
+}  // namespace
+
+FieldSummary compute_fields(const FieldOptions& options) {
+  options.validate();
+  const auto t0 = std::chrono::steady_clock::now();
+  const io::TetReader reader(options.input);
+  const io::TetFileHeader& h = reader.header();
+  const std::uint64_t n = reader.point_count();
+  FieldSummary summary;
+  summary.points = n;
+  summary.tets = reader.tet_count();
+  summary.frames = reader.frame_count();
+
+  const FieldPlan fp = plan_field_memory(options, reader, summary);
+  const BatchPlan& plan = fp.batches;
+  const std::uint64_t window_bytes = fp.window_bytes, batch_bytes = fp.batch_bytes, sort_bytes = fp.sort_bytes;
 
   // The mass file is checked (length, format) before any work; its values when read.
   std::unique_ptr<io::ScalarFileReader> masses;
@@ -253,35 +304,13 @@ FieldSummary compute_fields(const FieldOptions& options) {
     summary.total_mass = double(n);
   }
   if (neighbours) {
-    // int32 when it holds every offset and index (scipy.sparse makes the same choice),
-    // known only now that the entries are counted.
-    const bool wide = options.neighbour_int64 || neighbours->needs_int64();
-    neighbours->write(field_path(options, "neighbours.offsets"), field_path(options, "neighbours.indices"), wide);
-    summary.neighbour_entries = neighbours->entries();
-    summary.neighbour_dtype = wide ? "int64" : "int32";
-    spdlog::info("field: {} neighbour entries in {} bucket(s){}", neighbours->entries(), neighbours->buckets(),
-                 neighbours->spilled() ? ", spilled to disk" : "");
-    summary.files.push_back({"neighbours.offsets", field_path(options, "neighbours.offsets")});
-    summary.files.push_back({"neighbours.indices", field_path(options, "neighbours.indices")});
+    write_neighbours(*neighbours, options, summary);
     neighbours.reset();
   }
   if (grid) {
     rho_file->close();
     rho_file.reset();
-    GridSpec g;
-    g.n = options.grid;
-    for (std::size_t k = 0; k < 3; ++k) {
-      g.lo[k] = options.has_box ? options.box[k] : h.bbox_min[k];
-      g.hi[k] = options.has_box ? options.box[k + 3] : h.bbox_max[k];
-      if (!(g.hi[k] > g.lo[k])) throw UsageError("field: the points are flat along axis " + std::to_string(k) + ": give --box");
-    }
-    const double ext[3] = {h.bbox_max[0] - h.bbox_min[0], h.bbox_max[1] - h.bbox_min[1], h.bbox_max[2] - h.bbox_min[2]};
-    const int axis = int(std::max_element(ext, ext + 3) - ext);  // the sort axis of `run` (point_sort.cpp)
-    const GridStats gs = sample_grid(reader, plan, g, axis, rho_path, options, window_bytes + batch_bytes / 2,
-                                     tmp.dir(), &progress);
-    summary.grid_points = g.n[0] * g.n[1] * g.n[2];
-    summary.grid_inside = gs.inside;
-    summary.files.push_back({"grid", options.output + ".grid.npy"});
+    write_grid(reader, plan, options, rho_path, window_bytes + batch_bytes / 2, tmp.dir(), &progress, summary);
   }
   progress.finish();
   summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
