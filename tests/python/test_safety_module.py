@@ -3,7 +3,8 @@
 - TetFile.points, .original_ids and frames(original_ids=True) check the points
   section's CRC: a damaged section raises, as `cat --original-ids` refuses;
 - run(array, ...) never removes an OUT.input.f64.partial it did not make, and after
-  bad input (a NaN) removes its own spill, so the corrected call is not refused.
+  bad input (a NaN) removes its own spill, so the corrected call is not refused;
+- an HDF5 file of a list that lacks the dataset's group says so (it gives 0 points).
 
 Usage: python3 -m pytest tests/python/test_safety_module.py (PYTHONPATH=BUILD/python);
 CTest runs it so (tests/CMakeLists.txt, label `python`).
@@ -87,6 +88,24 @@ def test_run_array_with_a_nan_removes_its_spill(tmp_path):
     s = tetstream.run(pts, out, memory="64M", progress=False)  # the corrected call
     assert s["points"] == len(pts)
     assert tetstream.verify(out)["valid"]
+
+
+def test_a_file_of_a_list_without_the_dataset_says_so(tmp_path):
+    h5py = pytest.importorskip("h5py")
+    binary = os.environ.get("TETSTREAM_BINARY") or os.path.join(
+        os.path.dirname(os.path.abspath(tetstream.__file__)), "..", "..", "tools", "tetstream")
+    if not os.path.exists(binary):
+        pytest.skip("no tetstream binary beside the module")
+    rng = np.random.default_rng(6)
+    with h5py.File(tmp_path / "snap.0.hdf5", "w") as f:
+        f.create_dataset("/PartType0/Coordinates", data=rng.random((50, 3)))
+    with h5py.File(tmp_path / "snap.1.hdf5", "w") as f:
+        f.create_dataset("/PartType1/Coordinates", data=rng.random((50, 3)))
+    import subprocess
+    r = subprocess.run([binary, "info", str(tmp_path / "snap.*.hdf5"), "--dataset", "/PartType0/Coordinates"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "snap.1.hdf5: no /PartType0/Coordinates in this file" in r.stderr, r.stderr
 
 
 if __name__ == "__main__":
