@@ -354,7 +354,9 @@ MeshExportResult export_mesh(const TetReader& reader, const std::string& path, M
   }
   if (format == MeshFormat::kTetgen) {
     const std::string base = path.substr(0, path.rfind('.'));
-    OutputFile node(base + ".node"), ele(base + ".ele");
+    // BASE.ele is a name the user did not give (see OutputClaim::Kind::kBeside).
+    const OutputClaim ele_claim(base + ".ele", OutputClaim::Kind::kBeside, base + ".node");
+    OutputFile node(base + ".node"), ele(base + ".ele", std::size_t(8) << 20, &ele_claim);
     write_tetgen_node(reader, node, options);
     write_tetgen_ele(reader, ele, options);
     finish(node);

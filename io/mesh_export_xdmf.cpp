@@ -113,7 +113,9 @@ void write_xdmf(const TetReader& r, const std::string& path, const MeshExportOpt
   const std::string h5 = base + ".h5";
   hdf5::quiet();
   OutputFile xdmf(path);  // claims PATH first: a second job on the same mesh stops here
-  const OutputClaim claim(h5);
+  // BASE.h5 is a name the user did not give: an existing one that is not an earlier
+  // output beside this .xdmf is theirs (a snapshot the points came from, say).
+  const OutputClaim claim(h5, OutputClaim::Kind::kBeside, path);
   RemoveOnFailure cleanup{h5 + ".partial"};
   {
     // The claim holds a flock on the partial file: HDF5's own lock would conflict with it.
@@ -137,12 +139,20 @@ void write_xdmf(const TetReader& r, const std::string& path, const MeshExportOpt
     });
     if (H5Fflush(file.get(), H5F_SCOPE_LOCAL) < 0 || !file.close()) throw IoError(cleanup.path + ": write failed (disk full?)");
   }
+  {
+    // HDF5 opened the partial file by name: it must still be the claimed one.
+    struct stat at {}, held {};
+    if (::lstat(cleanup.path.c_str(), &at) != 0 || ::fstat(claim.fd(), &held) != 0 || at.st_dev != held.st_dev ||
+        at.st_ino != held.st_ino)
+      throw IoError(cleanup.path + ": replaced while it was written");
+  }
   if (::fsync(claim.fd()) != 0) throw IoError(cleanup.path + ": fsync failed: " + std::strerror(errno));
   xdmf.write(xdmf_text(xml_escaped(file_name(h5)), n, t));
   if (::rename(cleanup.path.c_str(), h5.c_str()) != 0) {
     throw IoError("cannot rename " + cleanup.path + " to " + h5 + ": " + std::strerror(errno));
   }
   cleanup.armed = false;
+  note_input(h5);  // a later output of this process (--json-file) never replaces it
   result.bytes += xdmf.offset();
   xdmf.commit();
   struct stat st{};

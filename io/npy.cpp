@@ -69,6 +69,7 @@ namespace tetstream::io {
 ScalarFileReader::ScalarFileReader(std::string path, std::uint64_t count) : path_(std::move(path)), count_(count) {
   fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw InputError(path_ + ": cannot open: " + std::strerror(errno));
+  note_input_fd(fd_);
   struct stat st{};
   ::fstat(fd_, &st);
   const std::uint64_t size = std::uint64_t(st.st_size);

@@ -6,7 +6,10 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <mutex>
+#include <set>
 #include <stdexcept>
+#include <utility>
 #include <fcntl.h>
 #include <sys/file.h>
 #include <sys/stat.h>
@@ -20,6 +23,72 @@ namespace {
 }
 }  // namespace
 
+namespace {
+using FileId = std::pair<std::uint64_t, std::uint64_t>;
+std::mutex& noted_mutex() {
+  static std::mutex m;
+  return m;
+}
+std::set<FileId>& noted() {
+  static std::set<FileId> s;
+  return s;
+}
+void note(const struct stat& st) {
+  if (!S_ISREG(st.st_mode)) return;
+  std::lock_guard lock(noted_mutex());
+  noted().insert({std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)});
+}
+bool is_noted(const struct stat& st) {
+  std::lock_guard lock(noted_mutex());
+  return noted().count({std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)}) != 0;
+}
+}  // namespace
+
+void note_input(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) == 0) note(st);
+}
+
+void note_input_fd(int fd) {
+  struct stat st {};
+  if (fd >= 0 && ::fstat(fd, &st) == 0) note(st);
+}
+
+void forget_noted_files() {
+  std::lock_guard lock(noted_mutex());
+  noted().clear();
+}
+
+bool is_noted_input(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && is_noted(st);
+}
+
+void refuse_stdout_into_input() {
+  struct stat st {};
+  if (::fstat(STDOUT_FILENO, &st) == 0 && S_ISREG(st.st_mode) && is_noted(st))
+    throw UsageError("standard output is a file this command reads: refusing to write into its own input");
+}
+
+int create_work_file(const std::string& path, int flags) {
+  if (::unlink(path.c_str()) != 0 && errno != ENOENT) fail("cannot remove the old work file", path);
+  const int fd = ::open(path.c_str(), flags | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
+  if (fd < 0) fail("cannot create", path);
+  return fd;
+}
+
+int open_work_file(const std::string& path) {
+  int fd = ::open(path.c_str(), O_RDWR | O_NOFOLLOW | O_CLOEXEC);
+  if (fd < 0 && errno == ENOENT) fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0600);
+  if (fd < 0) fail("cannot open", path);
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    throw IoError(path + ": not a regular file");
+  }
+  return fd;
+}
+
 void check_output_path(const std::string& path) {
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0) {
@@ -32,6 +101,7 @@ void check_output_path(const std::string& path) {
   if (!S_ISREG(st.st_mode))
     throw UsageError(path + " is not a regular file (a device, pipe or socket): tetstream writes regular files, "
                      "or - for standard output where the command supports it");
+  if (is_noted(st)) throw UsageError(path + " is a file this command reads or has written: refusing to write over it");
 }
 
 void refuse_input_as_output(const std::string& input, const std::string& output) {
@@ -44,8 +114,13 @@ void refuse_input_as_output(const std::string& input, const std::string& output)
   }
 }
 
-OutputClaim::OutputClaim(std::string path) : path_(std::move(path)), partial_(path_ + ".partial") {
+OutputClaim::OutputClaim(std::string path, Kind kind, const std::string& main)
+    : path_(std::move(path)), partial_(path_ + ".partial") {
   check_output_path(path_);
+  struct stat existing {};
+  if (kind == Kind::kBeside && ::lstat(path_.c_str(), &existing) == 0 && ::lstat(main.c_str(), &existing) != 0)
+    throw UsageError(path_ + " exists and is not an earlier output beside " + main +
+                     ": refusing to replace it (move it, or choose another output name)");
   fd_ = ::open(partial_.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW);
   if (fd_ < 0 && errno == ENOENT) {
     fd_ = ::open(partial_.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | O_CREAT | O_EXCL, 0644);
@@ -57,6 +132,11 @@ OutputClaim::OutputClaim(std::string path) : path_(std::move(path)), partial_(pa
   }
   struct stat st {};
   if (::fstat(fd_, &st) != 0) fail("cannot stat", partial_);
+  if (!created_ && S_ISREG(st.st_mode) && is_noted(st)) {
+    ::close(fd_);
+    fd_ = -1;
+    throw UsageError(partial_ + " is a file this command reads: refusing to write over it");
+  }
   if (!S_ISREG(st.st_mode) || st.st_nlink != 1) {
     ::close(fd_);
     fd_ = -1;
@@ -138,6 +218,7 @@ std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t k
 
 std::unique_ptr<OutputFile> OutputFile::to_stdout(std::size_t buffer_bytes) {
   if (::isatty(STDOUT_FILENO)) throw UsageError("-o -: standard output is a terminal; pipe it into a command or a file");
+  refuse_stdout_into_input();
   const int fd = ::fcntl(STDOUT_FILENO, F_DUPFD_CLOEXEC, 0);
   if (fd < 0) fail("cannot duplicate", "standard output");
   std::unique_ptr<OutputFile> f(new OutputFile("-", buffer_bytes, fd, 0));
@@ -268,7 +349,10 @@ void OutputFile::commit(bool do_sync) {
     fail("close failed", partial_);
   }
   fd_ = -1;
+  struct stat done {};
+  const bool known = ::lstat(partial_.c_str(), &done) == 0;
   if (::rename(partial_.c_str(), path_.c_str()) != 0) fail("cannot rename to " + path_, partial_);
+  if (known) note(done);  // a later output of this process (--json-file) never replaces it
   committed_ = true;
 }
 

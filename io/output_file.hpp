@@ -10,6 +10,7 @@
 // what was written after the last flush()/sync() may be missing or torn, which is why
 // a resumed writer cuts the file back to a checkpoint it synced.
 #include <cstddef>
+#include <fcntl.h>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -26,6 +27,32 @@ void check_output_path(const std::string& path);
 // same file by device and inode, whatever the spelling or hard link).
 void refuse_input_as_output(const std::string& input, const std::string& output);
 
+// The files this process reads and the outputs it has finished, by (st_dev, st_ino):
+// an output is never one of them. Readers note each input as they open it (the
+// container, point and npy readers do; a command notes the others), and every output
+// (OutputClaim) is refused when its path or its partial file is one of these files,
+// whatever its spelling or hard link. Missing paths and non-regular files are not noted.
+void note_input(const std::string& path);
+void note_input_fd(int fd);
+// Forgets them: a process that runs several commands (the Python package) starts each
+// with none, so that an inode the filesystem reuses is never taken for an input.
+void forget_noted_files();
+// Whether `path` names a file this process has read or written (by device and inode).
+bool is_noted_input(const std::string& path);
+// Refuses (UsageError) standard output redirected into a file this process reads
+// (`cat c.tets >> c.tets` would read what it appends).
+void refuse_stdout_into_input();
+
+// Creates a work file in a directory the job made (a sort run, a checkpoint's
+// temporary file, a scratch file, a spill): a name already there is unlinked first (a
+// planted link or hard link goes, its target untouched), then the file is made with
+// O_CREAT | O_EXCL | O_NOFOLLOW, so nothing but a new file of this process is ever
+// written. `flags`: O_WRONLY or O_RDWR. Returns the descriptor; IoError when it cannot.
+int create_work_file(const std::string& path, int flags = O_WRONLY);
+// Opens a work file that may already be there (a lock): never through a link; created
+// (O_EXCL) when missing. Refuses (IoError) anything but a regular file.
+int open_work_file(const std::string& path);
+
 // The claim of a job on PATH: PATH.partial opened (created when missing) without
 // following a link, checked to be a regular file with a single link, and locked
 // (flock, exclusive) for as long as the claim lives. A second process that claims the
@@ -36,7 +63,12 @@ void refuse_input_as_output(const std::string& input, const std::string& output)
 // it and nothing was written to it.
 class OutputClaim {
  public:
-  explicit OutputClaim(std::string path);
+  // A file the user named (kNamed) replaces an existing PATH at the end. A file written
+  // beside it under a name the tool chose (kBeside: the .h5 of an .xdmf, the .ele of a
+  // .node) may replace an existing PATH only when `main`, the named file, exists too
+  // (a rerun of the same command); otherwise PATH is the user's and is refused.
+  enum class Kind { kNamed, kBeside };
+  explicit OutputClaim(std::string path, Kind kind = Kind::kNamed, const std::string& main = {});
   ~OutputClaim();
   OutputClaim(const OutputClaim&) = delete;
   OutputClaim& operator=(const OutputClaim&) = delete;

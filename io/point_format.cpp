@@ -79,9 +79,12 @@ PointFormat sniff_format(const char* data, std::size_t size) {
   if (size >= 4 && std::memcmp(data, "LASF", 4) == 0) return PointFormat::kLas;
   if (size >= 8 && std::memcmp(data, "\x89HDF\r\n\x1a\n", 8) == 0) return PointFormat::kHdf5;
   if (size == 0) return PointFormat::kAuto;
-  // Text: printable ASCII and whitespace only in the prefix we have.
+  // Text: printable ASCII and whitespace only in the prefix we have, after a UTF-8
+  // byte order mark (editors on Windows write one).
   const std::size_t n = std::min<std::size_t>(size, 4096);
-  for (std::size_t i = 0; i < n; ++i) {
+  const std::size_t bom = size >= 3 && std::memcmp(data, "\xEF\xBB\xBF", 3) == 0 ? 3 : 0;
+  if (bom && size == 3) return PointFormat::kText;
+  for (std::size_t i = bom; i < n; ++i) {
     const unsigned char c = static_cast<unsigned char>(data[i]);
     if (!(c == '\n' || c == '\r' || c == '\t' || (c >= 0x20 && c < 0x7f))) return PointFormat::kAuto;
   }

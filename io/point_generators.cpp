@@ -188,6 +188,11 @@ void GeneratorOptions::validate() const {
   }
   if (!(spread >= 0.0 && spread < 0.5)) throw UsageError("--spread must be in [0, 0.5)");
   if (clusters == 0) throw UsageError("--clusters must be at least 1");
+  // The clusters are held in memory (about 64 bytes each, and a table to draw them):
+  // bounded so that a typo cannot take the machine's memory.
+  if (clusters > kMaxClusters)
+    throw UsageError("--clusters " + std::to_string(clusters) + " is more than the " + std::to_string(kMaxClusters) +
+                     " this generator holds");
   if (!(radius > 0.0 && std::isfinite(radius))) throw UsageError("--radius must be positive");
 }
 

@@ -39,6 +39,7 @@ struct GeneratorOptions {
   std::array<double, 3> axes{1.0, 0.6, 0.3};  // ellipsoid-shell semi-axes
   double spread = 0.01;         // ellipsoid-shell radial spread; mixed noise radius
   std::uint32_t clusters = 32;  // clusters: number of Gaussian clusters
+  static constexpr std::uint32_t kMaxClusters = std::uint32_t(1) << 20;
   double radius = 1.0;          // sphere radius
 
   void validate() const;  // throws UsageError

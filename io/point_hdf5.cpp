@@ -8,6 +8,9 @@
 // Built only with TETSTREAM_HDF5 (io/CMakeLists.txt); point_hdf5_none.cpp otherwise.
 #include "io/hdf5_detail.hpp"
 #include "io/point_detail.hpp"
+#include "io/output_file.hpp"
+
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -23,6 +26,7 @@ using hdf5::quiet;
 Handle open_file(const std::string& path) {
   quiet();
   if (::access(path.c_str(), R_OK) != 0) throw IoError("cannot open " + path + ": " + std::strerror(errno));
+  io::note_input(path);
   Handle f(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!f.ok()) throw InputError::at_byte(path, 0, "not a readable HDF5 file (no HDF5 signature, or truncated or damaged)");
   return f;
@@ -112,7 +116,11 @@ class Hdf5PointReader final : public PointReader {
       const std::size_t missing = first_missing(file_.get(), name);
       const std::size_t components = std::size_t(std::count(name.begin(), name.end(), '/'));
       // A snapshot file may lack a particle type's group altogether: 0 points here.
-      if (missing != 0 && one_of_many && missing < components) continue;
+      // Said, not silent: a misspelt group would otherwise pass for a missing type.
+      if (missing != 0 && one_of_many && missing < components) {
+        spdlog::warn("{}: no {} in this file (its group is missing): 0 points from it", path, name);
+        continue;
+      }
       if (missing != 0) {
         throw InputError(path + ": dataset " + name + " not found (" + candidates(list_datasets(file_.get())) + ")");
       }

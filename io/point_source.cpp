@@ -1,4 +1,5 @@
 #include "io/point_source.hpp"
+#include "io/output_file.hpp"
 
 #include "core/error.hpp"
 
@@ -20,6 +21,7 @@ ByteSource::ByteSource(const std::string& path, std::size_t block_bytes) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw IoError("cannot open " + path + ": " + std::strerror(errno));
     own_fd_ = true;
+    note_input_fd(fd_);
   }
   struct stat st {};
   if (::fstat(fd_, &st) == 0 && S_ISREG(st.st_mode)) {

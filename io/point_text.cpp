@@ -4,6 +4,7 @@
 // of a wider table. Numbers are parsed with std::from_chars.
 #include "io/point_detail.hpp"
 
+#include <cstring>
 #include <cctype>
 #include <charconv>
 #include <vector>
@@ -118,6 +119,9 @@ class TextPointReader final : public PointReader {
       : src_(std::move(src)), lines_(*src_), columns_(std::move(columns)) {
     format_name_ = "text";
     source_name_ = src_->name();
+    // A UTF-8 byte order mark before the first line is not part of it.
+    src_->ensure(3);
+    if (src_->available() >= 3 && std::memcmp(src_->data(), "\xEF\xBB\xBF", 3) == 0) src_->consume(3);
     if (!columns_.empty()) {
       format_name_ += " columns " + std::to_string(columns_[0]) + "," + std::to_string(columns_[1]) + "," +
                       std::to_string(columns_[2]);

@@ -1,6 +1,7 @@
 #include "io/point_writer.hpp"
 
 #include "io/npy.hpp"
+#include "io/output_file.hpp"
 
 #include "core/error.hpp"
 
@@ -26,19 +27,21 @@ PointWriter::~PointWriter() {
   if (!committed_ && !tmp_path_.empty()) ::unlink(tmp_path_.c_str());
 }
 
+PointWriter::PointWriter() = default;
+
 void PointWriter::open(const std::string& path, std::size_t buffer_bytes) {
   path_ = path;
   if (is_std_stream(path)) {
     to_stdout_ = true;
     fd_ = STDOUT_FILENO;
   } else {
+    // The claim refuses a link, a device, an input, and a second job on the same
+    // output; the writer writes through the claim's locked descriptor.
+    claim_ = std::make_unique<OutputClaim>(path);
+    fd_ = ::fcntl(claim_->fd(), F_DUPFD_CLOEXEC, 0);
+    if (fd_ < 0) throw IoError("cannot duplicate the descriptor of " + path + ".partial: " + std::strerror(errno));
     tmp_path_ = path + ".partial";
-    fd_ = ::open(tmp_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd_ < 0) {
-      const int err = errno;
-      tmp_path_.clear();  // nothing of ours to remove
-      throw IoError("cannot create " + path + ".partial: " + std::strerror(err));
-    }
+    if (::ftruncate(fd_, 0) != 0) throw IoError("cannot truncate " + tmp_path_ + ": " + std::strerror(errno));
   }
   cap_ = buffer_bytes < 65536 ? 65536 : buffer_bytes;
   buf_.reset(new char[cap_]);
@@ -113,6 +116,7 @@ void PointWriter::commit() {
     committed_ = true;
     return;
   }
+  if (::fsync(fd_) != 0) throw IoError("cannot write " + path_ + ": fsync failed: " + std::strerror(errno));
   if (::close(fd_) != 0) {
     fd_ = -1;
     throw IoError("cannot write " + path_ + ": " + std::strerror(errno));
@@ -121,6 +125,7 @@ void PointWriter::commit() {
   if (::rename(tmp_path_.c_str(), path_.c_str()) != 0) {
     throw IoError("cannot rename " + tmp_path_ + " to " + path_ + ": " + std::strerror(errno));
   }
+  note_input(path_);  // a later output of this process (--json-file) never replaces it
   committed_ = true;
 }
 

@@ -23,6 +23,8 @@
 
 namespace tetstream::io {
 
+class OutputClaim;
+
 struct PointWriteOptions {
   PointFormat format = PointFormat::kAuto;  // kAuto: from the extension
   ScalarType type = ScalarType::kAuto;      // raw, PLY binary, npy; kAuto: extension, else float64
@@ -48,7 +50,7 @@ class PointWriter {
   std::uint64_t bytes_written() const { return bytes_; }
 
  protected:
-  PointWriter() = default;
+  PointWriter();
   virtual void encode(const double* xyz, std::size_t n) = 0;
   // Called by commit() before the final flush; headers with a count placeholder patch it.
   virtual void finish() {}
@@ -67,6 +69,7 @@ class PointWriter {
                                                     std::uint64_t);
   void open(const std::string& path, std::size_t buffer_bytes);
 
+  std::unique_ptr<OutputClaim> claim_;  // PATH.partial, locked until the writer goes
   int fd_ = -1;
   bool committed_ = false;
   std::unique_ptr<char[]> buf_;

@@ -1,4 +1,5 @@
 #include "io/tet_reader.hpp"
+#include "io/output_file.hpp"
 
 #include "core/error.hpp"
 #include "io/tet_codec.hpp"
@@ -56,6 +57,7 @@ int spool_stdin() {
 TetReader::TetReader(std::string path) : path_(std::move(path)) {
   fd_ = path_ == "-" ? spool_stdin() : ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw IoError(path_ + ": cannot open: " + std::strerror(errno));
+  note_input_fd(fd_);
   struct stat st;
   if (::fstat(fd_, &st) != 0) {
     const int e = errno;

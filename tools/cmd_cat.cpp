@@ -16,6 +16,7 @@
 // it is written (`run ... -o - | cat -`): each frame is checked before it is printed,
 // and the exit status says whether the stream was complete (index and footer agree).
 #include "core/error.hpp"
+#include "io/output_file.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_stream_reader.hpp"
 #include "pipeline/util/progress.hpp"
@@ -145,6 +146,7 @@ void run_cat(const CatArgs& args, Context& ctx) {
   if (args.format == "f64" && !args.points) throw UsageError("--format f64 is for --points; tets are text, u32 or u64");
   if (args.path == "-") return run_cat_stream(args, ctx);
   const io::TetReader r(args.path);
+  io::refuse_stdout_into_input();
   // Points and original ids are trusted only after the points' CRC (frames are
   // checked one by one as they are read).
   if (args.points || args.original_ids) r.verify_points();

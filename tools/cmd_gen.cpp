@@ -10,7 +10,10 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <sys/statvfs.h>
 #include <memory>
 #include <vector>
 
@@ -28,6 +31,27 @@ struct GenArgs {
   bool ascii = false;
   std::uint64_t chunk = std::uint64_t(1) << 20;  // points per write
 };
+
+// Refuses (IoError, exit 3, before any point is written) an output its filesystem
+// cannot hold: binary formats by their exact size, text by a lower bound (a digit and
+// a separator a coordinate), so a job that could fit is never refused.
+void plan_gen_disk(const std::string& output, const std::string& format, std::uint64_t points) {
+  std::uint64_t per_point = 6;  // text, PLY ASCII
+  if (format.find("raw f64") == 0 || format.find("f8") != std::string::npos)
+    per_point = 24;
+  else if (format.rfind("raw", 0) == 0 || format.rfind("npy", 0) == 0 || format.find("binary") != std::string::npos)
+    per_point = 12;  // float32 records (PLY binary: at least that)
+  const std::string::size_type slash = output.rfind('/');
+  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : output.substr(0, slash);
+  struct statvfs vfs {};
+  if (::statvfs(dir.c_str(), &vfs) != 0) throw IoError(dir + ": cannot examine the filesystem: " + std::strerror(errno));
+  const std::uint64_t available = std::uint64_t(vfs.f_bavail) * std::uint64_t(vfs.f_frsize);
+  const unsigned __int128 need = static_cast<unsigned __int128>(points) * per_point;
+  if (need > available)
+    throw IoError("not enough disk for " + output + ": " + std::to_string(points) + " points need " +
+                  (need >> 64 ? std::string("more than 16 EiB") : pipeline::human_bytes(double(std::uint64_t(need)))) +
+                  " in " + dir + ", " + pipeline::human_bytes(double(available)) + " free");
+}
 
 void run_gen(const GenArgs& args, Context& ctx) {
   io::GeneratorOptions gopt = args.gen;
@@ -51,6 +75,7 @@ void run_gen(const GenArgs& args, Context& ctx) {
   wopt.ascii = args.ascii;
 
   auto writer = io::create_points(args.output, wopt, total);
+  if (args.output != "-") plan_gen_disk(args.output, writer->format_name(), total);
   pipeline::Progress progress("generating", "points", total, !ctx.global.quiet);
   const std::size_t chunk = static_cast<std::size_t>(std::min<std::uint64_t>(args.chunk, total));
   std::vector<double> xyz(3 * chunk);

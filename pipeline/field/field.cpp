@@ -211,6 +211,10 @@ FieldSummary compute_fields(const FieldOptions& options) {
   options.validate();
   const auto t0 = std::chrono::steady_clock::now();
   const io::TetReader reader(options.input);
+  // Every field is computed from the points' coordinates: a damaged points section
+  // would give other numbers with no error, so it is checked before any work (the
+  // frames are checked one by one as they are decoded).
+  reader.verify_points();
   const io::TetFileHeader& h = reader.header();
   const std::uint64_t n = reader.point_count();
   FieldSummary summary;

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <bit>
+#include <exception>
+#include <mutex>
 
 namespace tetstream::pipeline {
 
@@ -70,8 +72,20 @@ void DecodedBatch::decode(const io::TetReader& reader, const FrameBatch& b) {
   const std::size_t nf = b.end_frame - b.first_frame;
   if (frames_.size() < nf) frames_.resize(nf);
   first_.assign(nf + 1, 0);
+  // A damaged frame throws: the exception must not leave the parallel region (that
+  // terminates the process), so the first one is kept and rethrown after it.
+  std::exception_ptr failure;
+  std::mutex failure_mutex;
 #pragma omp parallel for schedule(dynamic, 1) if (nf > 1)
-  for (std::size_t i = 0; i < nf; ++i) reader.read_frame(b.first_frame + i, frames_[i]);
+  for (std::size_t i = 0; i < nf; ++i) {
+    try {
+      reader.read_frame(b.first_frame + i, frames_[i]);
+    } catch (...) {
+      std::lock_guard lock(failure_mutex);
+      if (!failure) failure = std::current_exception();
+    }
+  }
+  if (failure) std::rethrow_exception(failure);
   for (std::size_t i = 0; i < nf; ++i) first_[i + 1] = first_[i] + frames_[i].size() / 4;
   frames_used_ = nf;
 }

@@ -134,7 +134,25 @@ std::size_t MappedRegions::held() const {
 }
 
 BinaryFile::BinaryFile(const std::string& path, const char* mode) : path_(path) {
-  f_ = std::fopen(path.c_str(), mode);
+  const std::string m = mode;
+  if (m == "rb") {
+    f_ = std::fopen(path.c_str(), "rb");
+  } else if (m == "wb") {
+    // A work file of the job's own directory: made new, never through a planted link.
+    const int fd = io::create_work_file(path);
+    f_ = ::fdopen(fd, "wb");
+    if (!f_) ::close(fd);
+  } else if (m == "r+b") {
+    // A work file read once whose read part is given back (punching needs write
+    // access): an existing file only, never through a link.
+    const int fd = ::open(path.c_str(), O_RDWR | O_NOFOLLOW | O_CLOEXEC);
+    if (fd >= 0) {
+      f_ = ::fdopen(fd, "r+b");
+      if (!f_) ::close(fd);
+    }
+  } else {
+    throw std::logic_error("BinaryFile: mode " + m + " (rb, r+b or wb)");
+  }
   if (!f_) throw IoError(path + ": cannot open: " + errno_text());
   std::setvbuf(f_, nullptr, _IOFBF, std::size_t(1) << 20);
 }

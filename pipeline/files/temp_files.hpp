@@ -125,7 +125,9 @@ class MappedRegions {
 // the file, so no stage carries on with a short write.
 class BinaryFile {
  public:
-  BinaryFile(const std::string& path, const char* mode);  // fopen modes "rb", "wb"
+  // "rb"; "r+b" (an existing file, not through a link); "wb": a new work file
+  // (io::create_work_file: a link or file at its name is replaced, never written).
+  BinaryFile(const std::string& path, const char* mode);
   ~BinaryFile();
   BinaryFile(const BinaryFile&) = delete;
   BinaryFile& operator=(const BinaryFile&) = delete;

@@ -1,6 +1,15 @@
 #include "pipeline/files/work_dir.hpp"
 
 #include "core/error.hpp"
+#include "io/output_file.hpp"
+#include "io/tet_container.hpp"
+
+#include <nlohmann/json.hpp>
+
+#include <fstream>
+
+#include <cstdint>
+#include <ctime>
 
 #include <cerrno>
 #include <cstring>
@@ -22,7 +31,17 @@ std::string errno_text() { return std::strerror(errno); }
 // EWOULDBLOCK when another process holds it. O_NOFOLLOW: a planted link is refused.
 int try_lock(const std::string& dir, bool create) {
   const std::string lock = dir + "/" + WorkDir::kLock;
-  const int fd = ::open(lock.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW | (create ? O_CREAT : 0), 0600);
+  int fd = -1;
+  if (create) {
+    try {
+      fd = io::open_work_file(lock);
+    } catch (const IoError&) {
+      if (errno == 0) errno = EINVAL;
+      return -1;
+    }
+  } else {
+    fd = ::open(lock.c_str(), O_RDWR | O_CLOEXEC | O_NOFOLLOW);
+  }
   if (fd < 0) return -1;
   if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
@@ -33,21 +52,47 @@ int try_lock(const std::string& dir, bool create) {
   return fd;
 }
 
-// PATH is a real directory (lstat: not a link) of this user holding the marker.
+// The line of the marker that names the directory it was made in: its device and
+// inode. A copy of the marker (a checkpoint copied elsewhere, a marker dropped into a
+// directory of the user's) sits in a directory with another inode, and is not taken
+// for a work directory.
+std::string identity_line(const struct stat& dir) {
+  return "directory " + std::to_string(std::uint64_t(dir.st_dev)) + ":" + std::to_string(std::uint64_t(dir.st_ino));
+}
+
+// PATH is a real directory (lstat: not a link) of this user holding a marker written
+// in this very directory.
 bool is_own_work_dir(const std::string& path) {
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0 || !S_ISDIR(st.st_mode) || st.st_uid != ::geteuid()) return false;
-  struct stat marker {};
   const std::string m = path + "/" + WorkDir::kMarker;
-  return ::lstat(m.c_str(), &marker) == 0 && S_ISREG(marker.st_mode);
+  const int fd = ::open(m.c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+  if (fd < 0) return false;
+  struct stat marker {};
+  char buf[4096];
+  ssize_t n = -1;
+  if (::fstat(fd, &marker) == 0 && S_ISREG(marker.st_mode) && marker.st_uid == ::geteuid())
+    n = ::read(fd, buf, sizeof buf);
+  ::close(fd);
+  if (n <= 0) return false;
+  const std::string text(buf, std::size_t(n));
+  std::string want = identity_line(st);
+  want.insert(want.begin(), '\n');
+  want.push_back('\n');
+  return text.find(want) != std::string::npos;
 }
 
 void write_marker(const std::string& dir) {
+  struct stat st {};
+  if (::lstat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) throw IoError(dir + ": cannot stat: " + errno_text());
   const std::string m = dir + "/" + WorkDir::kMarker;
-  const int fd = ::open(m.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, 0600);
-  if (fd < 0) throw IoError(m + ": cannot create: " + errno_text());
-  static constexpr char kText[] = "made by tetstream: its working files; removed when the job ends\n";
-  const bool ok = ::write(fd, kText, sizeof kText - 1) == ssize_t(sizeof kText - 1);
+  const int fd = io::create_work_file(m);
+  char host[256] = {};
+  ::gethostname(host, sizeof host - 1);
+  const std::string text = "made by tetstream: its working files; removed when the job ends\n" + identity_line(st) +
+                           "\npath " + dir + "\njob " + std::to_string(::getpid()) + "@" + host + " " +
+                           std::to_string(std::time(nullptr)) + "\n";
+  const bool ok = ::write(fd, text.data(), text.size()) == ssize_t(text.size()) && ::fsync(fd) == 0;
   ::close(fd);
   if (!ok) throw IoError(m + ": cannot write: " + errno_text());
 }
@@ -56,7 +101,7 @@ void write_marker(const std::string& dir) {
 
 bool is_work_file_name(const std::string& name) {
   static const std::regex kNames(
-      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?)");
+      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?)");
   return std::regex_match(name, kNames);
 }
 
@@ -84,7 +129,15 @@ WorkDir WorkDir::open_or_create(const std::string& path) {
   if (::lstat(path.c_str(), &st) != 0) {
     if (errno != ENOENT) throw IoError(path + ": cannot stat: " + errno_text());
     // Not its parents: a mistyped --tmpdir is an error, not a tree of new directories.
-    if (::mkdir(path.c_str(), 0700) != 0) throw IoError(path + ": cannot create the work directory: " + errno_text());
+    if (::mkdir(path.c_str(), 0700) != 0) {
+      if (errno == ENOENT) {
+        const std::string::size_type slash = path.rfind('/');
+        const std::string parent = slash == std::string::npos ? "." : path.substr(0, slash);
+        throw UsageError(parent + " does not exist: the directory given for the work files (--checkpoint DIR, "
+                                  "--tmpdir DIR) must exist; tetstream makes " + path + " inside it");
+      }
+      throw IoError(path + ": cannot create the work directory: " + errno_text());
+    }
     w.lock_or_refuse();
     write_marker(path);
     return w;
@@ -163,9 +216,41 @@ std::vector<StaleWorkDir> find_stale_work_dirs(const std::string& parent) {
   return found;
 }
 
+namespace {
+// The partial output a stale checkpoint's job kept for --resume (state.json names the
+// output): removed with the checkpoint, which alone could finish it. Only a regular
+// file of one link that starts as a container and that no process holds locked (a
+// live job's claim holds its flock) is removed.
+void remove_orphaned_partial(const std::string& dir) {
+  std::string output;
+  try {
+    std::ifstream in(dir + "/state.json", std::ios::binary);
+    const nlohmann::json state = nlohmann::json::parse(in);
+    output = state.at("job").at("output").get<std::string>();
+  } catch (const std::exception&) {
+    return;
+  }
+  if (output.empty()) return;
+  const std::string partial = output + ".partial";
+  const int fd = ::open(partial.c_str(), O_RDWR | O_NOFOLLOW | O_CLOEXEC);
+  if (fd < 0) return;
+  struct stat st {};
+  unsigned char magic[8] = {};
+  const bool ours = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_nlink == 1 && st.st_uid == ::geteuid() &&
+                    ::pread(fd, magic, sizeof magic, 0) == ssize_t(sizeof magic) &&
+                    std::memcmp(magic, io::kFileMagic.data(), sizeof magic) == 0 &&
+                    ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+  struct stat at {};
+  if (ours && ::lstat(partial.c_str(), &at) == 0 && at.st_dev == st.st_dev && at.st_ino == st.st_ino)
+    ::unlink(partial.c_str());
+  ::close(fd);
+}
+}  // namespace
+
 bool remove_stale_work_dir(const StaleWorkDir& stale) {
   try {
     WorkDir w = WorkDir::open_or_create(stale.path);  // refuses a link or a directory not ours, or a live job's
+    if (stale.checkpoint) remove_orphaned_partial(w.dir());
     return w.remove();
   } catch (const Error&) {
     return false;

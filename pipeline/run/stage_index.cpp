@@ -1,6 +1,7 @@
 #include "pipeline/run/stage_index.hpp"
 
 #include "core/error.hpp"
+#include "io/output_file.hpp"
 #include "pipeline/sort/hull.hpp"
 #include "pipeline/run/stage.hpp"
 #include "pipeline/files/temp_files.hpp"
@@ -68,8 +69,7 @@ int open_shared(const std::string& path, int flags) {
 
 void IndexStage::create_shared_file(const std::string& path, std::uint64_t total_nodes) const {
   // A stopped job's file is rebuilt, never trusted (nothing records it).
-  if (::unlink(path.c_str()) != 0 && errno != ENOENT) throw IoError(path + ": cannot remove: " + std::strerror(errno));
-  const int fd = open_shared(path, O_RDWR | O_CREAT | O_EXCL);
+  const int fd = io::create_work_file(path, O_RDWR);
   const PointIndex::FileLayout layout = PointIndex::file_layout(
       view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
   const int rc = ::ftruncate(fd, off_t(layout.bytes));

@@ -1,5 +1,8 @@
 #include "pipeline/util/progress.hpp"
 
+#include "core/error.hpp"
+#include "io/output_file.hpp"
+
 #include <spdlog/spdlog.h>
 
 #include <cerrno>
@@ -64,9 +67,10 @@ Progress::~Progress() {
 
 void Progress::share_to(const std::string& path, std::uint64_t base) {
   // A file of the job's own work directory, never through a link.
-  share_fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_NOFOLLOW | O_CLOEXEC, 0600);
-  if (share_fd_ < 0) {
-    spdlog::debug("{}: cannot share progress: {}", path, std::strerror(errno));
+  try {
+    share_fd_ = io::create_work_file(path);
+  } catch (const IoError& e) {
+    spdlog::debug("cannot share progress: {}", e.what());
     return;
   }
   share_path_ = path;

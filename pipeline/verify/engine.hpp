@@ -542,11 +542,16 @@ class Engine {
 
   // Totals. Volumes summed exactly (exact_sum.hpp): the same bits however the tets are
   // cut into threads, spills and ranks. thread_volume_: one a thread (process_frame).
-  ExactSum tet_volume6_, hull_volume6_;
-  std::vector<ExactSum> thread_volume_;
+  // *_error6_: the sums of each term's rounding bound (det3_bounded), so that the
+  // comparison of the two volumes is a proof, not a tolerance: near-flat point sets have
+  // volumes far below the rounding of their terms.
+  ExactSum tet_volume6_, hull_volume6_, tet_error6_, hull_error6_;
+  std::vector<ExactSum> thread_volume_, thread_error_;
   bool wide_volume_ = false;  // volumes in long double (volume_fits_double)
-  long double volume6(const double* a, const double* b, const double* c, const double* d) const {
-    return wide_volume_ ? det3<long double>(a, b, c, d) : det3<double>(a, b, c, d);
+  BoundedDet<long double> volume6(const double* a, const double* b, const double* c, const double* d) const {
+    if (wide_volume_) return det3_bounded<long double>(a, b, c, d);
+    const BoundedDet<double> v = det3_bounded<double>(a, b, c, d);
+    return {v.value, v.error};
   }
   std::atomic<std::uint64_t> orient_tests_{0}, insphere_tests_{0}, hull_tests_{0};
   std::uint64_t good_tets_ = 0, interior_ = 0, boundary_ = 0, bad_facets_ = 0, edges_ = 0, hull_edges_ = 0;

@@ -19,6 +19,30 @@
 
 namespace tetstream::pipeline::verify_engine {
 
+// det3 and a bound on the distance from the computed value to the exact determinant
+// of the four points. Rounding analysis (Shewchuk's orient3d): with u the unit
+// roundoff of T, |computed - exact| <= (7u + 56u^2) * permanent, the permanent
+// being the same expression with absolute values over the computed differences; 16u
+// covers that and the rounding of the permanent itself. No product underflows or
+// overflows in T (volume_fits_double), so the bound holds without an absolute term;
+// one of T's smallest subnormals is added anyway for the float32 path's exact zeros.
+template <class T>
+struct BoundedDet {
+  T value, error;
+};
+template <class T>
+inline BoundedDet<T> det3_bounded(const double* a, const double* b, const double* c, const double* d) {
+  const T bx = T(b[0]) - a[0], by = T(b[1]) - a[1], bz = T(b[2]) - a[2];
+  const T cx = T(c[0]) - a[0], cy = T(c[1]) - a[1], cz = T(c[2]) - a[2];
+  const T dx = T(d[0]) - a[0], dy = T(d[1]) - a[1], dz = T(d[2]) - a[2];
+  const T value = bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+  using std::fabs;
+  const T permanent = fabs(bx) * (fabs(cy * dz) + fabs(cz * dy)) + fabs(by) * (fabs(cx * dz) + fabs(cz * dx)) +
+                      fabs(bz) * (fabs(cx * dy) + fabs(cy * dx));
+  constexpr T u = std::numeric_limits<T>::epsilon() / 2;
+  return {value, permanent * (16 * u) + std::numeric_limits<T>::denorm_min()};
+}
+
 class ExactSum {
  public:
   // Every finite long double is a multiple of 2^kLow (below the smallest subnormal's
@@ -67,6 +91,17 @@ class ExactSum {
     normalize();
     for (std::size_t i = 0; i < kLimbs; ++i) limb_[i] += b.limb_[i];
     special_ += b.special_;
+    pending_ = 1;
+    normalize();
+  }
+
+  // Subtracts another sum, exactly.
+  void subtract(const ExactSum& o) {
+    ExactSum b = o;
+    b.normalize();
+    normalize();
+    for (std::size_t i = 0; i < kLimbs; ++i) limb_[i] -= b.limb_[i];
+    special_ -= b.special_;
     pending_ = 1;
     normalize();
   }

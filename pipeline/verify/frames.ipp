@@ -63,12 +63,15 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
   const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
   std::vector<std::uint64_t> checked(threads, 0), good(threads, 0);
   if (thread_volume_.size() < threads) thread_volume_.resize(threads);
+  if (thread_error_.size() < threads) thread_error_.resize(threads);
   canonicalize(k, labels, flags, true, [&](std::size_t, std::uint64_t ordinal, const L* g) {
     const std::size_t me = std::size_t(omp_get_thread_num());
     ++good[me];
     for (int j = 0; j < 4; ++j) used_.set(g[j]);
     const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
-    thread_volume_[me].add(std::fabs(volume6(p0, p1, p2, p3)));
+    const BoundedDet<long double> v = volume6(p0, p1, p2, p3);
+    thread_volume_[me].add(std::fabs(v.value));
+    thread_error_[me].add(v.error);
     if (tet_sampled(ordinal)) {
       ++checked[me];
       const int o = core::orient3d(p0, p1, p2, p3);

@@ -171,7 +171,9 @@ void Engine<L>::final_facet(const Facet& f) {
   L a = f.v[0], b = f.v[1], c = f.v[2];
   if (f.x & kSide) std::swap(b, c);
   hull_used_.set(a), hull_used_.set(b), hull_used_.set(c);
-  hull_volume6_.add(volume6(origin_, P(a), P(b), P(c)));
+  const BoundedDet<long double> v = volume6(origin_, P(a), P(b), P(c));
+  hull_volume6_.add(v.value);
+  hull_error6_.add(v.error);
   const std::uint64_t ord = f.x & kPayload;
   auto edge = [&](L p, L q, L w) {
     hull_edges_batch_.push_back(p < q ? HullEdge{p, q, w, ord | kSide} : HullEdge{q, p, w, ord});

@@ -193,6 +193,8 @@ std::string Engine<L>::partial_totals() {
     put(v);
   put_text(tet_volume6_.bytes());
   put_text(hull_volume6_.bytes());
+  put_text(tet_error6_.bytes());
+  put_text(hull_error6_.bytes());
   VerifyReport r;
   log_.into(r);
   for (std::uint64_t c : r.counts) put(c);
@@ -235,6 +237,8 @@ void Engine<L>::merge_totals(const std::vector<std::string>& parts) {
     rep_.memory_planned = std::max(rep_.memory_planned, get());
     tet_volume6_.add(ExactSum::from_bytes(get_text()));
     hull_volume6_.add(ExactSum::from_bytes(get_text()));
+    tet_error6_.add(ExactSum::from_bytes(get_text()));
+    hull_error6_.add(ExactSum::from_bytes(get_text()));
     std::array<std::uint64_t, kViolationKinds> counts{};
     for (auto& c : counts) c = get();
     std::vector<VerifyReport::Listed> listed(static_cast<std::size_t>(get()));

@@ -506,6 +506,7 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
         mesh, output = output, output + ".tets"
     spill: Optional[str] = None
     remove_spill_always = False
+    wrote_spill = False
     if isinstance(source, (str, bytes, os.PathLike)):
         inputs = _core.expand_inputs([os.fsdecode(source)])
     elif isinstance(source, (list, tuple)) and source and all(isinstance(s, (str, os.PathLike)) for s in source):
@@ -535,27 +536,21 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
                     raise UsageError(f"{spill} exists (the input of an earlier job on this output): resume=True "
                                      f"continues that job, force=True starts over")
             if not os.path.lexists(spill):
-                tmp = spill + ".partial"
-                try:
-                    with builtins.open(tmp, "xb") as f:
-                        arr.tofile(f)
-                    os.replace(tmp, spill)
-                except BaseException:
-                    if os.path.lexists(tmp):
-                        os.remove(tmp)
-                    raise
+                _core.spill(spill, arr)  # SPILL.partial, renamed when complete; refused if there
+                wrote_spill = True
         else:
-            import tempfile
-            fd, spill = tempfile.mkstemp(prefix=".tetstream-input-", suffix=ext, dir=directory)
-            with os.fdopen(fd, "wb") as f:
-                arr.tofile(f)
+            import secrets
+            spill = os.path.join(directory, f".tetstream-input-{os.getpid()}-{secrets.token_hex(8)}{ext}")
+            _core.spill(spill, arr)
             remove_spill_always = True
         inputs = [spill]
     try:
         text = _core.run(inputs[0], inputs[1:], output, _core.parse_memory(memory), _threads(threads), bool(progress),
                          bool(resume), opts, _emitter(progress))
-    except BaseException:
-        if remove_spill_always and spill:
+    except BaseException as e:
+        # Bad input or options leave nothing to resume: the spill this call wrote goes
+        # too, so that the corrected call is not refused.
+        if spill and (remove_spill_always or (wrote_spill and isinstance(e, (InputError, UsageError)))):
             os.remove(spill)
         raise
     if spill:

@@ -26,6 +26,7 @@
 #include "io/tet_reader.hpp"
 #include "pipeline/field/field.hpp"
 #include "pipeline/field/geometry.hpp"
+#include "io/output_file.hpp"
 #include "pipeline/run/run.hpp"
 #include "pipeline/run/summary_json.hpp"
 #include "pipeline/util/interrupt.hpp"
@@ -520,12 +521,33 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
   if (o.resume && o.force) throw UsageError("resume and force exclude each other");
   if (io::is_std_stream(o.input) || io::is_std_stream(o.output))
     throw UsageError("standard input/output ('-') is for the command line; give file names");
+  io::forget_noted_files();  // this job's inputs are noted as it opens them
   return run_interruptible<std::string>([o] {
     configure_logging(o.progress);
     if (o.threads > 0) omp_set_num_threads(o.threads);
     const pipeline::RunSummary s = pipeline::run_job(o);
     return pipeline::run_summary_json(o, s).dump();
   }, emit);
+}
+
+// An array written to PATH for run(array): through io::OutputFile, the one way
+// tetstream opens an output (PATH.partial claimed without following a link and
+// locked, renamed when complete, removed on failure), with the GIL released.
+void spill_array(const std::string& path, const py::array& array) {
+  if (!(array.flags() & py::array::c_style)) throw UsageError("spill: the array must be C-contiguous");
+  const char* data = static_cast<const char*>(array.data());
+  const std::size_t bytes = std::size_t(array.nbytes());
+  io::forget_noted_files();
+  py::gil_scoped_release release;
+  // A PATH.partial that was there before is not this call's to reuse (another
+  // process's spill, or a file of the user's): refused, and left as it is.
+  const io::OutputClaim claim(path);
+  if (!claim.created())
+    throw UsageError(path + ".partial exists: another job is writing this input, or one was killed (remove it if "
+                     "no job runs)");
+  io::OutputFile f(path, std::size_t(8) << 20, &claim);
+  f.write(data, bytes);
+  f.commit();
 }
 
 std::uint64_t memory_size(const py::object& memory) {
@@ -710,6 +732,14 @@ class Reader {
     if (!reader_) throw UsageError("the container is closed");
     return *reader_;
   }
+  // The points section's CRC, checked once before any coordinate or original id is
+  // handed out (as `cat --points` and `--original-ids` do): a damaged section would
+  // otherwise give wrong numbers silently. Called without the GIL.
+  const io::TetReader& checked_points() const {
+    const io::TetReader& rd = r();
+    std::call_once(points_checked_, [&rd] { rd.verify_points(); });
+    return rd;
+  }
   void close() {
     py::gil_scoped_release release;
     reader_.reset();
@@ -746,6 +776,7 @@ class Reader {
     Buffer<std::int64_t> i(ids ? n : 0);
     {
       py::gil_scoped_release release;
+      checked_points();
       rd.read_points(first, std::size_t(n), xyz ? c.get() : nullptr,
                      ids ? reinterpret_cast<std::uint64_t*>(i.get()) : nullptr);
     }
@@ -777,7 +808,7 @@ class Reader {
       py::gil_scoped_release release;
       rd.read_frame(k, labels);
       if (release_pages) rd.release_frame_pages(k);
-      if (original_ids) rd.map_to_original(labels);
+      if (original_ids) checked_points().map_to_original(labels);
     }
     const py::ssize_t t = py::ssize_t(labels.size() / 4);
     if (narrow) {
@@ -816,7 +847,7 @@ class Reader {
         const std::uint64_t from = std::max(start, it->first_tet) - it->first_tet;
         const std::uint64_t to = std::min(stop, it->first_tet + it->tet_count) - it->first_tet;
         std::span<std::uint64_t> part(labels.data() + 4 * from, 4 * (to - from));
-        if (original_ids) rd.map_to_original(part);
+        if (original_ids) checked_points().map_to_original(part);
         std::memcpy(out.get() + 4 * filled, part.data(), part.size_bytes());
         filled += to - from;
       }
@@ -847,6 +878,7 @@ class Reader {
 
  private:
   std::unique_ptr<io::TetReader> reader_;
+  mutable std::once_flag points_checked_;
 };
 
 // ---- exceptions ----
@@ -889,6 +921,8 @@ PYBIND11_MODULE(_core, m) {
   m.def("run", &run, py::arg("input"), py::arg("more_inputs"), py::arg("output"), py::arg("memory_bytes"),
         py::arg("threads"), py::arg("progress"), py::arg("resume"), py::arg("options"), py::arg("emit") = py::none(),
         "The out-of-core job; its summary as JSON text (what `tetstream run --json` prints).");
+  m.def("spill", &spill_array, py::arg("path"), py::arg("array"),
+        "Writes a C-contiguous array's bytes to PATH (PATH.partial, renamed when complete).");
   m.def("parse_memory", &memory_size, py::arg("memory"), "Bytes of a budget such as '4G', '512M' or an int.");
   m.def("verify", &verify, py::arg("path"), py::arg("memory"), py::arg("sample"), py::arg("seed"), py::arg("tmpdir"),
         py::arg("volume_tolerance"), py::arg("max_listed"), py::arg("progress"), py::arg("threads") = 0,

@@ -7,4 +7,6 @@
 set -euo pipefail
 T=$(realpath "${1:?usage: damage_fuzz.sh /path/to/tetstream}")
 seed=$(( $(date +%j) * 1000 ))
-exec python3 "$(dirname "$0")/../../scripts/fuzz-damage" --binary "$T" --seconds 90 --seed "$seed"
+# TETSTREAM_PYTHON (set by CTest): an interpreter with numpy, for the Python reader's cases.
+exec python3 "$(dirname "$0")/../../scripts/fuzz-damage" --binary "$T" --seconds 90 --seed "$seed" \
+  --python "${TETSTREAM_PYTHON:-python3}"
