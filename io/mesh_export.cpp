@@ -122,14 +122,22 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
     xml += "      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   ";
     return xml;
   };
+  // The arrays' data go in the reverse of the order the XML names them (types first,
+  // original_id last): meshio (5.0) finds each array by its offset while it rewrites the
+  // offsets of the arrays it has read, and with equal-sized point arrays a rewritten
+  // offset can equal a later array's; searching in document order, it then takes the
+  // wrong array unless every array already read comes after the one sought. VTK and
+  // ParaView go by the offsets, in any order.
+  std::vector<int> order(sizes.size());
+  for (std::size_t b = 0; b < order.size(); ++b) order[b] = int(order.size() - 1 - b);
   // Raw arrays have offsets known now. Compressed ones are known only once written: the
   // header is reserved at its longest (20-digit offsets) and written last, the spaces
   // it does not need before the '_' that starts the data (readers skip to the '_').
   std::vector<std::string> offsets(sizes.size());
   std::uint64_t at = 0;
-  for (std::size_t b = 0; b < sizes.size(); ++b) {
-    offsets[b] = level > 0 ? std::string(20, '9') : std::to_string(at);
-    at += 8 + sizes[b];
+  for (const int b : order) {
+    offsets[std::size_t(b)] = level > 0 ? std::string(20, '9') : std::to_string(at);
+    at += 8 + sizes[std::size_t(b)];
   }
   const std::string first_header = header(offsets) + "_";
   f.write(level > 0 ? std::string(first_header.size(), ' ') : first_header);
@@ -139,8 +147,7 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
     return VtuArray(f, sizes[std::size_t(b)], level);
   };
 
-  // The points pass writes the ids, then the coordinates straight from the records.
-  {
+  auto write_ids = [&] {
     VtuArray ids_out = begin(0);
     std::vector<std::uint64_t> ids(kPointChunk);
     for (std::uint64_t first = 0; first < n; first += kPointChunk) {
@@ -149,13 +156,14 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
       ids_out.put(ids.data(), 8 * k);
     }
     ids_out.finish();
-  }
-  for (int k = 0; k < m; ++k) {
+  };
+  auto write_point_data = [&](int k) {
     VtuArray values = begin(1 + k);
     values.put(o.point_data[std::size_t(k)].values.data(), 8 * n);
     values.finish();
-  }
-  {
+  };
+  // The coordinates straight from the records.
+  auto write_xyz = [&] {
     VtuArray xyz_out = begin(P);
     const auto records = r.point_records();
     const std::size_t rec = r.header().point_record_bytes(), cb = f32 ? 12 : 24;
@@ -168,14 +176,14 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
       if (o.on_points) o.on_points(k);
     }
     xyz_out.finish();
-  }
+  };
   // The tets pass; offsets and types follow from the count.
-  {
+  auto write_cells = [&] {
     VtuArray cells = begin(P + 1);
     for_each_frame(r, o, [&](const std::vector<std::uint64_t>& labels) { cells.put(labels.data(), 8 * labels.size()); });
     cells.finish();
-  }
-  {
+  };
+  auto write_ends = [&] {
     VtuArray ends = begin(P + 2);
     std::vector<std::uint64_t> chunk;
     for (std::uint64_t i = 0; i < t; i += kPointChunk) {
@@ -184,12 +192,20 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
       ends.put(chunk.data(), 8 * chunk.size());
     }
     ends.finish();
-  }
-  {
+  };
+  auto write_types = [&] {
     VtuArray types = begin(P + 3);
     const std::vector<std::uint8_t> tetra(kPointChunk, 10);  // VTK_TETRA
     for (std::uint64_t i = 0; i < t; i += kPointChunk) types.put(tetra.data(), std::size_t(std::min<std::uint64_t>(kPointChunk, t - i)));
     types.finish();
+  };
+  for (const int b : order) {
+    if (b == 0) write_ids();
+    else if (b < P) write_point_data(b - 1);
+    else if (b == P) write_xyz();
+    else if (b == P + 1) write_cells();
+    else if (b == P + 2) write_ends();
+    else write_types();
   }
   f.write("\n  </AppendedData>\n</VTKFile>\n");
   if (level > 0) {

@@ -18,7 +18,9 @@
 //
 // Vertex i of the mesh is the point of label i (the container's sorted order); every
 // tet keeps its positive orientation (det[b-a, c-a, d-a] > 0), which is what all the
-// formats expect. "original_id" is the point's index in the input of `run`.
+// formats expect. "original_id" is the point's index in the input of `run`. A .vtu's
+// appended data holds its arrays in the reverse of the order its XML names them
+// (meshio 5.0 misreads same-sized arrays otherwise: mesh_export.cpp says why).
 // Coordinates are written exactly: float64 values in text as the shortest decimal that
 // reads back to the same double (float32 values as the double they equal).
 //
