@@ -4,7 +4,7 @@
 
 # Options that take no value (every other option's next word is its value).
 _tetstream_flags=" --json -q --quiet -v --verbose --check --original-ids --points --binary --compress --voronoi-volume
-  --neighbours --neighbors --resume --force --no-checkpoint --ascii --help -h --version "
+  --neighbours --neighbors --resume --force --no-checkpoint --ascii --las-attributes --help -h --version "
 
 # The values the help of `tetstream SUB` lists for OPTION: CLI11's {a,b,c} set when the
 # option is checked against one, else the comma-separated words after the description's

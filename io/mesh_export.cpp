@@ -8,6 +8,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <climits>
 #include <cstring>
 #include <memory>
@@ -88,50 +89,65 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
   const std::uint64_t n = r.point_count(), t = r.tet_count();
   const bool f32 = r.header().coord_type == CoordType::kFloat32;
   const int level = o.compress_level;
-  // The arrays: original_id, Points, connectivity, offsets, types; `offsets` from the '_'.
-  const std::uint64_t sizes[5] = {8 * n, 3 * n * (f32 ? 4 : 8), 32 * t, 8 * t, t};
-  auto header = [&](const std::string (&offsets)[5]) {
+  // The arrays: original_id, the point data, Points, connectivity, offsets, types;
+  // `offsets` from the '_'.
+  const int m = int(o.point_data.size()), P = 1 + m;
+  std::vector<std::uint64_t> sizes = {8 * n};
+  for (int k = 0; k < m; ++k) sizes.push_back(8 * n);
+  for (std::uint64_t b : {3 * n * (f32 ? 4 : 8), 32 * t, 8 * t, t}) sizes.push_back(b);
+  auto header = [&](const std::vector<std::string>& offsets) {
     std::string xml = "<?xml version=\"1.0\"?>\n"
                       "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
                       "header_type=\"UInt64\"";
     if (level > 0) xml += " compressor=\"vtkZLibDataCompressor\"";
     xml += ">\n  <UnstructuredGrid>\n";
     auto array = [&](int b, const std::string& attributes) {
-      xml += "<DataArray " + attributes + " format=\"appended\" offset=\"" + offsets[b] + "\"/>\n";
+      xml += "<DataArray " + attributes + " format=\"appended\" offset=\"" + offsets[std::size_t(b)] + "\"/>\n";
     };
     xml += "    <Piece NumberOfPoints=\"" + std::to_string(n) + "\" NumberOfCells=\"" + std::to_string(t) + "\">\n";
     xml += "      <PointData>\n        ";
     array(0, "type=\"Int64\" Name=\"original_id\"");
+    for (int k = 0; k < m; ++k) {
+      xml += "        ";
+      array(1 + k, "type=\"Float64\" Name=\"" + o.point_data[std::size_t(k)].name + "\"");
+    }
     xml += "      </PointData>\n      <Points>\n        ";
-    array(1, std::string("type=\"") + (f32 ? "Float32" : "Float64") + "\" Name=\"Points\" NumberOfComponents=\"3\"");
+    array(P, std::string("type=\"") + (f32 ? "Float32" : "Float64") + "\" Name=\"Points\" NumberOfComponents=\"3\"");
     xml += "      </Points>\n      <Cells>\n        ";
-    array(2, "type=\"Int64\" Name=\"connectivity\"");
+    array(P + 1, "type=\"Int64\" Name=\"connectivity\"");
     xml += "        ";
-    array(3, "type=\"Int64\" Name=\"offsets\"");
+    array(P + 2, "type=\"Int64\" Name=\"offsets\"");
     xml += "        ";
-    array(4, "type=\"UInt8\" Name=\"types\"");
+    array(P + 3, "type=\"UInt8\" Name=\"types\"");
     xml += "      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   ";
     return xml;
   };
+  // The arrays' data go in the reverse of the order the XML names them (types first,
+  // original_id last): meshio (5.0) finds each array by its offset while it rewrites the
+  // offsets of the arrays it has read, and with equal-sized point arrays a rewritten
+  // offset can equal a later array's; searching in document order, it then takes the
+  // wrong array unless every array already read comes after the one sought. VTK and
+  // ParaView go by the offsets, in any order.
+  std::vector<int> order(sizes.size());
+  for (std::size_t b = 0; b < order.size(); ++b) order[b] = int(order.size() - 1 - b);
   // Raw arrays have offsets known now. Compressed ones are known only once written: the
   // header is reserved at its longest (20-digit offsets) and written last, the spaces
   // it does not need before the '_' that starts the data (readers skip to the '_').
-  std::string offsets[5];
+  std::vector<std::string> offsets(sizes.size());
   std::uint64_t at = 0;
-  for (int b = 0; b < 5; ++b) {
-    offsets[b] = level > 0 ? std::string(20, '9') : std::to_string(at);
-    at += 8 + sizes[b];
+  for (const int b : order) {
+    offsets[std::size_t(b)] = level > 0 ? std::string(20, '9') : std::to_string(at);
+    at += 8 + sizes[std::size_t(b)];
   }
   const std::string first_header = header(offsets) + "_";
   f.write(level > 0 ? std::string(first_header.size(), ' ') : first_header);
   const std::uint64_t data_start = f.offset();
   auto begin = [&](int b) {
-    offsets[b] = std::to_string(f.offset() - data_start);
-    return VtuArray(f, sizes[b], level);
+    offsets[std::size_t(b)] = std::to_string(f.offset() - data_start);
+    return VtuArray(f, sizes[std::size_t(b)], level);
   };
 
-  // The points pass writes the ids, then the coordinates straight from the records.
-  {
+  auto write_ids = [&] {
     VtuArray ids_out = begin(0);
     std::vector<std::uint64_t> ids(kPointChunk);
     for (std::uint64_t first = 0; first < n; first += kPointChunk) {
@@ -140,9 +156,15 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
       ids_out.put(ids.data(), 8 * k);
     }
     ids_out.finish();
-  }
-  {
-    VtuArray xyz_out = begin(1);
+  };
+  auto write_point_data = [&](int k) {
+    VtuArray values = begin(1 + k);
+    values.put(o.point_data[std::size_t(k)].values.data(), 8 * n);
+    values.finish();
+  };
+  // The coordinates straight from the records.
+  auto write_xyz = [&] {
+    VtuArray xyz_out = begin(P);
     const auto records = r.point_records();
     const std::size_t rec = r.header().point_record_bytes(), cb = f32 ? 12 : 24;
     std::vector<char> chunk(kPointChunk * cb);
@@ -154,15 +176,15 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
       if (o.on_points) o.on_points(k);
     }
     xyz_out.finish();
-  }
+  };
   // The tets pass; offsets and types follow from the count.
-  {
-    VtuArray cells = begin(2);
+  auto write_cells = [&] {
+    VtuArray cells = begin(P + 1);
     for_each_frame(r, o, [&](const std::vector<std::uint64_t>& labels) { cells.put(labels.data(), 8 * labels.size()); });
     cells.finish();
-  }
-  {
-    VtuArray ends = begin(3);
+  };
+  auto write_ends = [&] {
+    VtuArray ends = begin(P + 2);
     std::vector<std::uint64_t> chunk;
     for (std::uint64_t i = 0; i < t; i += kPointChunk) {
       chunk.clear();
@@ -170,12 +192,20 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
       ends.put(chunk.data(), 8 * chunk.size());
     }
     ends.finish();
-  }
-  {
-    VtuArray types = begin(4);
+  };
+  auto write_types = [&] {
+    VtuArray types = begin(P + 3);
     const std::vector<std::uint8_t> tetra(kPointChunk, 10);  // VTK_TETRA
     for (std::uint64_t i = 0; i < t; i += kPointChunk) types.put(tetra.data(), std::size_t(std::min<std::uint64_t>(kPointChunk, t - i)));
     types.finish();
+  };
+  for (const int b : order) {
+    if (b == 0) write_ids();
+    else if (b < P) write_point_data(b - 1);
+    else if (b == P) write_xyz();
+    else if (b == P + 1) write_cells();
+    else if (b == P + 2) write_ends();
+    else write_types();
   }
   f.write("\n  </AppendedData>\n</VTKFile>\n");
   if (level > 0) {
@@ -278,6 +308,23 @@ void write_gmsh(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
   }
   if (bin) out.c('\n');
   out.s("$EndNodeData\n");
+  // The point data: one view each, the same layout.
+  for (const PointDataArray& a : o.point_data) {
+    out.s("$NodeData\n1\n\"").s(a.name).s("\"\n1\n0\n3\n0\n1\n").u(n).c('\n');
+    for (std::uint64_t first = 0; first < n; first += kPointChunk) {
+      const std::size_t k = std::size_t(std::min<std::uint64_t>(kPointChunk, n - first));
+      const double* v = a.values.data() + first;
+      if (bin) {
+        rows.resize(k);
+        for (std::size_t i = 0; i < k; ++i) rows[i] = {int(first + i + 1), v[i]};
+        f.write(rows.data(), sizeof(Row) * k);
+      } else {
+        for (std::size_t i = 0; i < k; ++i) out.u(first + i + 1).c(' ').d(v[i]).c('\n');
+      }
+    }
+    if (bin) out.c('\n');
+    out.s("$EndNodeData\n");
+  }
 }
 
 void write_tetgen_node(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
@@ -336,6 +383,26 @@ MeshExportResult export_mesh(const TetReader& reader, const std::string& path, M
   }
   if (options.compress_level < 0 || options.compress_level > 9) {
     throw UsageError("--compress level " + std::to_string(options.compress_level) + ": use 1 to 9");
+  }
+  if (!options.point_data.empty() && (format == MeshFormat::kMedit || format == MeshFormat::kTetgen)) {
+    throw UsageError(path + ": " + mesh_format_name(format) +
+                     " has no place for point data (use .vtu, .vtk, .msh or .xdmf)");
+  }
+  for (std::size_t k = 0; k < options.point_data.size(); ++k) {
+    const PointDataArray& a = options.point_data[k];
+    const bool plain = !a.name.empty() && std::all_of(a.name.begin(), a.name.end(), [](char c) {
+      return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == '.';
+    });
+    // The formats quote names differently (XML attributes, legacy VTK's blank-separated
+    // words, Gmsh strings): only names every one of them takes as they are.
+    if (!plain) throw UsageError("point data name '" + a.name + "': use letters, digits, '_', '-' and '.' only");
+    if (a.name == "original_id") throw UsageError("point data name 'original_id' is taken by the input index");
+    for (std::size_t j = 0; j < k; ++j)
+      if (options.point_data[j].name == a.name) throw UsageError("point data name '" + a.name + "' is given twice");
+    if (a.values.size() != reader.point_count()) {
+      throw UsageError("point data '" + a.name + "' has " + std::to_string(a.values.size()) + " values, the container has " +
+                       std::to_string(reader.point_count()) + " points");
+    }
   }
   if (format == MeshFormat::kXdmf && !hdf5_available()) {
     throw UsageError(path + ": .xdmf needs HDF5 for its heavy data, and this tetstream was built without it "

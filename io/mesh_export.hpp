@@ -18,11 +18,17 @@
 //
 // Vertex i of the mesh is the point of label i (the container's sorted order); every
 // tet keeps its positive orientation (det[b-a, c-a, d-a] > 0), which is what all the
-// formats expect. "original_id" is the point's index in the input of `run`.
+// formats expect. "original_id" is the point's index in the input of `run`. A .vtu's
+// appended data holds its arrays in the reverse of the order its XML names them
+// (meshio 5.0 misreads same-sized arrays otherwise: mesh_export.cpp says why).
 // Coordinates are written exactly: float64 values in text as the shortest decimal that
 // reads back to the same double (float32 values as the double they equal).
 //
-// Streaming in bounded memory: one pass over the points, then one over the frames (the
+// Point data arrays (MeshExportOptions::point_data) follow "original_id" under their
+// names: .vtu Float64 DataArrays in PointData, .vtk SCALARS NAME double, .msh one
+// $NodeData view each, .xdmf /NAME N float64 and an Attribute.
+//
+// Streaming in bounded memory (besides the point data arrays given): one pass over the points, then one over the frames (the
 // counts the headers need are in the container's header and footer), whatever the
 // size of the output. Each file goes to NAME.partial and is renamed when complete.
 #include "io/tet_reader.hpp"
@@ -41,6 +47,14 @@ enum class MeshFormat { kVtu, kMedit, kGmsh, kTetgen, kVtk, kXdmf };
 MeshFormat mesh_format_for(const std::string& path);
 const char* mesh_format_name(MeshFormat format);
 
+// A per-point array written as point data beside "original_id" (`convert --point-data`,
+// `--las-attributes`): values[i] belongs to vertex i (label i, the container's order).
+// Written as float64 in every format (integers up to 2^53 are exact in it).
+struct PointDataArray {
+  std::string name;  // letters, digits, '_', '-', '.'; not "original_id"
+  std::vector<double> values;
+};
+
 struct MeshExportOptions {
   // .msh and .vtk: binary instead of ASCII.
   bool binary = false;
@@ -48,6 +62,9 @@ struct MeshExportOptions {
   int compress_level = 0;
   // Progress: called with the number of points / tets just written.
   std::function<void(std::uint64_t)> on_points, on_tets;
+  // Point data: .vtu, .vtk, .msh and .xdmf have a place for it; a UsageError for the
+  // others, a name used twice, or an array whose length is not the point count.
+  std::vector<PointDataArray> point_data;
 };
 
 struct MeshExportResult {

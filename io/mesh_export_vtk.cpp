@@ -76,6 +76,11 @@ void write_vtk(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
     }
   }
   array.end();
+  for (const PointDataArray& a : o.point_data) {
+    out.s("SCALARS ").s(a.name).s(" double 1\nLOOKUP_TABLE default\n");
+    for (std::uint64_t i = 0; i < n; ++i) array.row(a.values.data() + i, 1);
+    array.end();
+  }
 }
 
 }  // namespace tetstream::io::mesh_detail

@@ -81,12 +81,17 @@ std::string xml_escaped(const std::string& s) {
   return out;
 }
 
-std::string xdmf_text(const std::string& h5_name, std::uint64_t n, std::uint64_t t) {
+std::string xdmf_text(const std::string& h5_name, std::uint64_t n, std::uint64_t t, const MeshExportOptions& o) {
   const std::string N = std::to_string(n), T = std::to_string(t);
   auto item = [&h5_name](const std::string& dims, const char* type, const char* set) {
     return "<DataItem Dimensions=\"" + dims + "\" NumberType=\"" + type + "\" Precision=\"8\" Format=\"HDF\">" +
            h5_name + ":/" + set + "</DataItem>\n";
   };
+  std::string point_data;  // (names are plain: export_mesh checked them)
+  for (const PointDataArray& a : o.point_data) {
+    point_data += "      <Attribute Name=\"" + a.name + "\" AttributeType=\"Scalar\" Center=\"Node\">\n"
+                  "        " + item(N, "Float", ("point_data/" + a.name).c_str()) + "      </Attribute>\n";
+  }
   return "<?xml version=\"1.0\"?>\n"
          "<Xdmf Version=\"3.0\">\n"
          "  <Domain>\n"
@@ -99,7 +104,7 @@ std::string xdmf_text(const std::string& h5_name, std::uint64_t n, std::uint64_t
          "      </Geometry>\n"
          "      <Attribute Name=\"original_id\" AttributeType=\"Scalar\" Center=\"Node\">\n"
          "        " + item(N, "Int", "original_id") +
-         "      </Attribute>\n"
+         "      </Attribute>\n" + point_data +
          "    </Grid>\n"
          "  </Domain>\n"
          "</Xdmf>\n";
@@ -126,6 +131,15 @@ void write_xdmf(const TetReader& r, const std::string& path, const MeshExportOpt
     Dataset points(file.get(), "points", H5T_IEEE_F64LE, n, 3, h5);
     Dataset ids(file.get(), "original_id", H5T_STD_I64LE, n, 1, h5);
     Dataset tets(file.get(), "tets", H5T_STD_I64LE, t, 4, h5);
+    // The point data under a group of its own: a user's name cannot meet points or tets.
+    if (!o.point_data.empty()) {
+      Handle group(H5Gcreate2(file.get(), "point_data", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Gclose);
+      if (!group.ok()) throw IoError(h5 + ": cannot create the group point_data");
+      for (const PointDataArray& a : o.point_data) {
+        Dataset values(group.get(), a.name.c_str(), H5T_IEEE_F64LE, n, 1, h5 + ":point_data");
+        values.write(H5T_NATIVE_DOUBLE, 0, n, a.values.data());
+      }
+    }
     std::uint64_t first = 0;
     for_each_point_chunk(r, o, [&](const double* xyz, const std::uint64_t* id, std::size_t k) {
       points.write(H5T_NATIVE_DOUBLE, first, k, xyz);
@@ -147,7 +161,7 @@ void write_xdmf(const TetReader& r, const std::string& path, const MeshExportOpt
       throw IoError(cleanup.path + ": replaced while it was written");
   }
   if (::fsync(claim.fd()) != 0) throw IoError(cleanup.path + ": fsync failed: " + std::strerror(errno));
-  xdmf.write(xdmf_text(xml_escaped(file_name(h5)), n, t));
+  xdmf.write(xdmf_text(xml_escaped(file_name(h5)), n, t, o));
   if (::rename(cleanup.path.c_str(), h5.c_str()) != 0) {
     throw IoError("cannot rename " + cleanup.path + " to " + h5 + ": " + std::strerror(errno));
   }

@@ -133,3 +133,95 @@ double ScalarFileReader::at(std::uint64_t index) {
 }
 
 }  // namespace tetstream::io
+
+namespace tetstream::io {
+
+namespace {
+
+// Little-endian bytes p[0..k) as an unsigned integer.
+std::uint64_t le_unsigned(const unsigned char* p, std::size_t k) {
+  std::uint64_t u = 0;
+  for (std::size_t i = k; i-- > 0;) u = u << 8 | p[i];
+  return u;
+}
+
+}  // namespace
+
+std::vector<double> read_npy_values(const std::string& path, std::uint64_t count) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw InputError(path + ": cannot open: " + std::strerror(errno));
+  struct Close {
+    int fd;
+    ~Close() { ::close(fd); }
+  } close_fd{fd};
+  struct stat st{};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) throw InputError(path + ": not a regular file");
+  const std::uint64_t size = std::uint64_t(st.st_size);
+  unsigned char pre[12] = {};
+  if (size < 10 || !pread_exactly(fd, pre, 10, 0) || std::memcmp(pre, "\x93NUMPY", 6) != 0)
+    throw InputError::at_byte(path, 0, "not a .npy file (no \\x93NUMPY magic)");
+  // Version 1: a 2-byte header length; 2 and 3: a 4-byte one.
+  std::uint64_t header_at = 10, hl = pre[8] | std::uint64_t(pre[9]) << 8;
+  if (pre[6] >= 2) {
+    if (!pread_exactly(fd, pre + 10, 2, 10)) throw InputError::at_byte(path, 10, "truncated .npy header");
+    header_at = 12, hl = le_unsigned(pre + 8, 4);
+  }
+  if (hl > size - header_at) throw InputError::at_byte(path, header_at, "truncated .npy header");
+  std::string h(std::size_t(hl), '\0');
+  if (!pread_exactly(fd, h.data(), h.size(), header_at)) throw InputError::at_byte(path, header_at, "truncated .npy header");
+  const std::uint64_t data_at = header_at + hl;
+  const std::size_t d = h.find("'descr': '");
+  const std::string descr = d == std::string::npos ? "" : h.substr(d + 10, h.find('\'', d + 10) - d - 10);
+  // '<f8', '<i4', '|u1'...: the byte order, the kind, the item size.
+  const bool known = descr.size() == 3 && (descr[0] == '<' || (descr[0] == '|' && descr[2] == '1')) &&
+                     (descr[1] == 'f' ? (descr[2] == '4' || descr[2] == '8')
+                                      : (descr[1] == 'i' || descr[1] == 'u') && std::string("1248").find(descr[2]) != std::string::npos);
+  if (!known) {
+    throw InputError::at_byte(path, header_at, "dtype '" + descr + "' is not one of float64, float32 or a " +
+                                                   "little-endian integer (convert it with numpy's astype)");
+  }
+  if (h.find("'fortran_order': True") != std::string::npos)
+    throw InputError::at_byte(path, header_at, "Fortran-ordered .npy arrays are not read");
+  const std::size_t s = h.find("'shape': (");
+  const std::string shape = s == std::string::npos ? "" : h.substr(s + 10, h.find(')', s) - s - 10);
+  const std::size_t comma = shape.find(',');
+  if (comma == std::string::npos || shape.find_first_not_of(' ', comma + 1) != std::string::npos)
+    throw InputError::at_byte(path, header_at, "a 1-D array is needed, not shape (" + shape + ")");
+  const std::size_t item = std::size_t(descr[2] - '0');
+  const std::uint64_t have = (size - data_at) / item;
+  if (have != count || (size - data_at) % item != 0) {
+    throw InputError::at_byte(path, data_at, "holds " + std::to_string(have) + " values, the container has " +
+                                                 std::to_string(count) + " points");
+  }
+  std::vector<unsigned char> bytes(std::size_t(count) * item);
+  if (!pread_exactly(fd, bytes.data(), bytes.size(), data_at)) throw IoError(path + ": read failed: " + std::strerror(errno));
+  std::vector<double> values(static_cast<std::size_t>(count));
+  constexpr double kExact = 9007199254740992.0;  // 2^53: beyond it a double skips integers
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const std::uint64_t u = le_unsigned(bytes.data() + i * item, item);
+    double v;
+    if (descr[1] == 'f') {
+      if (item == 8) {
+        std::memcpy(&v, &u, 8);
+      } else {
+        const std::uint32_t u32 = std::uint32_t(u);
+        float f;
+        std::memcpy(&f, &u32, 4);
+        v = f;
+      }
+    } else if (descr[1] == 'u') {
+      v = double(u);
+      if (u > std::uint64_t(kExact)) throw InputError::at_byte(path, data_at + i * item, "integer " + std::to_string(u) + " is not exact in float64");
+    } else {
+      const unsigned shift = unsigned(64 - 8 * item);
+      const std::int64_t x = std::int64_t(u << shift) >> shift;  // sign-extend
+      v = double(x);
+      if (x > std::int64_t(kExact) || x < -std::int64_t(kExact))
+        throw InputError::at_byte(path, data_at + i * item, "integer " + std::to_string(x) + " is not exact in float64");
+    }
+    values[i] = v;
+  }
+  return values;
+}
+
+}  // namespace tetstream::io

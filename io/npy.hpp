@@ -75,3 +75,13 @@ class ScalarFileReader {
 };
 
 }  // namespace tetstream::io
+
+namespace tetstream::io {
+
+// A whole 1-D .npy array (little-endian or single-byte float64, float32, or signed or
+// unsigned integers of 1-8 bytes; version 1-3 header) as doubles, for per-point data
+// (`convert --point-data`). It must hold exactly `count` values; integers must be
+// exact in a double (|v| <= 2^53). Throws InputError naming the file and the problem.
+std::vector<double> read_npy_values(const std::string& path, std::uint64_t count);
+
+}  // namespace tetstream::io

@@ -60,7 +60,16 @@ std::unique_ptr<PointReader> open_raw(std::unique_ptr<ByteSource> src, ScalarTyp
 std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src, const PointReadOptions& options);
 std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src, const PointReadOptions& options);
 std::unique_ptr<PointReader> open_text(std::unique_ptr<ByteSource> src, const PointReadOptions& options);
-std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src);
+// The fields of one LAS point record besides x, y, z (those a filter or an attribute needs).
+struct LasFields {
+  std::uint16_t intensity = 0;
+  std::uint8_t return_number = 0, number_of_returns = 0, classification = 0;
+  double gps_time = 0;  // 0 when the point format has none
+};
+using LasFieldSink = std::function<void(const LasFields&)>;
+// `sink`, when set, is called for each point kept, in order.
+std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const PointReadOptions& options,
+                                      LasFieldSink sink = {});
 // HDF5 reads by path (the library does its own I/O). `one_of_many`: the file is one of
 // several of a snapshot, so a dataset whose group it lacks holds 0 points here.
 std::unique_ptr<PointReader> open_hdf5(const std::string& path, const PointReadOptions& options, bool one_of_many);

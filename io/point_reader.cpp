@@ -57,6 +57,7 @@ void check_applies(PointFormat format, const PointReadOptions& o, const std::str
   if (format != PointFormat::kText && format != PointFormat::kNpy && !o.columns.empty()) refuse("--columns", "text and npy");
   if (format != PointFormat::kPly && !o.properties.empty()) refuse("--properties", "PLY");
   if (format != PointFormat::kHdf5 && !o.datasets.empty()) refuse("--dataset", "HDF5");
+  if (format != PointFormat::kLas && o.las_filtered()) refuse("--las-classes and --las-returns", "LAS");
 }
 
 std::unique_ptr<PointReader> open_one(const std::string& path, const PointReadOptions& options, bool one_of_many) {
@@ -98,7 +99,7 @@ std::unique_ptr<PointReader> open_one(const std::string& path, const PointReadOp
     case PointFormat::kPly: return detail::open_ply(std::move(src), options);
     case PointFormat::kNpy: return detail::open_npy(std::move(src), options);
     case PointFormat::kText: return detail::open_text(std::move(src), options);
-    case PointFormat::kLas: return detail::open_las(std::move(src));
+    case PointFormat::kLas: return detail::open_las(std::move(src), options);
     case PointFormat::kHdf5: case PointFormat::kAuto: break;
   }
   throw UsageError("no reader for " + path);
@@ -161,7 +162,18 @@ std::string PointReadOptions::identity() const {
   return std::string("format=") + to_string(format) + " type=" + to_string(type) + " stride=" + std::to_string(stride) +
          " offset=" + std::to_string(offset) + " byte_order=" + to_string(byte_order) + " more_inputs=" +
          join(more_inputs) + " datasets=" + join(datasets) + " columns=" + join(cols) +
-         " properties=" + join(properties);
+         " properties=" + join(properties) + las_identity();
+}
+
+std::string PointReadOptions::las_identity() const {
+  std::string s;
+  if (!las_classes.empty()) {
+    std::vector<std::string> codes;
+    for (auto c : las_classes) codes.push_back(std::to_string(c));
+    s += " las_classes=" + join(codes);
+  }
+  if (las_returns != LasReturns::kAll) s += std::string(" las_returns=") + (las_returns == LasReturns::kLast ? "last" : "first");
+  return s;
 }
 
 std::unique_ptr<PointReader> open_points(const std::string& path, const PointReadOptions& options) {

@@ -36,6 +36,12 @@ struct PointReadOptions {
   std::vector<std::string> datasets;    // HDF5: the (N, 3) datasets to read, in order
   std::vector<std::uint64_t> columns;   // text, npy: 1-based columns of x, y, z; empty: the only three
   std::vector<std::string> properties;  // PLY: vertex properties of x, y, z; empty: x,y,z, else X,Y,Z
+  // LAS only: keep the points of these ASPRS classification codes (0-255; empty: all),
+  // and of these returns. Applied as the records are decoded, so the points are
+  // numbered (original ids) among those kept.
+  std::vector<std::uint8_t> las_classes;
+  enum class LasReturns : std::uint8_t { kAll, kFirst, kLast } las_returns = LasReturns::kAll;
+  bool las_filtered() const { return !las_classes.empty() || las_returns != LasReturns::kAll; }
 
   // The largest --stride (and any binary record) we accept: one record must fit the
   // read buffer, so a larger one could only be an error.
@@ -46,8 +52,11 @@ struct PointReadOptions {
   // positive numbers; ...).
   void validate() const;
   // The options that change which points are read, as one canonical line (for a job's
-  // identity): format, type, stride, offset, byte order, files, datasets, columns, properties.
+  // identity): format, type, stride, offset, byte order, files, datasets, columns, properties,
+  // and the LAS filters when set (absent when not: the identity of older jobs is unchanged).
   std::string identity() const;
+  // The LAS filters alone (" las_classes=2,6 las_returns=last"; empty when none is set).
+  std::string las_identity() const;
 };
 
 class PointReader {

@@ -83,6 +83,33 @@ void add_point_input_options(CLI::App* app, io::PointReadOptions& options) {
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll)
       ->group(group);
   app->add_option_function<std::string>(
+         "--las-classes",
+         [&options](const std::string& v) {
+           options.las_classes.clear();
+           for (const auto& f : split_commas(v)) {
+             unsigned c = 0;
+             const auto r = std::from_chars(f.data(), f.data() + f.size(), c);
+             if (f.empty() || r.ec != std::errc() || r.ptr != f.data() + f.size() || c > 255)
+               throw UsageError("--las-classes: '" + f + "' is not a classification code (0-255)");
+             options.las_classes.push_back(std::uint8_t(c));
+           }
+         },
+         "LAS input: keep only the points of these ASPRS classification codes, e.g. 2,6 (ground,\n"
+         "buildings); part of the job: a resume with other classes is refused")
+      ->group(group);
+  app->add_option_function<std::string>(
+         "--las-returns",
+         [&options](const std::string& v) {
+           using R = io::PointReadOptions::LasReturns;
+           if (v == "all") options.las_returns = R::kAll;
+           else if (v == "first") options.las_returns = R::kFirst;
+           else if (v == "last") options.las_returns = R::kLast;
+           else throw UsageError("--las-returns: expected last, first or all, got '" + v + "'");
+         },
+         "LAS input: keep only last returns (return number = number of returns), first returns\n"
+         "(return number 1), or all (default)")
+      ->group(group);
+  app->add_option_function<std::string>(
          "--byte-order",
          [&options](const std::string& v) {
            try {

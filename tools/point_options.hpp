@@ -2,7 +2,7 @@
 // The point-input options every subcommand that reads points shares (`info`, `run`, ...):
 //   --format raw|f32|f64|ply|npy|text|las|hdf5   --type f32|f64   --stride BYTES
 //   --offset BYTES   --byte-order little|big   --columns X,Y,Z   --properties X,Y,Z
-//   --dataset PATH (repeatable)
+//   --dataset PATH (repeatable)   --las-classes C,C,...   --las-returns last|first|all
 // Values are checked while parsing (UsageError, exit 2); io::open_points checks the rest.
 #include "io/point_reader.hpp"
 

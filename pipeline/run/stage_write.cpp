@@ -102,13 +102,21 @@ io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memo
   header.coord_type = sorted.layout.float32 ? io::CoordType::kFloat32 : io::CoordType::kFloat64;
   for (int k = 0; k < 3; ++k) header.bbox_min[k] = sorted.bbox_min[k], header.bbox_max[k] = sorted.bbox_max[k];
   header.tool = "tetstream 0.1.0";
-  header.options = json{{"command", "run"},
-                        {"input", options.input},
-                        {"memory", memory},
-                        {"buffer_spacings", options.buffer_spacings},
-                        {"axis", std::string(1, "xyz"[sorted.axis])},
-                        {"duplicates_merged", sorted.duplicates}}
-                       .dump();
+  json made = json{{"command", "run"},
+                   {"input", options.input},
+                   {"memory", memory},
+                   {"buffer_spacings", options.buffer_spacings},
+                   {"axis", std::string(1, "xyz"[sorted.axis])},
+                   {"duplicates_merged", sorted.duplicates}};
+  // The LAS filters decide which points (and so which original ids) the container has:
+  // `convert --las-attributes` reads the input again through the same filter. Only when
+  // set, so the header of every other job keeps its bytes.
+  const io::PointReadOptions& read = options.read;
+  if (!read.las_classes.empty()) made["las_classes"] = read.las_classes;
+  if (read.las_returns != io::PointReadOptions::LasReturns::kAll)
+    made["las_returns"] = read.las_returns == io::PointReadOptions::LasReturns::kLast ? "last" : "first";
+  if (!read.more_inputs.empty() && read.las_filtered()) made["more_inputs"] = read.more_inputs;
+  header.options = made.dump();
   return header;
 }
 
