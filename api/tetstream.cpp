@@ -19,9 +19,11 @@ Triangulation triangulate(std::span<const double> xyz, int threads) {
   if (xyz.size() % 3 != 0) throw UsageError("triangulate: the coordinates are not a multiple of 3");
   const std::size_t n = xyz.size() / 3;
   if (n > std::size_t(150'000'000))
-    throw UsageError("triangulate: " + std::to_string(n) + " points are more than the in-memory kernel holds; use run()");
+    throw UsageError("triangulate: " + std::to_string(n) +
+                     " points are more than the in-memory kernel holds; use run()");
   for (std::size_t i = 0; i < xyz.size(); ++i)
-    if (!std::isfinite(xyz[i])) throw InputError("points: row " + std::to_string(i / 3) + ": a coordinate is not finite");
+    if (!std::isfinite(xyz[i]))
+      throw InputError("points: row " + std::to_string(i / 3) + ": a coordinate is not finite");
   core::Delaunay dt;
   if (dt.build(xyz.data(), nullptr, n) != core::BuildStatus::kOk)
     throw InputError("points: fewer than 4 affinely independent distinct points: no tetrahedron");

@@ -18,8 +18,7 @@ namespace {
 constexpr double kTetsPerPointEstimate = 6.9;
 
 TS_FORCE_INLINE bool has_infinite_vertex(const VertexId* v) {
-  return v[0] == kInfiniteVertex || v[1] == kInfiniteVertex || v[2] == kInfiniteVertex ||
-         v[3] == kInfiniteVertex;
+  return v[0] == kInfiniteVertex || v[1] == kInfiniteVertex || v[2] == kInfiniteVertex || v[3] == kInfiniteVertex;
 }
 
 TS_FORCE_INLINE int infinite_position(const VertexId* v) {
@@ -39,7 +38,6 @@ constexpr int kOtherPositions[4][4][2] = {
 TS_FORCE_INLINE bool same_point(const double* a, const double* b) {
   return a[0] == b[0] && a[1] == b[1] && a[2] == b[2];
 }
-
 
 }  // namespace
 
@@ -541,15 +539,14 @@ Circumsphere Delaunay::tet_circumsphere(TetId t) const {
 }
 
 std::size_t Delaunay::memory_bytes() const {
-  return tets_.size() * sizeof(Tet) + marks_.bits.capacity() * 8 +
-         pts_.capacity() * sizeof(double) + order_.capacity() * sizeof(VertexId) +
-         local_internal_.capacity() * sizeof(VertexId) + vertex_tet_.capacity() * sizeof(TetId) +
-         duplicate_of_.size() * (2 * sizeof(VertexId) + 2 * sizeof(void*)) +
+  return tets_.size() * sizeof(Tet) + marks_.bits.capacity() * 8 + pts_.capacity() * sizeof(double) +
+         order_.capacity() * sizeof(VertexId) + local_internal_.capacity() * sizeof(VertexId) +
+         vertex_tet_.capacity() * sizeof(TetId) + duplicate_of_.size() * (2 * sizeof(VertexId) + 2 * sizeof(void*)) +
          duplicate_of_.bucket_count() * sizeof(void*) + cavity_.capacity() * sizeof(TetId) +
          rejected_.capacity() * sizeof(TetId) + new_tets_.capacity() * sizeof(NewTet) +
          new_slots_.capacity() * sizeof(TetId) + local_ids_.capacity() * sizeof(local_ids_[0]) +
-         local_vertex_.capacity() * sizeof(VertexId) + local_tet_.capacity() * sizeof(TetId) + edge_table_.capacity() * sizeof(FacetHandle) +
-         edge_hash_.capacity() * sizeof(EdgeSlot);
+         local_vertex_.capacity() * sizeof(VertexId) + local_tet_.capacity() * sizeof(TetId) +
+         edge_table_.capacity() * sizeof(FacetHandle) + edge_hash_.capacity() * sizeof(EdgeSlot);
 }
 
 }  // namespace tetstream::core

@@ -30,8 +30,8 @@
 //            v1
 //
 // Vertices are local indices into the caller's point array (uint32: a window holds
-// fewer than 2^31 points; link_new_tets() borrows the top bit). Each point also has a 64-bit global label that drives the
-// symbolic perturbation, so two windows that share points agree on degenerate cases.
+// fewer than 2^31 points; link_new_tets() borrows the top bit). Each point also has a 64-bit global label that drives
+// the symbolic perturbation, so two windows that share points agree on degenerate cases.
 //
 // Two numberings (translated at the API boundary, never inside the insertion loop):
 //   caller ids    positions in the caller's xyz/labels arrays; everything public
@@ -149,9 +149,7 @@ class Delaunay {
   // Not thread-safe on one kernel (it marks tets while it searches).
   void star(VertexId v, std::vector<TetId>& out) const;
   // One tet incident to v, or kNoTet when v is not a vertex (a duplicate, not inserted).
-  TetId incident_tet(VertexId v) const {
-    return v < vertex_tet_.size() ? vertex_tet_[v] : kNoTet;
-  }
+  TetId incident_tet(VertexId v) const { return v < vertex_tet_.size() ? vertex_tet_[v] : kNoTet; }
 
   Circumsphere tet_circumsphere(TetId t) const;
 
@@ -176,7 +174,7 @@ class Delaunay {
 
   struct NewTet {  // one facet of the cavity boundary, joined to the new point
     VertexId v[4];
-    FacetHandle outer;  // the facet handle across the boundary, outside the cavity
+    FacetHandle outer;    // the facet handle across the boundary, outside the cavity
     std::uint32_t facet;  // position of the new point in v
   };
 
@@ -223,9 +221,9 @@ class Delaunay {
   mutable Marks marks_;  // mutable: star() marks and unmarks
 
   // Internal numbering (see the top of this file).
-  std::vector<double> pts_;         // 3 per internal id
-  std::vector<VertexId> order_;     // internal -> caller
-  std::vector<TetId> vertex_tet_;   // caller -> one incident tet (kNoTet: not a vertex)
+  std::vector<double> pts_;                              // 3 per internal id
+  std::vector<VertexId> order_;                          // internal -> caller
+  std::vector<TetId> vertex_tet_;                        // caller -> one incident tet (kNoTet: not a vertex)
   std::unordered_map<VertexId, VertexId> duplicate_of_;  // caller -> caller; rare
   TetId last_tet_ = kNoTet;
   std::size_t num_vertices_ = 0;
@@ -238,9 +236,9 @@ class Delaunay {
   std::vector<NewTet> new_tets_;
   std::vector<TetId> new_slots_;
   std::vector<std::array<std::uint32_t, 3>> local_ids_;  // per new tet: its boundary vertices
-  std::vector<VertexId> local_vertex_;   // local id -> caller id (saved from order_)
-  std::vector<VertexId> local_internal_;  // local id -> internal id
-  std::vector<TetId> local_tet_;         // local id -> a new tet holding it
+  std::vector<VertexId> local_vertex_;                   // local id -> caller id (saved from order_)
+  std::vector<VertexId> local_internal_;                 // local id -> internal id
+  std::vector<TetId> local_tet_;                         // local id -> a new tet holding it
   // Directed boundary edge (local ids) -> new facet: a dense table for cavities of
   // up to kDenseEdgeSide local ids (at most 256 KiB), a hash table beyond.
   static constexpr std::size_t kDenseEdgeSide = 256;

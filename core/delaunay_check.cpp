@@ -38,9 +38,7 @@ std::string tet_name(const Delaunay& dt, TetId t) {
   return s + ")";
 }
 
-std::string facet_name(const Delaunay& dt, TetId t, int f) {
-  return tet_name(dt, t) + " facet " + std::to_string(f);
-}
+std::string facet_name(const Delaunay& dt, TetId t, int f) { return tet_name(dt, t) + " facet " + std::to_string(f); }
 
 int infinite_index(const Delaunay& dt, TetId t) {
   for (int i = 0; i < 4; ++i)
@@ -107,9 +105,9 @@ std::string CheckReport::summary() const {
   s += ": points " + std::to_string(points) + ", vertices " + std::to_string(vertices) + ", duplicates " +
        std::to_string(duplicates) + ", finite tets " + std::to_string(finite_tets) + ", hull facets " +
        std::to_string(infinite_tets) + ", V-E+F-T " + std::to_string(euler) + ", volume error " +
-       std::to_string(volume_rel_error) + "; violations: storage " + std::to_string(bad_storage) +
-       ", orientation " + std::to_string(bad_orientation) + ", adjacency " + std::to_string(bad_adjacency) +
-       ", delaunay " + std::to_string(bad_delaunay) + ", hull " + std::to_string(bad_hull) + ", topology " +
+       std::to_string(volume_rel_error) + "; violations: storage " + std::to_string(bad_storage) + ", orientation " +
+       std::to_string(bad_orientation) + ", adjacency " + std::to_string(bad_adjacency) + ", delaunay " +
+       std::to_string(bad_delaunay) + ", hull " + std::to_string(bad_hull) + ", topology " +
        std::to_string(bad_topology) + ", coverage " + std::to_string(bad_coverage) + ", volume " +
        std::to_string(bad_volume);
   for (const std::string& m : messages) s += "\n  " + m;
@@ -214,16 +212,15 @@ CheckReport check_delaunay(const Delaunay& dt, const CheckOptions& options) {
       }
       if (dt.neighbor(t2, f2) != 4 * t + FacetHandle(f)) {
         bad.add(r.bad_adjacency, [&] {
-          return "adjacency: " + facet_name(dt, t, f) + ": neighbour " + facet_name(dt, t2, f2) +
-                 " points back to " + std::to_string(dt.neighbor(t2, f2));
+          return "adjacency: " + facet_name(dt, t, f) + ": neighbour " + facet_name(dt, t2, f2) + " points back to " +
+                 std::to_string(dt.neighbor(t2, f2));
         });
         continue;
       }
       if (broken[t2]) continue;
       if (sorted_facet(dt, t, f) != sorted_facet(dt, t2, f2)) {
-        bad.add(r.bad_adjacency, [&] {
-          return "adjacency: " + facet_name(dt, t, f) + " and " + facet_name(dt, t2, f2) + " differ";
-        });
+        bad.add(r.bad_adjacency,
+                [&] { return "adjacency: " + facet_name(dt, t, f) + " and " + facet_name(dt, t2, f2) + " differ"; });
         continue;
       }
       const VertexId w = dt.vertex(t2, f2);
@@ -321,8 +318,8 @@ CheckReport check_delaunay(const Delaunay& dt, const CheckOptions& options) {
         }
       }
     });
-    r.euler = std::int64_t(r.vertices) - std::int64_t(r.edges) + std::int64_t(r.triangles) -
-              std::int64_t(r.finite_tets);
+    r.euler =
+        std::int64_t(r.vertices) - std::int64_t(r.edges) + std::int64_t(r.triangles) - std::int64_t(r.finite_tets);
     if (r.euler != 1)
       bad.add(r.bad_topology, [&] { return "topology: V - E + F - T = " + std::to_string(r.euler) + ", not 1"; });
   }
@@ -338,8 +335,8 @@ CheckReport check_delaunay(const Delaunay& dt, const CheckOptions& options) {
     });
   if (dt.num_vertices() != r.vertices)
     bad.add(r.bad_topology, [&] {
-      return "topology: num_vertices() = " + std::to_string(dt.num_vertices()) + " but " +
-             std::to_string(r.vertices) + " points are vertices of finite tets";
+      return "topology: num_vertices() = " + std::to_string(dt.num_vertices()) + " but " + std::to_string(r.vertices) +
+             " points are vertices of finite tets";
     });
 
   // 5. Coverage: each point is a vertex, or a duplicate of a vertex with the same

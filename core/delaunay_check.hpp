@@ -48,37 +48,37 @@ struct CheckReport {
   bool ok = false;
 
   // What was found.
-  std::uint64_t points = 0;          // num_points() of the kernel
-  std::uint64_t vertices = 0;        // distinct vertices of finite tets
-  std::uint64_t duplicates = 0;      // points p with duplicate_of(p) != p
+  std::uint64_t points = 0;      // num_points() of the kernel
+  std::uint64_t vertices = 0;    // distinct vertices of finite tets
+  std::uint64_t duplicates = 0;  // points p with duplicate_of(p) != p
   std::uint64_t finite_tets = 0;
-  std::uint64_t infinite_tets = 0;   // = hull facets
-  std::uint64_t edges = 0;           // of the finite complex
-  std::uint64_t triangles = 0;       // of the finite complex
-  std::int64_t euler = 0;            // V - E + F - T, 1 when valid
+  std::uint64_t infinite_tets = 0;  // = hull facets
+  std::uint64_t edges = 0;          // of the finite complex
+  std::uint64_t triangles = 0;      // of the finite complex
+  std::int64_t euler = 0;           // V - E + F - T, 1 when valid
   std::uint64_t hull_vertices = 0;
   std::uint64_t hull_edges = 0;
-  std::uint64_t facets_tested = 0;   // conflict tests made
-  double tet_volume = 0;             // sum of finite tet volumes (unsigned)
-  double hull_volume = 0;            // volume enclosed by the hull facets
+  std::uint64_t facets_tested = 0;  // conflict tests made
+  double tet_volume = 0;            // sum of finite tet volumes (unsigned)
+  double hull_volume = 0;           // volume enclosed by the hull facets
   double volume_rel_error = 0;
 
   // Violations of each kind (0 when valid).
-  std::uint64_t bad_storage = 0;       // bad vertex ids, repeated vertices, freed neighbours
+  std::uint64_t bad_storage = 0;  // bad vertex ids, repeated vertices, freed neighbours
   std::uint64_t bad_orientation = 0;
   std::uint64_t bad_adjacency = 0;
-  std::uint64_t bad_delaunay = 0;      // a finite tet's circumsphere holds a neighbour's vertex
-  std::uint64_t bad_hull = 0;          // hull not locally convex, or not a closed surface
-  std::uint64_t bad_topology = 0;      // Euler characteristic, counts disagreeing with the kernel
-  std::uint64_t bad_coverage = 0;      // a point neither a vertex nor a duplicate of one
+  std::uint64_t bad_delaunay = 0;  // a finite tet's circumsphere holds a neighbour's vertex
+  std::uint64_t bad_hull = 0;      // hull not locally convex, or not a closed surface
+  std::uint64_t bad_topology = 0;  // Euler characteristic, counts disagreeing with the kernel
+  std::uint64_t bad_coverage = 0;  // a point neither a vertex nor a duplicate of one
   std::uint64_t bad_volume = 0;
 
   // The first max_messages violations, e.g. "orientation: tet 17 (3 9 12 40): orient3d = -1".
   std::vector<std::string> messages;
 
   std::uint64_t violations() const {
-    return bad_storage + bad_orientation + bad_adjacency + bad_delaunay + bad_hull + bad_topology +
-           bad_coverage + bad_volume;
+    return bad_storage + bad_orientation + bad_adjacency + bad_delaunay + bad_hull + bad_topology + bad_coverage +
+           bad_volume;
   }
   // One line of counts, then the messages, one a line.
   std::string summary() const;

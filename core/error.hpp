@@ -10,9 +10,9 @@ namespace tetstream {
 
 enum class ExitCode : int {
   kOk = 0,
-  kBadInput = 1,   // malformed, truncated, non-finite or degenerate input
-  kUsage = 2,      // bad command line or options
-  kIoFailure = 3,  // I/O or resource failure (disk full, unreadable file, out of memory)
+  kBadInput = 1,       // malformed, truncated, non-finite or degenerate input
+  kUsage = 2,          // bad command line or options
+  kIoFailure = 3,      // I/O or resource failure (disk full, unreadable file, out of memory)
   kInterrupted = 130,  // stopped by SIGINT/SIGTERM (128 + 2, the shell's convention)
 };
 

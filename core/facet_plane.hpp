@@ -34,9 +34,7 @@ struct FacetPlane {
     const bool in_range = extent[0] <= 0x1p300 && extent[1] <= 0x1p300 && extent[2] <= 0x1p300;
     error = in_range ? 16 * kEps * bound * (1 + 16 * kEps) + 0x1p-700 : std::numeric_limits<double>::infinity();
   }
-  double value(const double* p) const {
-    return n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]);
-  }
+  double value(const double* p) const { return n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]); }
   // orient3d(a, b, c, p) < 0, exactly.
   bool strictly_below(const double* p) const {
     const double g = value(p);

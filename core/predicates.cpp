@@ -224,9 +224,7 @@ int insphere_int(const double* const* p, int low) {
   Int<2 * K> m[4][4];
   for (int i = 0; i < 4; ++i)
     for (int j = i + 1; j < 4; ++j) m[i][j] = t[i][0] * t[j][1] - t[j][0] * t[i][1];
-  const auto minor3 = [&](int i, int j, int k) {
-    return t[i][2] * m[j][k] - t[j][2] * m[i][k] + t[k][2] * m[i][j];
-  };
+  const auto minor3 = [&](int i, int j, int k) { return t[i][2] * m[j][k] - t[j][2] * m[i][k] + t[k][2] * m[i][j]; };
   const auto lift = [&](int i) { return t[i][0] * t[i][0] + t[i][1] * t[i][1] + t[i][2] * t[i][2]; };
   return sign((lift(0) * minor3(1, 2, 3) - lift(1) * minor3(0, 2, 3)) +
               (lift(2) * minor3(0, 1, 3) - lift(3) * minor3(0, 1, 2)));
@@ -312,8 +310,7 @@ int insphere_fallback(const double* a, const double* b, const double* c, const d
 // -O != 0 unless a, b, c, d are coplanar. Sorting the labels needs no permutation
 // sign because each coefficient is evaluated with the points in their own places.
 int insphere_sos_tiebreak(const double* a, const double* b, const double* c, const double* d, const double* e,
-                          std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t ld,
-                          std::uint64_t le) {
+                          std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t ld, std::uint64_t le) {
   ++tls_predicate_stats.insphere_perturbed;
   const std::uint64_t label[5] = {la, lb, lc, ld, le};
   int order[5];
@@ -321,11 +318,21 @@ int insphere_sos_tiebreak(const double* a, const double* b, const double* c, con
   for (int i = 0; i < 5; ++i) {
     int s = 0;
     switch (order[i]) {
-      case 0: s = orient3d(e, b, c, d); break;
-      case 1: s = orient3d(a, e, c, d); break;
-      case 2: s = orient3d(a, b, e, d); break;
-      case 3: s = orient3d(a, b, c, e); break;
-      default: s = -orient3d(a, b, c, d); break;
+      case 0:
+        s = orient3d(e, b, c, d);
+        break;
+      case 1:
+        s = orient3d(a, e, c, d);
+        break;
+      case 2:
+        s = orient3d(a, b, e, d);
+        break;
+      case 3:
+        s = orient3d(a, b, c, e);
+        break;
+      default:
+        s = -orient3d(a, b, c, d);
+        break;
     }
     if (s != 0) return s;
   }
@@ -344,8 +351,8 @@ int insphere_sos_tiebreak(const double* a, const double* b, const double* c, con
 // the same signs with the tet written (a,b,c,d'). So insphere_sos(a,c,b,o,e) is the
 // answer, for an o we can build exactly: a moved along the axis where the facet
 // normal is largest, by about the facet's size, towards the inside.
-int infinite_conflict_coplanar(const double* a, const double* b, const double* c, const double* e,
-                               std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t le) {
+int infinite_conflict_coplanar(const double* a, const double* b, const double* c, const double* e, std::uint64_t la,
+                               std::uint64_t lb, std::uint64_t lc, std::uint64_t le) {
   const double ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
   const double vx = c[0] - a[0], vy = c[1] - a[1], vz = c[2] - a[2];
   const double n[3] = {uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};
@@ -599,8 +606,7 @@ Circumsphere circumsphere(const double* a, const double* b, const double* c, con
   const Range r = scan(p, 4);
   if (!r.finite) return s;
   double x[3];
-  if (!with_exact_width(r.max_exp - r.low, [&]<int K>() { return circumcentre_offset_int<K>(p, r.low, x); }))
-    return s;
+  if (!with_exact_width(r.max_exp - r.low, [&]<int K>() { return circumcentre_offset_int<K>(p, r.low, x); })) return s;
   double e[3];
   for (int k = 0; k < 3; ++k) e[k] = 4 * u * std::fabs(x[k]);
   finish(x, e);

@@ -78,8 +78,7 @@ inline int insphere(const double* a, const double* b, const double* c, const dou
 // perturbed sphere) or -1; never 0. (Exactly the sign of I_eps above, so for a
 // negatively oriented (a,b,c,d) it returns the opposite answer: antisymmetric.)
 inline int insphere_sos(const double* a, const double* b, const double* c, const double* d, const double* e,
-                 std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t ld,
-                 std::uint64_t le);
+                        std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t ld, std::uint64_t le);
 
 // Conflict test of e with the infinite tetrahedron on hull facet (a,b,c): the facet
 // is oriented so that orient3d(a,b,c,p) < 0 for points p inside the hull. Returns
@@ -88,8 +87,8 @@ inline int insphere_sos(const double* a, const double* b, const double* c, const
 // (so the answer agrees with insphere_sos of any finite tet (a,c,b,d) behind the
 // facet, and of any finite tet (a,b,c,d') in front of it). Returns -1 otherwise;
 // never 0 for distinct labels and a non-degenerate triangle abc.
-inline int infinite_conflict_sos(const double* a, const double* b, const double* c, const double* e,
-                          std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t le);
+inline int infinite_conflict_sos(const double* a, const double* b, const double* c, const double* e, std::uint64_t la,
+                                 std::uint64_t lb, std::uint64_t lc, std::uint64_t le);
 
 // Circumsphere of a positively oriented tetrahedron, in floating point, with a
 // rigorous bound on its error: the true centre c* and squared radius r2* satisfy
@@ -173,8 +172,7 @@ TS_FORCE_INLINE double max4(double a, double b, double c, double d) {
   return m > n ? m : n;
 }
 
-TS_FORCE_INLINE FilterValue orient3d_filter(const double* a, const double* b, const double* c,
-                                            const double* d) {
+TS_FORCE_INLINE FilterValue orient3d_filter(const double* a, const double* b, const double* c, const double* d) {
   const double ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
   const double vx = c[0] - a[0], vy = c[1] - a[1], vz = c[2] - a[2];
   const double wx = d[0] - a[0], wy = d[1] - a[1], wz = d[2] - a[2];
@@ -191,8 +189,8 @@ TS_FORCE_INLINE FilterValue orient3d_filter(const double* a, const double* b, co
   return f;
 }
 
-TS_FORCE_INLINE FilterValue insphere_filter(const double* a, const double* b, const double* c,
-                                            const double* d, const double* e) {
+TS_FORCE_INLINE FilterValue insphere_filter(const double* a, const double* b, const double* c, const double* d,
+                                            const double* e) {
   const double ax = a[0] - e[0], ay = a[1] - e[1], az = a[2] - e[2];
   const double bx = b[0] - e[0], by = b[1] - e[1], bz = b[2] - e[2];
   const double cx = c[0] - e[0], cy = c[1] - e[1], cz = c[2] - e[2];
@@ -225,14 +223,13 @@ TS_FORCE_INLINE FilterValue insphere_filter(const double* a, const double* b, co
 // f is the filter's value for the same arguments (the fallback reuses it).
 TS_NOINLINE int orient3d_fallback(const double* a, const double* b, const double* c, const double* d,
                                   const FilterValue& f);
-TS_NOINLINE int insphere_fallback(const double* a, const double* b, const double* c, const double* d,
-                                  const double* e, const FilterValue& f);
+TS_NOINLINE int insphere_fallback(const double* a, const double* b, const double* c, const double* d, const double* e,
+                                  const FilterValue& f);
 TS_NOINLINE int insphere_sos_tiebreak(const double* a, const double* b, const double* c, const double* d,
-                                      const double* e, std::uint64_t la, std::uint64_t lb,
-                                      std::uint64_t lc, std::uint64_t ld, std::uint64_t le);
-TS_NOINLINE int infinite_conflict_coplanar(const double* a, const double* b, const double* c,
-                                           const double* e, std::uint64_t la, std::uint64_t lb,
-                                           std::uint64_t lc, std::uint64_t le);
+                                      const double* e, std::uint64_t la, std::uint64_t lb, std::uint64_t lc,
+                                      std::uint64_t ld, std::uint64_t le);
+TS_NOINLINE int infinite_conflict_coplanar(const double* a, const double* b, const double* c, const double* e,
+                                           std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t le);
 
 }  // namespace detail
 
@@ -249,8 +246,7 @@ TS_FORCE_INLINE int orient3d(const double* a, const double* b, const double* c, 
   return detail::orient3d_fallback(a, b, c, d, f);
 }
 
-TS_FORCE_INLINE int insphere(const double* a, const double* b, const double* c, const double* d,
-                             const double* e) {
+TS_FORCE_INLINE int insphere(const double* a, const double* b, const double* c, const double* d, const double* e) {
   ++detail::tls_predicate_stats.insphere_calls;
   const detail::FilterValue f = detail::insphere_filter(a, b, c, d, e);
   if (TS_LIKELY(f.in_range)) {
@@ -260,16 +256,16 @@ TS_FORCE_INLINE int insphere(const double* a, const double* b, const double* c, 
   return detail::insphere_fallback(a, b, c, d, e, f);
 }
 
-TS_FORCE_INLINE int insphere_sos(const double* a, const double* b, const double* c, const double* d,
-                                 const double* e, std::uint64_t la, std::uint64_t lb, std::uint64_t lc,
-                                 std::uint64_t ld, std::uint64_t le) {
+TS_FORCE_INLINE int insphere_sos(const double* a, const double* b, const double* c, const double* d, const double* e,
+                                 std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t ld,
+                                 std::uint64_t le) {
   const int s = insphere(a, b, c, d, e);
   if (TS_LIKELY(s != 0)) return s;
   return detail::insphere_sos_tiebreak(a, b, c, d, e, la, lb, lc, ld, le);
 }
 
-inline int infinite_conflict_sos(const double* a, const double* b, const double* c, const double* e,
-                                 std::uint64_t la, std::uint64_t lb, std::uint64_t lc, std::uint64_t le) {
+inline int infinite_conflict_sos(const double* a, const double* b, const double* c, const double* e, std::uint64_t la,
+                                 std::uint64_t lb, std::uint64_t lc, std::uint64_t le) {
   const int s = orient3d(a, b, c, e);
   if (TS_LIKELY(s != 0)) return s;
   return detail::infinite_conflict_coplanar(a, b, c, e, la, lb, lc, le);

@@ -134,9 +134,8 @@ std::uint64_t hilbert_index_3d(std::uint32_t x, std::uint32_t y, std::uint32_t z
 
 std::vector<std::uint64_t> hilbert_keys(const double* xyz, std::size_t n) {
   std::vector<std::uint64_t> key(n);
-  for_each_grid_point(xyz, n, kHilbertBits, [&](std::size_t i, const std::uint32_t* c) {
-    key[i] = hilbert_index_3d(c[0], c[1], c[2]);
-  });
+  for_each_grid_point(xyz, n, kHilbertBits,
+                      [&](std::size_t i, const std::uint32_t* c) { key[i] = hilbert_index_3d(c[0], c[1], c[2]); });
   return key;
 }
 

@@ -13,8 +13,9 @@ namespace tetstream::io {
 std::vector<PointDataArray> las_point_data(const TetReader& reader, const std::string& las_path,
                                            const PointReadOptions& read) {
   const std::string why = " (convert --las-attributes reads the container's input again)";
-  struct stat st{};
-  if (is_std_stream(las_path)) throw InputError("the container's input was standard input: it cannot be read again" + why);
+  struct stat st {};
+  if (is_std_stream(las_path))
+    throw InputError("the container's input was standard input: it cannot be read again" + why);
   // A relative name is relative to where `run` ran: here, else beside the container.
   std::string path = las_path;
   if (::stat(path.c_str(), &st) != 0 && !path.empty() && path.front() != '/') {
@@ -39,7 +40,9 @@ std::vector<PointDataArray> las_point_data(const TetReader& reader, const std::s
     for (const auto id : ids) inputs = std::max(inputs, id + 1);
   std::vector<std::uint64_t> label_of(inputs, none);
   for (std::uint64_t l = 0; l < n; ++l) {
-    if (ids[l] >= inputs) throw InputError(reader.path() + ": point " + std::to_string(l) + " has original id " + std::to_string(ids[l]) + " past the input's " + std::to_string(inputs) + " points");
+    if (ids[l] >= inputs)
+      throw InputError(reader.path() + ": point " + std::to_string(l) + " has original id " + std::to_string(ids[l]) +
+                       " past the input's " + std::to_string(inputs) + " points");
     label_of[ids[l]] = l;
   }
 
@@ -54,11 +57,14 @@ std::vector<PointDataArray> las_point_data(const TetReader& reader, const std::s
   std::uint64_t id = 0;
   while (std::size_t k = las->read(chunk.data(), kChunk)) {
     for (std::size_t i = 0; i < k; ++i, ++id) {
-      if (id >= inputs) throw InputError(changed + ": it has more than the " + std::to_string(inputs) + " points the container was made from");
+      if (id >= inputs)
+        throw InputError(changed + ": it has more than the " + std::to_string(inputs) +
+                         " points the container was made from");
       const std::uint64_t l = label_of[id];
       if (l == none) continue;  // a duplicate merged into an earlier point
       if (chunk[3 * i] != xyz[3 * l] || chunk[3 * i + 1] != xyz[3 * l + 1] || chunk[3 * i + 2] != xyz[3 * l + 2])
-        throw InputError(changed + ": point " + std::to_string(id) + " (" + las->location(id) + ") is not where the container has it");
+        throw InputError(changed + ": point " + std::to_string(id) + " (" + las->location(id) +
+                         ") is not where the container has it");
       const detail::LasFields& f = fields[i];
       out[0].values[l] = f.intensity;
       out[1].values[l] = f.classification;
@@ -68,7 +74,8 @@ std::vector<PointDataArray> las_point_data(const TetReader& reader, const std::s
     fields.clear();
   }
   if (id != inputs)
-    throw InputError(changed + ": it has " + std::to_string(id) + " points (after its filters), the container was made from " + std::to_string(inputs));
+    throw InputError(changed + ": it has " + std::to_string(id) +
+                     " points (after its filters), the container was made from " + std::to_string(inputs));
   // Formats 0 and 2 have no GPS time ("las 1.2 point format 2").
   const std::string& name = las->format_name();
   const int format = std::stoi(name.substr(name.rfind(' ') + 1));

@@ -96,9 +96,10 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
   for (int k = 0; k < m; ++k) sizes.push_back(8 * n);
   for (std::uint64_t b : {3 * n * (f32 ? 4 : 8), 32 * t, 8 * t, t}) sizes.push_back(b);
   auto header = [&](const std::vector<std::string>& offsets) {
-    std::string xml = "<?xml version=\"1.0\"?>\n"
-                      "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
-                      "header_type=\"UInt64\"";
+    std::string xml =
+        "<?xml version=\"1.0\"?>\n"
+        "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" "
+        "header_type=\"UInt64\"";
     if (level > 0) xml += " compressor=\"vtkZLibDataCompressor\"";
     xml += ">\n  <UnstructuredGrid>\n";
     auto array = [&](int b, const std::string& attributes) {
@@ -180,7 +181,8 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
   // The tets pass; offsets and types follow from the count.
   auto write_cells = [&] {
     VtuArray cells = begin(P + 1);
-    for_each_frame(r, o, [&](const std::vector<std::uint64_t>& labels) { cells.put(labels.data(), 8 * labels.size()); });
+    for_each_frame(r, o,
+                   [&](const std::vector<std::uint64_t>& labels) { cells.put(labels.data(), 8 * labels.size()); });
     cells.finish();
   };
   auto write_ends = [&] {
@@ -196,16 +198,23 @@ void write_vtu(const TetReader& r, OutputFile& f, const MeshExportOptions& o) {
   auto write_types = [&] {
     VtuArray types = begin(P + 3);
     const std::vector<std::uint8_t> tetra(kPointChunk, 10);  // VTK_TETRA
-    for (std::uint64_t i = 0; i < t; i += kPointChunk) types.put(tetra.data(), std::size_t(std::min<std::uint64_t>(kPointChunk, t - i)));
+    for (std::uint64_t i = 0; i < t; i += kPointChunk)
+      types.put(tetra.data(), std::size_t(std::min<std::uint64_t>(kPointChunk, t - i)));
     types.finish();
   };
   for (const int b : order) {
-    if (b == 0) write_ids();
-    else if (b < P) write_point_data(b - 1);
-    else if (b == P) write_xyz();
-    else if (b == P + 1) write_cells();
-    else if (b == P + 2) write_ends();
-    else write_types();
+    if (b == 0)
+      write_ids();
+    else if (b < P)
+      write_point_data(b - 1);
+    else if (b == P)
+      write_xyz();
+    else if (b == P + 1)
+      write_cells();
+    else if (b == P + 2)
+      write_ends();
+    else
+      write_types();
   }
   f.write("\n  </AppendedData>\n</VTKFile>\n");
   if (level > 0) {
@@ -363,12 +372,18 @@ MeshFormat mesh_format_for(const std::string& path) {
 
 const char* mesh_format_name(MeshFormat format) {
   switch (format) {
-    case MeshFormat::kVtu: return "VTK XML unstructured grid (.vtu)";
-    case MeshFormat::kVtk: return "legacy VTK unstructured grid (.vtk)";
-    case MeshFormat::kMedit: return "Medit (.mesh)";
-    case MeshFormat::kGmsh: return "Gmsh 4.1 (.msh)";
-    case MeshFormat::kTetgen: return "TetGen (.node + .ele)";
-    case MeshFormat::kXdmf: return "XDMF 3 + HDF5 (.xdmf + .h5)";
+    case MeshFormat::kVtu:
+      return "VTK XML unstructured grid (.vtu)";
+    case MeshFormat::kVtk:
+      return "legacy VTK unstructured grid (.vtk)";
+    case MeshFormat::kMedit:
+      return "Medit (.mesh)";
+    case MeshFormat::kGmsh:
+      return "Gmsh 4.1 (.msh)";
+    case MeshFormat::kTetgen:
+      return "TetGen (.node + .ele)";
+    case MeshFormat::kXdmf:
+      return "XDMF 3 + HDF5 (.xdmf + .h5)";
   }
   return "?";
 }
@@ -400,13 +415,14 @@ MeshExportResult export_mesh(const TetReader& reader, const std::string& path, M
     for (std::size_t j = 0; j < k; ++j)
       if (options.point_data[j].name == a.name) throw UsageError("point data name '" + a.name + "' is given twice");
     if (a.values.size() != reader.point_count()) {
-      throw UsageError("point data '" + a.name + "' has " + std::to_string(a.values.size()) + " values, the container has " +
-                       std::to_string(reader.point_count()) + " points");
+      throw UsageError("point data '" + a.name + "' has " + std::to_string(a.values.size()) +
+                       " values, the container has " + std::to_string(reader.point_count()) + " points");
     }
   }
   if (format == MeshFormat::kXdmf && !hdf5_available()) {
-    throw UsageError(path + ": .xdmf needs HDF5 for its heavy data, and this tetstream was built without it "
-                            "(install libhdf5-dev and rebuild, or convert to .vtu)");
+    throw UsageError(path +
+                     ": .xdmf needs HDF5 for its heavy data, and this tetstream was built without it "
+                     "(install libhdf5-dev and rebuild, or convert to .vtu)");
   }
   reader.verify_points();
   MeshExportResult result;
@@ -432,12 +448,21 @@ MeshExportResult export_mesh(const TetReader& reader, const std::string& path, M
   }
   OutputFile f(path);
   switch (format) {
-    case MeshFormat::kVtu: write_vtu(reader, f, options); break;
-    case MeshFormat::kVtk: write_vtk(reader, f, options); break;
-    case MeshFormat::kMedit: write_medit(reader, f, options); break;
-    case MeshFormat::kGmsh: write_gmsh(reader, f, options); break;
+    case MeshFormat::kVtu:
+      write_vtu(reader, f, options);
+      break;
+    case MeshFormat::kVtk:
+      write_vtk(reader, f, options);
+      break;
+    case MeshFormat::kMedit:
+      write_medit(reader, f, options);
+      break;
+    case MeshFormat::kGmsh:
+      write_gmsh(reader, f, options);
+      break;
     case MeshFormat::kTetgen:
-    case MeshFormat::kXdmf: break;
+    case MeshFormat::kXdmf:
+      break;
   }
   finish(f);
   return result;

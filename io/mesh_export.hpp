@@ -28,9 +28,9 @@
 // names: .vtu Float64 DataArrays in PointData, .vtk SCALARS NAME double, .msh one
 // $NodeData view each, .xdmf /NAME N float64 and an Attribute.
 //
-// Streaming in bounded memory (besides the point data arrays given): one pass over the points, then one over the frames (the
-// counts the headers need are in the container's header and footer), whatever the
-// size of the output. Each file goes to NAME.partial and is renamed when complete.
+// Streaming in bounded memory (besides the point data arrays given): one pass over the points, then one over the frames
+// (the counts the headers need are in the container's header and footer), whatever the size of the output. Each file
+// goes to NAME.partial and is renamed when complete.
 #include "io/tet_reader.hpp"
 
 #include <cstdint>

@@ -79,8 +79,10 @@ void put_big_endian(char* out, T value) {
   using U = std::conditional_t<sizeof(T) == 8, std::uint64_t, std::uint32_t>;
   U bits = std::bit_cast<U>(value);
   if constexpr (std::endian::native == std::endian::little) {
-    if constexpr (sizeof(T) == 8) bits = __builtin_bswap64(bits);
-    else bits = __builtin_bswap32(bits);
+    if constexpr (sizeof(T) == 8)
+      bits = __builtin_bswap64(bits);
+    else
+      bits = __builtin_bswap32(bits);
   }
   std::memcpy(out, &bits, sizeof(T));
 }

@@ -21,8 +21,10 @@ class VtkArray {
       return;
     }
     for (std::size_t i = 0; i < k; ++i) {
-      if constexpr (std::is_floating_point_v<T>) text_.d(v[i]);
-      else text_.u(std::uint64_t(v[i]));
+      if constexpr (std::is_floating_point_v<T>)
+        text_.d(v[i]);
+      else
+        text_.u(std::uint64_t(v[i]));
       text_.c(i + 1 == k ? '\n' : ' ');
     }
   }

@@ -71,11 +71,20 @@ std::string xml_escaped(const std::string& s) {
   std::string out;
   for (const char c : s) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -89,22 +98,28 @@ std::string xdmf_text(const std::string& h5_name, std::uint64_t n, std::uint64_t
   };
   std::string point_data;  // (names are plain: export_mesh checked them)
   for (const PointDataArray& a : o.point_data) {
-    point_data += "      <Attribute Name=\"" + a.name + "\" AttributeType=\"Scalar\" Center=\"Node\">\n"
-                  "        " + item(N, "Float", ("point_data/" + a.name).c_str()) + "      </Attribute>\n";
+    point_data += "      <Attribute Name=\"" + a.name +
+                  "\" AttributeType=\"Scalar\" Center=\"Node\">\n"
+                  "        " +
+                  item(N, "Float", ("point_data/" + a.name).c_str()) + "      </Attribute>\n";
   }
   return "<?xml version=\"1.0\"?>\n"
          "<Xdmf Version=\"3.0\">\n"
          "  <Domain>\n"
          "    <Grid Name=\"tetstream\" GridType=\"Uniform\">\n"
-         "      <Topology TopologyType=\"Tetrahedron\" NumberOfElements=\"" + T + "\" NodesPerElement=\"4\">\n"
-         "        " + item(T + " 4", "Int", "tets") +
+         "      <Topology TopologyType=\"Tetrahedron\" NumberOfElements=\"" +
+         T +
+         "\" NodesPerElement=\"4\">\n"
+         "        " +
+         item(T + " 4", "Int", "tets") +
          "      </Topology>\n"
          "      <Geometry GeometryType=\"XYZ\">\n"
-         "        " + item(N + " 3", "Float", "points") +
+         "        " +
+         item(N + " 3", "Float", "points") +
          "      </Geometry>\n"
          "      <Attribute Name=\"original_id\" AttributeType=\"Scalar\" Center=\"Node\">\n"
-         "        " + item(N, "Int", "original_id") +
-         "      </Attribute>\n" + point_data +
+         "        " +
+         item(N, "Int", "original_id") + "      </Attribute>\n" + point_data +
          "    </Grid>\n"
          "  </Domain>\n"
          "</Xdmf>\n";
@@ -151,11 +166,13 @@ void write_xdmf(const TetReader& r, const std::string& path, const MeshExportOpt
       tets.write(H5T_NATIVE_UINT64, first, labels.size() / 4, labels.data());
       first += labels.size() / 4;
     });
-    if (H5Fflush(file.get(), H5F_SCOPE_LOCAL) < 0 || !file.close()) throw IoError(cleanup.path + ": write failed (disk full?)");
+    if (H5Fflush(file.get(), H5F_SCOPE_LOCAL) < 0 || !file.close())
+      throw IoError(cleanup.path + ": write failed (disk full?)");
   }
   {
     // HDF5 opened the partial file by name: it must still be the claimed one.
-    struct stat at {}, held {};
+    struct stat at {
+    }, held{};
     if (::lstat(cleanup.path.c_str(), &at) != 0 || ::fstat(claim.fd(), &held) != 0 || at.st_dev != held.st_dev ||
         at.st_ino != held.st_ino)
       throw IoError(cleanup.path + ": replaced while it was written");
@@ -169,7 +186,7 @@ void write_xdmf(const TetReader& r, const std::string& path, const MeshExportOpt
   note_input(h5);  // a later output of this process (--json-file) never replaces it
   result.bytes += xdmf.offset();
   xdmf.commit();
-  struct stat st{};
+  struct stat st {};
   result.bytes += ::stat(h5.c_str(), &st) == 0 ? std::uint64_t(st.st_size) : 0;
   result.files.push_back(path);
   result.files.push_back(h5);

@@ -70,7 +70,7 @@ ScalarFileReader::ScalarFileReader(std::string path, std::uint64_t count) : path
   fd_ = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw InputError(path_ + ": cannot open: " + std::strerror(errno));
   note_input_fd(fd_);
-  struct stat st{};
+  struct stat st {};
   ::fstat(fd_, &st);
   const std::uint64_t size = std::uint64_t(st.st_size);
   unsigned char pre[10] = {};
@@ -83,7 +83,8 @@ ScalarFileReader::ScalarFileReader(std::string path, std::uint64_t count) : path
     if (!pread_exactly(fd_, h.data(), hl, 10)) throw InputError::at_byte(path_, 10, "truncated .npy header");
     data_offset_ = 10 + hl;
     const bool f8 = h.find("'<f8'") != std::string::npos, f4 = h.find("'<f4'") != std::string::npos;
-    if (!f8 && !f4) throw InputError::at_byte(path_, 10, "masses must be a little-endian float64 or float32 .npy array");
+    if (!f8 && !f4)
+      throw InputError::at_byte(path_, 10, "masses must be a little-endian float64 or float32 .npy array");
     if (h.find("'fortran_order': True") != std::string::npos)
       throw InputError::at_byte(path_, 10, "Fortran-ordered .npy arrays are not read");
     item_ = f8 ? 8 : 4;
@@ -95,8 +96,9 @@ ScalarFileReader::ScalarFileReader(std::string path, std::uint64_t count) : path
   }
   const std::uint64_t have = (size - data_offset_) / item_;
   if (have != count_ || (size - data_offset_) % item_ != 0)
-    throw InputError::at_byte(path_, data_offset_, what + " holds " + std::to_string(have) +
-                                                      " values, the container's input had " + std::to_string(count_));
+    throw InputError::at_byte(
+        path_, data_offset_,
+        what + " holds " + std::to_string(have) + " values, the container's input had " + std::to_string(count_));
   buf_.resize(std::size_t(1) << 20);
 }
 
@@ -121,14 +123,16 @@ double ScalarFileReader::at(std::uint64_t index) {
     for (int i = 7; i >= 0; --i) u = u << 8 | p[i];
     std::memcpy(&v, &u, 8);
   } else {
-    std::uint32_t u = std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
+    std::uint32_t u =
+        std::uint32_t(p[0]) | std::uint32_t(p[1]) << 8 | std::uint32_t(p[2]) << 16 | std::uint32_t(p[3]) << 24;
     float f;
     std::memcpy(&f, &u, 4);
     v = f;
   }
   if (!std::isfinite(v) || v <= 0.0)
-    throw InputError::at_byte(path_, data_offset_ + index * item_,
-                              "mass " + std::to_string(v) + " of point " + std::to_string(index) + " is not finite and > 0");
+    throw InputError::at_byte(
+        path_, data_offset_ + index * item_,
+        "mass " + std::to_string(v) + " of point " + std::to_string(index) + " is not finite and > 0");
   return v;
 }
 
@@ -154,7 +158,7 @@ std::vector<double> read_npy_values(const std::string& path, std::uint64_t count
     int fd;
     ~Close() { ::close(fd); }
   } close_fd{fd};
-  struct stat st{};
+  struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) throw InputError(path + ": not a regular file");
   const std::uint64_t size = std::uint64_t(st.st_size);
   unsigned char pre[12] = {};
@@ -168,17 +172,20 @@ std::vector<double> read_npy_values(const std::string& path, std::uint64_t count
   }
   if (hl > size - header_at) throw InputError::at_byte(path, header_at, "truncated .npy header");
   std::string h(std::size_t(hl), '\0');
-  if (!pread_exactly(fd, h.data(), h.size(), header_at)) throw InputError::at_byte(path, header_at, "truncated .npy header");
+  if (!pread_exactly(fd, h.data(), h.size(), header_at))
+    throw InputError::at_byte(path, header_at, "truncated .npy header");
   const std::uint64_t data_at = header_at + hl;
   const std::size_t d = h.find("'descr': '");
   const std::string descr = d == std::string::npos ? "" : h.substr(d + 10, h.find('\'', d + 10) - d - 10);
   // '<f8', '<i4', '|u1'...: the byte order, the kind, the item size.
   const bool known = descr.size() == 3 && (descr[0] == '<' || (descr[0] == '|' && descr[2] == '1')) &&
                      (descr[1] == 'f' ? (descr[2] == '4' || descr[2] == '8')
-                                      : (descr[1] == 'i' || descr[1] == 'u') && std::string("1248").find(descr[2]) != std::string::npos);
+                                      : (descr[1] == 'i' || descr[1] == 'u') &&
+                                            std::string("1248").find(descr[2]) != std::string::npos);
   if (!known) {
-    throw InputError::at_byte(path, header_at, "dtype '" + descr + "' is not one of float64, float32 or a " +
-                                                   "little-endian integer (convert it with numpy's astype)");
+    throw InputError::at_byte(path, header_at,
+                              "dtype '" + descr + "' is not one of float64, float32 or a " +
+                                  "little-endian integer (convert it with numpy's astype)");
   }
   if (h.find("'fortran_order': True") != std::string::npos)
     throw InputError::at_byte(path, header_at, "Fortran-ordered .npy arrays are not read");
@@ -190,11 +197,13 @@ std::vector<double> read_npy_values(const std::string& path, std::uint64_t count
   const std::size_t item = std::size_t(descr[2] - '0');
   const std::uint64_t have = (size - data_at) / item;
   if (have != count || (size - data_at) % item != 0) {
-    throw InputError::at_byte(path, data_at, "holds " + std::to_string(have) + " values, the container has " +
-                                                 std::to_string(count) + " points");
+    throw InputError::at_byte(
+        path, data_at,
+        "holds " + std::to_string(have) + " values, the container has " + std::to_string(count) + " points");
   }
   std::vector<unsigned char> bytes(std::size_t(count) * item);
-  if (!pread_exactly(fd, bytes.data(), bytes.size(), data_at)) throw IoError(path + ": read failed: " + std::strerror(errno));
+  if (!pread_exactly(fd, bytes.data(), bytes.size(), data_at))
+    throw IoError(path + ": read failed: " + std::strerror(errno));
   std::vector<double> values(static_cast<std::size_t>(count));
   constexpr double kExact = 9007199254740992.0;  // 2^53: beyond it a double skips integers
   for (std::size_t i = 0; i < values.size(); ++i) {
@@ -211,13 +220,16 @@ std::vector<double> read_npy_values(const std::string& path, std::uint64_t count
       }
     } else if (descr[1] == 'u') {
       v = double(u);
-      if (u > std::uint64_t(kExact)) throw InputError::at_byte(path, data_at + i * item, "integer " + std::to_string(u) + " is not exact in float64");
+      if (u > std::uint64_t(kExact))
+        throw InputError::at_byte(path, data_at + i * item,
+                                  "integer " + std::to_string(u) + " is not exact in float64");
     } else {
       const unsigned shift = unsigned(64 - 8 * item);
       const std::int64_t x = std::int64_t(u << shift) >> shift;  // sign-extend
       v = double(x);
       if (x > std::int64_t(kExact) || x < -std::int64_t(kExact))
-        throw InputError::at_byte(path, data_at + i * item, "integer " + std::to_string(x) + " is not exact in float64");
+        throw InputError::at_byte(path, data_at + i * item,
+                                  "integer " + std::to_string(x) + " is not exact in float64");
     }
     values[i] = v;
   }

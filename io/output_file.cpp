@@ -99,7 +99,8 @@ void check_output_path(const std::string& path) {
     throw UsageError(path + " is a symbolic link: tetstream does not write through links (give the real path)");
   if (S_ISDIR(st.st_mode)) throw UsageError(path + " is a directory: give the output file's name");
   if (!S_ISREG(st.st_mode))
-    throw UsageError(path + " is not a regular file (a device, pipe or socket): tetstream writes regular files, "
+    throw UsageError(path +
+                     " is not a regular file (a device, pipe or socket): tetstream writes regular files, "
                      "or - for standard output where the command supports it");
   if (is_noted(st)) throw UsageError(path + " is a file this command reads or has written: refusing to write over it");
 }
@@ -140,7 +141,8 @@ OutputClaim::OutputClaim(std::string path, Kind kind, const std::string& main)
   if (!S_ISREG(st.st_mode) || st.st_nlink != 1) {
     ::close(fd_);
     fd_ = -1;
-    throw UsageError(partial_ + " is not a regular file of its own (a device, pipe, or a hard link to another file): "
+    throw UsageError(partial_ +
+                     " is not a regular file of its own (a device, pipe, or a hard link to another file): "
                      "remove it");
   }
   if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
@@ -204,8 +206,8 @@ std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t k
   }
   if (std::uint64_t(st.st_size) < keep) {
     ::close(fd);
-    throw IoError(partial + ": has " + std::to_string(st.st_size) + " bytes, fewer than the " +
-                  std::to_string(keep) + " to resume after");
+    throw IoError(partial + ": has " + std::to_string(st.st_size) + " bytes, fewer than the " + std::to_string(keep) +
+                  " to resume after");
   }
   if (::ftruncate(fd, off_t(keep)) != 0 || ::lseek(fd, off_t(keep), SEEK_SET) < 0) {
     ::close(fd);
@@ -217,7 +219,8 @@ std::unique_ptr<OutputFile> OutputFile::reopen(std::string path, std::uint64_t k
 }
 
 std::unique_ptr<OutputFile> OutputFile::to_stdout(std::size_t buffer_bytes) {
-  if (::isatty(STDOUT_FILENO)) throw UsageError("-o -: standard output is a terminal; pipe it into a command or a file");
+  if (::isatty(STDOUT_FILENO))
+    throw UsageError("-o -: standard output is a terminal; pipe it into a command or a file");
   refuse_stdout_into_input();
   const int fd = ::fcntl(STDOUT_FILENO, F_DUPFD_CLOEXEC, 0);
   if (fd < 0) fail("cannot duplicate", "standard output");
@@ -364,7 +367,8 @@ OutputPart::OutputPart(const std::string& partial_path, Identity identity) : pat
   fd_ = ::open(path_.c_str(), O_RDWR | O_NOFOLLOW | O_CLOEXEC);
   if (fd_ < 0) throw IoError(path_ + ": cannot open the output being written: " + std::strerror(errno));
   struct stat st {};
-  if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode) || Identity{std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)} != identity) {
+  if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode) ||
+      Identity{std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)} != identity) {
     ::close(fd_);
     throw IoError(path_ + ": not the file this job is writing (it was replaced)");
   }

@@ -8,24 +8,40 @@ namespace tetstream::io::detail {
 
 std::size_t scalar_size(Scalar s) {
   switch (s) {
-    case Scalar::kI8: case Scalar::kU8: return 1;
-    case Scalar::kI16: case Scalar::kU16: return 2;
-    case Scalar::kI32: case Scalar::kU32: case Scalar::kF32: return 4;
-    case Scalar::kF64: return 8;
+    case Scalar::kI8:
+    case Scalar::kU8:
+      return 1;
+    case Scalar::kI16:
+    case Scalar::kU16:
+      return 2;
+    case Scalar::kI32:
+    case Scalar::kU32:
+    case Scalar::kF32:
+      return 4;
+    case Scalar::kF64:
+      return 8;
   }
   return 0;
 }
 
 const char* scalar_name(Scalar s) {
   switch (s) {
-    case Scalar::kI8: return "int8";
-    case Scalar::kU8: return "uint8";
-    case Scalar::kI16: return "int16";
-    case Scalar::kU16: return "uint16";
-    case Scalar::kI32: return "int32";
-    case Scalar::kU32: return "uint32";
-    case Scalar::kF32: return "float32";
-    case Scalar::kF64: return "float64";
+    case Scalar::kI8:
+      return "int8";
+    case Scalar::kU8:
+      return "uint8";
+    case Scalar::kI16:
+      return "int16";
+    case Scalar::kU16:
+      return "uint16";
+    case Scalar::kI32:
+      return "int32";
+    case Scalar::kU32:
+      return "uint32";
+    case Scalar::kF32:
+      return "float32";
+    case Scalar::kF64:
+      return "float64";
   }
   return "?";
 }
@@ -45,9 +61,12 @@ inline double load_as_double(const char* p) {
     U bits;
     std::memcpy(&bits, p, sizeof(U));
     if constexpr (Swap) {
-      if constexpr (sizeof(U) == 2) bits = __builtin_bswap16(bits);
-      else if constexpr (sizeof(U) == 4) bits = __builtin_bswap32(bits);
-      else bits = __builtin_bswap64(bits);
+      if constexpr (sizeof(U) == 2)
+        bits = __builtin_bswap16(bits);
+      else if constexpr (sizeof(U) == 4)
+        bits = __builtin_bswap32(bits);
+      else
+        bits = __builtin_bswap64(bits);
     }
     T v;
     std::memcpy(&v, &bits, sizeof(T));
@@ -57,8 +76,7 @@ inline double load_as_double(const char* p) {
 
 // All three coordinates of one type: the common case, one tight loop per type.
 template <class T, bool Swap>
-void decode_same(const char* src, std::size_t stride, const std::uint64_t* off, std::size_t n,
-                 double* dst) {
+void decode_same(const char* src, std::size_t stride, const std::uint64_t* off, std::size_t n, double* dst) {
   const std::size_t ox = off[0], oy = off[1], oz = off[2];
   for (std::size_t i = 0; i < n; ++i) {
     const char* r = src + i * stride;
@@ -71,14 +89,22 @@ void decode_same(const char* src, std::size_t stride, const std::uint64_t* off, 
 template <bool Swap>
 double load_any(Scalar s, const char* p) {
   switch (s) {
-    case Scalar::kI8: return load_as_double<std::int8_t, Swap>(p);
-    case Scalar::kU8: return load_as_double<std::uint8_t, Swap>(p);
-    case Scalar::kI16: return load_as_double<std::int16_t, Swap>(p);
-    case Scalar::kU16: return load_as_double<std::uint16_t, Swap>(p);
-    case Scalar::kI32: return load_as_double<std::int32_t, Swap>(p);
-    case Scalar::kU32: return load_as_double<std::uint32_t, Swap>(p);
-    case Scalar::kF32: return load_as_double<float, Swap>(p);
-    case Scalar::kF64: return load_as_double<double, Swap>(p);
+    case Scalar::kI8:
+      return load_as_double<std::int8_t, Swap>(p);
+    case Scalar::kU8:
+      return load_as_double<std::uint8_t, Swap>(p);
+    case Scalar::kI16:
+      return load_as_double<std::int16_t, Swap>(p);
+    case Scalar::kU16:
+      return load_as_double<std::uint16_t, Swap>(p);
+    case Scalar::kI32:
+      return load_as_double<std::int32_t, Swap>(p);
+    case Scalar::kU32:
+      return load_as_double<std::uint32_t, Swap>(p);
+    case Scalar::kF32:
+      return load_as_double<float, Swap>(p);
+    case Scalar::kF64:
+      return load_as_double<double, Swap>(p);
   }
   return 0;
 }
@@ -88,22 +114,30 @@ using DecodeFn = void (*)(const char*, std::size_t, const std::uint64_t*, std::s
 template <bool Swap>
 DecodeFn pick_same(Scalar s) {
   switch (s) {
-    case Scalar::kI8: return decode_same<std::int8_t, Swap>;
-    case Scalar::kU8: return decode_same<std::uint8_t, Swap>;
-    case Scalar::kI16: return decode_same<std::int16_t, Swap>;
-    case Scalar::kU16: return decode_same<std::uint16_t, Swap>;
-    case Scalar::kI32: return decode_same<std::int32_t, Swap>;
-    case Scalar::kU32: return decode_same<std::uint32_t, Swap>;
-    case Scalar::kF32: return decode_same<float, Swap>;
-    case Scalar::kF64: return decode_same<double, Swap>;
+    case Scalar::kI8:
+      return decode_same<std::int8_t, Swap>;
+    case Scalar::kU8:
+      return decode_same<std::uint8_t, Swap>;
+    case Scalar::kI16:
+      return decode_same<std::int16_t, Swap>;
+    case Scalar::kU16:
+      return decode_same<std::uint16_t, Swap>;
+    case Scalar::kI32:
+      return decode_same<std::int32_t, Swap>;
+    case Scalar::kU32:
+      return decode_same<std::uint32_t, Swap>;
+    case Scalar::kF32:
+      return decode_same<float, Swap>;
+    case Scalar::kF64:
+      return decode_same<double, Swap>;
   }
   return nullptr;
 }
 
 class BinaryPointReader final : public PointReader {
  public:
-  BinaryPointReader(std::unique_ptr<ByteSource> src, BinaryLayout layout,
-                    std::optional<std::uint64_t> count, bool promised, std::string format_name)
+  BinaryPointReader(std::unique_ptr<ByteSource> src, BinaryLayout layout, std::optional<std::uint64_t> count,
+                    bool promised, std::string format_name)
       : src_(std::move(src)), layout_(std::move(layout)), promised_(promised) {
     count_ = count;
     format_name_ = std::move(format_name);
@@ -114,8 +148,8 @@ class BinaryPointReader final : public PointReader {
     if (same_type_) decode_ = swap_ ? pick_same<true>(t) : pick_same<false>(t);
     float32_ = same_type_ && t == Scalar::kF32;
     // Packed native float64 xyz: read(2) straight into the caller's chunk.
-    direct_ = same_type_ && t == Scalar::kF64 && !swap_ && layout_.stride == 24 &&
-              layout_.offset[0] == 0 && layout_.offset[1] == 8 && layout_.offset[2] == 16;
+    direct_ = same_type_ && t == Scalar::kF64 && !swap_ && layout_.stride == 24 && layout_.offset[0] == 0 &&
+              layout_.offset[1] == 8 && layout_.offset[2] == 16;
   }
 
   std::size_t read(double* xyz, std::size_t max_points) override {
@@ -124,9 +158,8 @@ class BinaryPointReader final : public PointReader {
     std::size_t n = 0;
     if (limit > 0) n = direct_ ? read_direct(xyz, limit) : read_decoded(xyz, limit);
     const std::uint64_t first = points_read_;
-    check_finite(xyz, n, source_name_, [&](std::size_t i) {
-      return "byte " + std::to_string(coordinate_offset(first + i / 3, i % 3));
-    });
+    check_finite(xyz, n, source_name_,
+                 [&](std::size_t i) { return "byte " + std::to_string(coordinate_offset(first + i / 3, i % 3)); });
     points_read_ += n;
     if (n == 0 && points_read_ == 0) {
       throw InputError::at_byte(source_name_, src_->offset(), "no points");
@@ -207,10 +240,10 @@ class BinaryPointReader final : public PointReader {
     // the end of the input after whole records.
     const std::uint64_t at = layout_.data_start + index * layout_.stride;
     std::string problem = "truncated: input ends ";
-    problem += partial_bytes ? "inside " + layout_.record + " " + std::to_string(index) + " (" +
-                                   std::to_string(partial_bytes) + " of " +
-                                   std::to_string(layout_.stride) + " bytes present)"
-                             : "after " + std::to_string(index) + " " + layout_.records;
+    problem += partial_bytes
+                   ? "inside " + layout_.record + " " + std::to_string(index) + " (" + std::to_string(partial_bytes) +
+                         " of " + std::to_string(layout_.stride) + " bytes present)"
+                   : "after " + std::to_string(index) + " " + layout_.records;
     if (promised_) problem += ", but the header promises " + std::to_string(*count_);
     throw InputError::at_byte(source_name_, at, problem);
   }
@@ -242,17 +275,18 @@ std::unique_ptr<PointReader> make_binary_reader(std::unique_ptr<ByteSource> src,
                                   " bytes: more than the largest record we read (" +
                                   std::to_string(PointReadOptions::kMaxRecordBytes) + " bytes)");
   }
-  if (!promised) return std::make_unique<BinaryPointReader>(std::move(src), std::move(layout), count, false, std::move(format_name));
+  if (!promised)
+    return std::make_unique<BinaryPointReader>(std::move(src), std::move(layout), count, false, std::move(format_name));
   // A regular file must hold every record the header promises: check before any work.
   if (count && src->size()) {
     const std::uint64_t have = *src->size() > layout.data_start ? *src->size() - layout.data_start : 0;
     if (*count > have / layout.stride) {
-      throw InputError::at_byte(
-          src->name(), *src->size(),
-          "truncated: the header promises " + std::to_string(*count) + " " + layout.records + " of " +
-              std::to_string(layout.stride) + " bytes from byte " + std::to_string(layout.data_start) +
-              " but the file holds " + std::to_string(have) + " bytes of data (" +
-              std::to_string(have / layout.stride) + " " + layout.records + ")");
+      throw InputError::at_byte(src->name(), *src->size(),
+                                "truncated: the header promises " + std::to_string(*count) + " " + layout.records +
+                                    " of " + std::to_string(layout.stride) + " bytes from byte " +
+                                    std::to_string(layout.data_start) + " but the file holds " + std::to_string(have) +
+                                    " bytes of data (" + std::to_string(have / layout.stride) + " " + layout.records +
+                                    ")");
     }
   }
   std::uint64_t bytes = 0;  // (on stdin the count is not checked against a size above)
@@ -262,7 +296,8 @@ std::unique_ptr<PointReader> make_binary_reader(std::unique_ptr<ByteSource> src,
                                   std::to_string(layout.stride) + " bytes: more than any file can hold");
   }
   if (count && *count == 0) {
-    throw InputError::at_byte(src->name(), layout.data_start, "the header declares 0 " + layout.records + ": no points");
+    throw InputError::at_byte(src->name(), layout.data_start,
+                              "the header declares 0 " + layout.records + ": no points");
   }
   // Nothing may follow the records: on a regular file, refuse before any work.
   if (count && src->size() && layout.tail == BinaryLayout::Tail::kNothing) {
@@ -285,9 +320,8 @@ std::unique_ptr<PointReader> open_raw(std::unique_ptr<ByteSource> src, ScalarTyp
   layout.stride = options.stride ? options.stride : 3 * w;
   std::uint64_t end = 0;
   if (!checked_add(options.offset, 3 * w, end) || end > layout.stride) {
-    throw UsageError("--offset " + std::to_string(options.offset) + " + 3 coordinates of " +
-                     std::to_string(w) + " bytes do not fit in a record of --stride " +
-                     std::to_string(layout.stride) + " bytes");
+    throw UsageError("--offset " + std::to_string(options.offset) + " + 3 coordinates of " + std::to_string(w) +
+                     " bytes do not fit in a record of --stride " + std::to_string(layout.stride) + " bytes");
   }
   for (int c = 0; c < 3; ++c) {
     layout.offset[c] = options.offset + c * w;
@@ -295,8 +329,8 @@ std::unique_ptr<PointReader> open_raw(std::unique_ptr<ByteSource> src, ScalarTyp
   }
   layout.big_endian = options.byte_order == ByteOrder::kBig;
   layout.record = "record";
-  std::string name = std::string("raw ") + (w == 4 ? "f32 " : "f64 ") +
-                     (layout.big_endian ? "big-endian" : "little-endian");
+  std::string name =
+      std::string("raw ") + (w == 4 ? "f32 " : "f64 ") + (layout.big_endian ? "big-endian" : "little-endian");
   if (layout.stride != 3 * w || options.offset)
     name += ", stride " + std::to_string(layout.stride) + ", offset " + std::to_string(options.offset);
 
@@ -306,10 +340,10 @@ std::unique_ptr<PointReader> open_raw(std::unique_ptr<ByteSource> src, ScalarTyp
     if (size == 0) throw InputError::at_byte(src->name(), 0, "empty file: no points");
     if (size % layout.stride != 0) {
       throw InputError::at_byte(src->name(), size - size % layout.stride,
-                                "truncated: file size " + std::to_string(size) +
-                                    " is not a multiple of the " + std::to_string(layout.stride) +
-                                    "-byte record (" + std::to_string(size / layout.stride) +
-                                    " records and " + std::to_string(size % layout.stride) + " bytes)");
+                                "truncated: file size " + std::to_string(size) + " is not a multiple of the " +
+                                    std::to_string(layout.stride) + "-byte record (" +
+                                    std::to_string(size / layout.stride) + " records and " +
+                                    std::to_string(size % layout.stride) + " bytes)");
     }
     count = size / layout.stride;
   }

@@ -24,9 +24,12 @@ class ConcatPointReader final : public PointReader {
     for (const auto& p : paths_) {
       const auto r = open_one_(p);  // checks the header; closed again at once
       float32_ = float32_ && r->float32_input();
-      if (!r->count()) known = false;
-      else if (!checked_add(total, *r->count(), total)) throw InputError(p + ": the files hold more than 2^64 points");
-      if (formats.find(r->format_name()) == std::string::npos) formats += (formats.empty() ? "" : "; ") + r->format_name();
+      if (!r->count())
+        known = false;
+      else if (!checked_add(total, *r->count(), total))
+        throw InputError(p + ": the files hold more than 2^64 points");
+      if (formats.find(r->format_name()) == std::string::npos)
+        formats += (formats.empty() ? "" : "; ") + r->format_name();
       sizes_.push_back(r->source_size().value_or(0));
       counts_.push_back(r->count());
     }
@@ -115,7 +118,7 @@ class ConcatPointReader final : public PointReader {
   OpenOne open_one_;
   std::vector<std::uint64_t> sizes_;
   std::vector<std::optional<std::uint64_t>> counts_;  // each file's, when its header gives it
-  std::vector<std::uint64_t> first_;  // index of the first point of each file opened so far
+  std::vector<std::uint64_t> first_;                  // index of the first point of each file opened so far
   std::unique_ptr<PointReader> current_;
   std::size_t next_ = 0;
   std::uint64_t bytes_done_ = 0;

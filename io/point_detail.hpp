@@ -17,8 +17,12 @@ namespace tetstream::io::detail {
 // Overflow-checked arithmetic for every size that comes from a header or an option:
 // one rule in one place. Each returns false (and leaves r unspecified) when the exact
 // result does not fit in 64 bits.
-inline bool checked_add(std::uint64_t a, std::uint64_t b, std::uint64_t& r) { return !__builtin_add_overflow(a, b, &r); }
-inline bool checked_mul(std::uint64_t a, std::uint64_t b, std::uint64_t& r) { return !__builtin_mul_overflow(a, b, &r); }
+inline bool checked_add(std::uint64_t a, std::uint64_t b, std::uint64_t& r) {
+  return !__builtin_add_overflow(a, b, &r);
+}
+inline bool checked_mul(std::uint64_t a, std::uint64_t b, std::uint64_t& r) {
+  return !__builtin_mul_overflow(a, b, &r);
+}
 
 // Scalar types a binary record may hold (PLY property types; raw and npy use the floats).
 enum class Scalar : std::uint8_t { kI8, kU8, kI16, kU16, kI32, kU32, kF32, kF64 };
@@ -29,8 +33,8 @@ constexpr bool kHostLittle = std::endian::native == std::endian::little;
 
 // Where x, y, z sit in a fixed-size binary record, and how to decode them.
 struct BinaryLayout {
-  std::uint64_t data_start = 0;  // absolute byte offset of record 0
-  std::uint64_t stride = 24;     // bytes per record
+  std::uint64_t data_start = 0;          // absolute byte offset of record 0
+  std::uint64_t stride = 24;             // bytes per record
   std::uint64_t offset[3] = {0, 8, 16};  // byte offset of x, y, z within a record
   Scalar type[3] = {Scalar::kF64, Scalar::kF64, Scalar::kF64};
   bool big_endian = false;
@@ -140,7 +144,10 @@ inline void check_finite(const double* xyz, std::size_t n, const std::string& fi
     if (!std::isfinite(xyz[i])) {
       const char* axis = i % 3 == 0 ? "x" : i % 3 == 1 ? "y" : "z";
       throw InputError(file + ": " + where(i) + ": non-finite coordinate (" + axis + " = " +
-                       (std::isnan(xyz[i]) ? "nan" : xyz[i] > 0 ? "inf" : "-inf") + ")");
+                       (std::isnan(xyz[i]) ? "nan"
+                        : xyz[i] > 0       ? "inf"
+                                           : "-inf") +
+                       ")");
     }
   }
 }

@@ -10,22 +10,32 @@ namespace tetstream::io {
 
 const char* to_string(PointFormat f) {
   switch (f) {
-    case PointFormat::kAuto: return "auto";
-    case PointFormat::kRaw: return "raw";
-    case PointFormat::kPly: return "ply";
-    case PointFormat::kNpy: return "npy";
-    case PointFormat::kText: return "text";
-    case PointFormat::kLas: return "las";
-    case PointFormat::kHdf5: return "hdf5";
+    case PointFormat::kAuto:
+      return "auto";
+    case PointFormat::kRaw:
+      return "raw";
+    case PointFormat::kPly:
+      return "ply";
+    case PointFormat::kNpy:
+      return "npy";
+    case PointFormat::kText:
+      return "text";
+    case PointFormat::kLas:
+      return "las";
+    case PointFormat::kHdf5:
+      return "hdf5";
   }
   return "?";
 }
 
 const char* to_string(ScalarType t) {
   switch (t) {
-    case ScalarType::kAuto: return "auto";
-    case ScalarType::kFloat32: return "f32";
-    case ScalarType::kFloat64: return "f64";
+    case ScalarType::kAuto:
+      return "auto";
+    case ScalarType::kFloat32:
+      return "f32";
+    case ScalarType::kFloat64:
+      return "f64";
   }
   return "?";
 }
@@ -33,18 +43,44 @@ const char* to_string(ScalarType t) {
 const char* to_string(ByteOrder o) { return o == ByteOrder::kLittle ? "little" : "big"; }
 
 void parse_format_name(std::string_view name, PointFormat& format, ScalarType& type) {
-  if (name == "raw") { format = PointFormat::kRaw; return; }
-  if (name == "f32") { format = PointFormat::kRaw; type = ScalarType::kFloat32; return; }
-  if (name == "f64") { format = PointFormat::kRaw; type = ScalarType::kFloat64; return; }
-  if (name == "ply") { format = PointFormat::kPly; return; }
-  if (name == "npy") { format = PointFormat::kNpy; return; }
+  if (name == "raw") {
+    format = PointFormat::kRaw;
+    return;
+  }
+  if (name == "f32") {
+    format = PointFormat::kRaw;
+    type = ScalarType::kFloat32;
+    return;
+  }
+  if (name == "f64") {
+    format = PointFormat::kRaw;
+    type = ScalarType::kFloat64;
+    return;
+  }
+  if (name == "ply") {
+    format = PointFormat::kPly;
+    return;
+  }
+  if (name == "npy") {
+    format = PointFormat::kNpy;
+    return;
+  }
   if (name == "text" || name == "txt" || name == "csv" || name == "xyz") {
     format = PointFormat::kText;
     return;
   }
-  if (name == "las") { format = PointFormat::kLas; return; }
-  if (name == "hdf5" || name == "h5") { format = PointFormat::kHdf5; return; }
-  if (name == "auto") { format = PointFormat::kAuto; return; }
+  if (name == "las") {
+    format = PointFormat::kLas;
+    return;
+  }
+  if (name == "hdf5" || name == "h5") {
+    format = PointFormat::kHdf5;
+    return;
+  }
+  if (name == "auto") {
+    format = PointFormat::kAuto;
+    return;
+  }
   throw UsageError("unknown point format '" + std::string(name) +
                    "' (expected raw, f32, f64, ply, npy, text, las or hdf5)");
 }
@@ -73,8 +109,7 @@ FormatGuess format_from_extension(std::string_view path) {
 }
 
 PointFormat sniff_format(const char* data, std::size_t size) {
-  if (size >= 4 && std::memcmp(data, "ply", 3) == 0 && (data[3] == '\n' || data[3] == '\r'))
-    return PointFormat::kPly;
+  if (size >= 4 && std::memcmp(data, "ply", 3) == 0 && (data[3] == '\n' || data[3] == '\r')) return PointFormat::kPly;
   if (size >= 6 && std::memcmp(data, "\x93NUMPY", 6) == 0) return PointFormat::kNpy;
   if (size >= 4 && std::memcmp(data, "LASF", 4) == 0) return PointFormat::kLas;
   if (size >= 8 && std::memcmp(data, "\x89HDF\r\n\x1a\n", 8) == 0) return PointFormat::kHdf5;

@@ -16,11 +16,11 @@ using rng::key_for;
 using rng::PointRng;
 
 // Distinct keys for the independent uses of one seed.
-constexpr std::uint64_t kPurposePoint = 0x706f696e74ULL;     // "point"
-constexpr std::uint64_t kPurposeDup = 0x6475706cULL;         // "dupl"
-constexpr std::uint64_t kPurposeClusters = 0x636c7573ULL;    // "clus"
-constexpr std::uint64_t kPurposeTerrain = 0x74657272ULL;     // "terr"
-constexpr std::uint64_t kPurposeBuildings = 0x626c6467ULL;   // "bldg"
+constexpr std::uint64_t kPurposePoint = 0x706f696e74ULL;    // "point"
+constexpr std::uint64_t kPurposeDup = 0x6475706cULL;        // "dupl"
+constexpr std::uint64_t kPurposeClusters = 0x636c7573ULL;   // "clus"
+constexpr std::uint64_t kPurposeTerrain = 0x74657272ULL;    // "terr"
+constexpr std::uint64_t kPurposeBuildings = 0x626c6467ULL;  // "bldg"
 
 // The terrain: a 1 km x 1 km airborne LiDAR tile (see distribution_help).
 constexpr double kTileMetres = 1000, kCellMetres = 40, kFootprintMetres = 24;
@@ -29,13 +29,14 @@ constexpr double kOffsetX = 500000, kOffsetY = 4000000, kOffsetZ = 100;  // UTM-
 double terrain_ground(const double* phase, double x, double y) {
   constexpr double tau = 2 * std::numbers::pi;
   return 30 * std::sin(tau * x / 700 + phase[0]) * std::cos(tau * y / 900 + phase[1]) +
-         8 * std::sin(tau * (x + y) / 230 + phase[2]) + 1.5 * std::sin(tau * x / 57 + phase[3]) * std::sin(tau * y / 43);
+         8 * std::sin(tau * (x + y) / 230 + phase[2]) +
+         1.5 * std::sin(tau * x / 57 + phase[3]) * std::sin(tau * y / 43);
 }
 
 // The building of 40 m cell (cx, cy), if any: 30% of the cells hold one, a 24 m square
 // in the cell's middle with a flat roof 5 to 25 m above the ground at its centre.
-bool terrain_building(std::uint64_t key, const double* phase, std::int64_t cx, std::int64_t cy, double* lo,
-                      double* hi, double* roof) {
+bool terrain_building(std::uint64_t key, const double* phase, std::int64_t cx, std::int64_t cy, double* lo, double* hi,
+                      double* roof) {
   PointRng rng(key, std::uint64_t(cx) * 1000003u + std::uint64_t(cy));
   if (!(rng.uniform() < 0.3)) return false;
   const double margin = (kCellMetres - kFootprintMetres) / 2;
@@ -60,10 +61,14 @@ void terrain_point(PointRng& rng, std::uint64_t key_buildings, const double* pha
     // A wall: the point moved to the nearest side of the footprint, anywhere up to the roof.
     const double d[4] = {x - lo[0], hi[0] - x, y - lo[1], hi[1] - y};
     const int side = int(std::min_element(d, d + 4) - d);
-    if (side == 0) x = lo[0];
-    else if (side == 1) x = hi[0];
-    else if (side == 2) y = lo[1];
-    else y = hi[1];
+    if (side == 0)
+      x = lo[0];
+    else if (side == 1)
+      x = hi[0];
+    else if (side == 2)
+      y = lo[1];
+    else
+      y = hi[1];
     x = std::clamp(x, lo[0], hi[0]), y = std::clamp(y, lo[1], hi[1]);
     ground = terrain_ground(phase, x, y);
     z = ground + (roof - ground) * rng.uniform();
@@ -79,34 +84,50 @@ void terrain_point(PointRng& rng, std::uint64_t key_buildings, const double* pha
 
 const char* to_string(Distribution d) {
   switch (d) {
-    case Distribution::kUniform: return "uniform";
-    case Distribution::kBall: return "ball";
-    case Distribution::kEllipsoidShell: return "ellipsoid-shell";
-    case Distribution::kMixed: return "mixed";
-    case Distribution::kClusters: return "clusters";
-    case Distribution::kGrid: return "grid";
-    case Distribution::kSphere: return "sphere";
-    case Distribution::kTerrain: return "terrain";
-    case Distribution::kTwoPlates: return "two-plates";
-    case Distribution::kHills: return "hills";
-    case Distribution::kRoofs: return "roofs";
-    case Distribution::kCanopy: return "canopy";
-    case Distribution::kWater: return "water";
-    case Distribution::kStrips: return "strips";
-    case Distribution::kScanLines: return "scan-lines";
-    case Distribution::kSurvey: return "survey";
-    case Distribution::kIndoor: return "indoor";
+    case Distribution::kUniform:
+      return "uniform";
+    case Distribution::kBall:
+      return "ball";
+    case Distribution::kEllipsoidShell:
+      return "ellipsoid-shell";
+    case Distribution::kMixed:
+      return "mixed";
+    case Distribution::kClusters:
+      return "clusters";
+    case Distribution::kGrid:
+      return "grid";
+    case Distribution::kSphere:
+      return "sphere";
+    case Distribution::kTerrain:
+      return "terrain";
+    case Distribution::kTwoPlates:
+      return "two-plates";
+    case Distribution::kHills:
+      return "hills";
+    case Distribution::kRoofs:
+      return "roofs";
+    case Distribution::kCanopy:
+      return "canopy";
+    case Distribution::kWater:
+      return "water";
+    case Distribution::kStrips:
+      return "strips";
+    case Distribution::kScanLines:
+      return "scan-lines";
+    case Distribution::kSurvey:
+      return "survey";
+    case Distribution::kIndoor:
+      return "indoor";
   }
   return "?";
 }
 
 Distribution parse_distribution(std::string_view name) {
-  for (Distribution d :
-       {Distribution::kUniform, Distribution::kBall, Distribution::kEllipsoidShell, Distribution::kMixed,
-        Distribution::kClusters, Distribution::kGrid, Distribution::kSphere, Distribution::kTerrain,
-        Distribution::kTwoPlates, Distribution::kHills, Distribution::kRoofs, Distribution::kCanopy,
-        Distribution::kWater, Distribution::kStrips, Distribution::kScanLines, Distribution::kSurvey,
-        Distribution::kIndoor}) {
+  for (Distribution d : {Distribution::kUniform, Distribution::kBall, Distribution::kEllipsoidShell,
+                         Distribution::kMixed, Distribution::kClusters, Distribution::kGrid, Distribution::kSphere,
+                         Distribution::kTerrain, Distribution::kTwoPlates, Distribution::kHills, Distribution::kRoofs,
+                         Distribution::kCanopy, Distribution::kWater, Distribution::kStrips, Distribution::kScanLines,
+                         Distribution::kSurvey, Distribution::kIndoor}) {
     if (name == to_string(d)) return d;
   }
   if (name == "shell" || name == "ellipsoid") return Distribution::kEllipsoidShell;
@@ -117,67 +138,66 @@ Distribution parse_distribution(std::string_view name) {
 }
 
 const char* distribution_help() {
-  return
-      "Distributions (point i depends only on --seed and i, and on --n for the zoo's tiles;\n"
-      "any chunking or thread count gives the same file):\n"
-      "  uniform          x, y, z uniform in [0, 1) (multiples of 2^-53).\n"
-      "  ball             uniform in the unit ball centred at 0: x^2+y^2+z^2 <= 1 exactly\n"
-      "                   (rejection sampling from [-1, 1)^3).\n"
-      "  ellipsoid-shell  area-uniform on the ellipsoid centred at 0 with semi-axes --axes a,b,c\n"
-      "                   (default 1,0.6,0.3), each point scaled radially by a factor uniform in\n"
-      "                   [1 - s, 1 + s], s = --spread (default 0.01): (x/a)^2+(y/b)^2+(z/c)^2\n"
-      "                   lies in [(1-s)^2, (1+s)^2].\n"
-      "  mixed            the paper's mixed patterns in the unit cube, one third each (by a\n"
-      "                   random draw): a line from (0.05,0.05,0.05) to (0.95,0.95,0.95); the\n"
-      "                   ellipsoid surface centred at (0.5,0.5,0.5) with semi-axes\n"
-      "                   (0.45,0.3,0.2); a helix of radius 0.4 around the vertical line through\n"
-      "                   (0.5,0.5), z from 0.05 to 0.95, 5 turns. Each point is moved by a\n"
-      "                   uniform offset in a ball of radius --spread (default 0.01, 1% of the\n"
-      "                   box).\n"
-      "  clusters         --clusters K (default 32) Gaussian clusters: centres uniform in\n"
-      "                   [0.1, 0.9]^3, standard deviations log-uniform in [0.001, 0.05],\n"
-      "                   weights uniform in [0.1, 1.1] (normalised); all drawn from the seed.\n"
-      "  grid             the regular lattice (ix, iy, iz) * h, 0 <= i < k, h = 2^-ceil(log2 k),\n"
-      "                   coordinates exact in [0, 1); --n is rounded to the nearest cube k^3;\n"
-      "                   x varies fastest. Degenerate: many cospherical and coplanar points.\n"
-      "  sphere           on the sphere of radius --radius (default 1) centred at 0: normalised\n"
-      "                   Gaussian vectors, so |p| = r up to rounding (within 1e-15 r).\n"
-      "  terrain          (alias lidar) an airborne LiDAR tile of 1 km x 1 km: a height field of\n"
-      "                   hills (about +-40 m) with 24 m square buildings in 30% of the 40 m\n"
-      "                   cells (flat roofs 5-25 m up), 8% of the points on their walls and 12%\n"
-      "                   vegetation returns up to 15 m above the ground; UTM-like offsets\n"
-      "                   (x + 500000, y + 4000000, z + 100) and 1 cm quantisation, as a LAS\n"
-      "                   file with scale 0.01 holds them. A surface: most tets are flat.\n"
-      "  two-plates       two parallel plates, z = 0.25 and z = 0.75 (one point in two on each),\n"
-      "                   x, y uniform in [0, 1), z jittered uniformly by +-0.1 * --spread.\n"
-      "The surface zoo: airborne tiles with what real surveys have, x + 500000, y + 5000000,\n"
-      "z + 200, 1 cm quantisation; the square's side follows --n (about 3.3 points a square\n"
-      "metre under one flight strip, at least 100 m), so point i depends on --n too:\n"
-      "  hills            bare ground of steep hills as wide as the tile (+-12% of its side):\n"
-      "                   the hull spans the valleys, long edges under it.\n"
-      "  roofs            gentle ground, buildings on 35% of the 40 m cells, 10-28 m footprints,\n"
-      "                   half flat roofs 4-20 m up, half gable roofs (25-40 degrees); no wall\n"
-      "                   returns, as airborne scanners rarely hit walls.\n"
-      "  canopy           gentle ground under a forest (a tree in 85% of the 8 m cells, crowns\n"
-      "                   2-4.5 m in radius, 6-22 m tall): a pulse that meets a crown gives three\n"
-      "                   points (first return near the top, one inside the crown, the ground)\n"
-      "                   along its slanted path: a thick layer of vegetation.\n"
-      "  water            lakes and the scan shadows beyond buildings' +x walls: holes with no\n"
-      "                   returns; buildings on 20% of the cells.\n"
-      "  strips           overlapping flight strips along y (30% of a strip's width shared with\n"
-      "                   the next: bands of double density), on scan lines.\n"
-      "  scan-lines       points on lines across the flight direction, 1 m apart (+-2 cm), about\n"
-      "                   0.3 m apart along a line.\n"
-      "  survey           all of it: hills, flat and gable roofs without walls, trees with multiple\n"
-      "                   returns, lakes and shadows, overlapping strips, scan lines.\n"
-      "  indoor           a terrestrial scan of 3 x 2 closed rooms (5-9 m x 4-7 m, one ceiling\n"
-      "                   height 2.6-3.2 m, walls 0.2 m thick), a scanner 1.5 m up in each:\n"
-      "                   points on floors, walls and ceilings meeting at right angles, their\n"
-      "                   density falling with the square of the distance to the scanner; 2 mm\n"
-      "                   range noise, millimetre quantisation, local coordinates.\n"
-      "--duplicates F: each point i > 0 is, with probability F, an exact copy of point\n"
-      "floor(v * i) for a uniform v (resolved to an original point), so about F * n points\n"
-      "repeat an earlier one.\n";
+  return "Distributions (point i depends only on --seed and i, and on --n for the zoo's tiles;\n"
+         "any chunking or thread count gives the same file):\n"
+         "  uniform          x, y, z uniform in [0, 1) (multiples of 2^-53).\n"
+         "  ball             uniform in the unit ball centred at 0: x^2+y^2+z^2 <= 1 exactly\n"
+         "                   (rejection sampling from [-1, 1)^3).\n"
+         "  ellipsoid-shell  area-uniform on the ellipsoid centred at 0 with semi-axes --axes a,b,c\n"
+         "                   (default 1,0.6,0.3), each point scaled radially by a factor uniform in\n"
+         "                   [1 - s, 1 + s], s = --spread (default 0.01): (x/a)^2+(y/b)^2+(z/c)^2\n"
+         "                   lies in [(1-s)^2, (1+s)^2].\n"
+         "  mixed            the paper's mixed patterns in the unit cube, one third each (by a\n"
+         "                   random draw): a line from (0.05,0.05,0.05) to (0.95,0.95,0.95); the\n"
+         "                   ellipsoid surface centred at (0.5,0.5,0.5) with semi-axes\n"
+         "                   (0.45,0.3,0.2); a helix of radius 0.4 around the vertical line through\n"
+         "                   (0.5,0.5), z from 0.05 to 0.95, 5 turns. Each point is moved by a\n"
+         "                   uniform offset in a ball of radius --spread (default 0.01, 1% of the\n"
+         "                   box).\n"
+         "  clusters         --clusters K (default 32) Gaussian clusters: centres uniform in\n"
+         "                   [0.1, 0.9]^3, standard deviations log-uniform in [0.001, 0.05],\n"
+         "                   weights uniform in [0.1, 1.1] (normalised); all drawn from the seed.\n"
+         "  grid             the regular lattice (ix, iy, iz) * h, 0 <= i < k, h = 2^-ceil(log2 k),\n"
+         "                   coordinates exact in [0, 1); --n is rounded to the nearest cube k^3;\n"
+         "                   x varies fastest. Degenerate: many cospherical and coplanar points.\n"
+         "  sphere           on the sphere of radius --radius (default 1) centred at 0: normalised\n"
+         "                   Gaussian vectors, so |p| = r up to rounding (within 1e-15 r).\n"
+         "  terrain          (alias lidar) an airborne LiDAR tile of 1 km x 1 km: a height field of\n"
+         "                   hills (about +-40 m) with 24 m square buildings in 30% of the 40 m\n"
+         "                   cells (flat roofs 5-25 m up), 8% of the points on their walls and 12%\n"
+         "                   vegetation returns up to 15 m above the ground; UTM-like offsets\n"
+         "                   (x + 500000, y + 4000000, z + 100) and 1 cm quantisation, as a LAS\n"
+         "                   file with scale 0.01 holds them. A surface: most tets are flat.\n"
+         "  two-plates       two parallel plates, z = 0.25 and z = 0.75 (one point in two on each),\n"
+         "                   x, y uniform in [0, 1), z jittered uniformly by +-0.1 * --spread.\n"
+         "The surface zoo: airborne tiles with what real surveys have, x + 500000, y + 5000000,\n"
+         "z + 200, 1 cm quantisation; the square's side follows --n (about 3.3 points a square\n"
+         "metre under one flight strip, at least 100 m), so point i depends on --n too:\n"
+         "  hills            bare ground of steep hills as wide as the tile (+-12% of its side):\n"
+         "                   the hull spans the valleys, long edges under it.\n"
+         "  roofs            gentle ground, buildings on 35% of the 40 m cells, 10-28 m footprints,\n"
+         "                   half flat roofs 4-20 m up, half gable roofs (25-40 degrees); no wall\n"
+         "                   returns, as airborne scanners rarely hit walls.\n"
+         "  canopy           gentle ground under a forest (a tree in 85% of the 8 m cells, crowns\n"
+         "                   2-4.5 m in radius, 6-22 m tall): a pulse that meets a crown gives three\n"
+         "                   points (first return near the top, one inside the crown, the ground)\n"
+         "                   along its slanted path: a thick layer of vegetation.\n"
+         "  water            lakes and the scan shadows beyond buildings' +x walls: holes with no\n"
+         "                   returns; buildings on 20% of the cells.\n"
+         "  strips           overlapping flight strips along y (30% of a strip's width shared with\n"
+         "                   the next: bands of double density), on scan lines.\n"
+         "  scan-lines       points on lines across the flight direction, 1 m apart (+-2 cm), about\n"
+         "                   0.3 m apart along a line.\n"
+         "  survey           all of it: hills, flat and gable roofs without walls, trees with multiple\n"
+         "                   returns, lakes and shadows, overlapping strips, scan lines.\n"
+         "  indoor           a terrestrial scan of 3 x 2 closed rooms (5-9 m x 4-7 m, one ceiling\n"
+         "                   height 2.6-3.2 m, walls 0.2 m thick), a scanner 1.5 m up in each:\n"
+         "                   points on floors, walls and ceilings meeting at right angles, their\n"
+         "                   density falling with the square of the distance to the scanner; 2 mm\n"
+         "                   range noise, millimetre quantisation, local coordinates.\n"
+         "--duplicates F: each point i > 0 is, with probability F, an exact copy of point\n"
+         "floor(v * i) for a uniform v (resolved to an original point), so about F * n points\n"
+         "repeat an earlier one.\n";
 }
 
 void GeneratorOptions::validate() const {
@@ -249,17 +269,32 @@ PointGenerator::PointGenerator(const GeneratorOptions& options) : opt_(options) 
       key_buildings_ = key_for(opt_.seed, kPurposeBuildings);
       break;
     }
-    case Distribution::kHills: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kHills, opt_.seed, opt_.n); break;
-    case Distribution::kRoofs: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kRoofs, opt_.seed, opt_.n); break;
-    case Distribution::kCanopy: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kCanopy, opt_.seed, opt_.n); break;
-    case Distribution::kWater: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kWater, opt_.seed, opt_.n); break;
-    case Distribution::kStrips: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kStrips, opt_.seed, opt_.n); break;
+    case Distribution::kHills:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kHills, opt_.seed, opt_.n);
+      break;
+    case Distribution::kRoofs:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kRoofs, opt_.seed, opt_.n);
+      break;
+    case Distribution::kCanopy:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kCanopy, opt_.seed, opt_.n);
+      break;
+    case Distribution::kWater:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kWater, opt_.seed, opt_.n);
+      break;
+    case Distribution::kStrips:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kStrips, opt_.seed, opt_.n);
+      break;
     case Distribution::kScanLines:
       tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kScanLines, opt_.seed, opt_.n);
       break;
-    case Distribution::kSurvey: tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kSurvey, opt_.seed, opt_.n); break;
-    case Distribution::kIndoor: indoor_ = std::make_shared<IndoorScan>(opt_.seed); break;
-    default: break;
+    case Distribution::kSurvey:
+      tile_ = std::make_shared<LidarTile>(LidarTile::Preset::kSurvey, opt_.seed, opt_.n);
+      break;
+    case Distribution::kIndoor:
+      indoor_ = std::make_shared<IndoorScan>(opt_.seed);
+      break;
+    default:
+      break;
   }
 }
 

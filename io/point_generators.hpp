@@ -22,9 +22,24 @@ class LidarTile;
 class IndoorScan;
 
 enum class Distribution {
-  kUniform, kBall, kEllipsoidShell, kMixed, kClusters, kGrid, kSphere, kTerrain, kTwoPlates,
+  kUniform,
+  kBall,
+  kEllipsoidShell,
+  kMixed,
+  kClusters,
+  kGrid,
+  kSphere,
+  kTerrain,
+  kTwoPlates,
   // The surface zoo (io/point_zoo.hpp): what real scans have, one feature at a time, then all.
-  kHills, kRoofs, kCanopy, kWater, kStrips, kScanLines, kSurvey, kIndoor
+  kHills,
+  kRoofs,
+  kCanopy,
+  kWater,
+  kStrips,
+  kScanLines,
+  kSurvey,
+  kIndoor
 };
 
 const char* to_string(Distribution d);
@@ -33,14 +48,14 @@ const char* distribution_help();
 
 struct GeneratorOptions {
   Distribution dist = Distribution::kUniform;
-  std::uint64_t n = 1000;       // grid: rounded to the nearest cube k^3
+  std::uint64_t n = 1000;  // grid: rounded to the nearest cube k^3
   std::uint64_t seed = 1;
-  double duplicates = 0.0;      // fraction of points that copy an earlier point, in [0, 1)
+  double duplicates = 0.0;                    // fraction of points that copy an earlier point, in [0, 1)
   std::array<double, 3> axes{1.0, 0.6, 0.3};  // ellipsoid-shell semi-axes
-  double spread = 0.01;         // ellipsoid-shell radial spread; mixed noise radius
-  std::uint32_t clusters = 32;  // clusters: number of Gaussian clusters
+  double spread = 0.01;                       // ellipsoid-shell radial spread; mixed noise radius
+  std::uint32_t clusters = 32;                // clusters: number of Gaussian clusters
   static constexpr std::uint32_t kMaxClusters = std::uint32_t(1) << 20;
-  double radius = 1.0;          // sphere radius
+  double radius = 1.0;  // sphere radius
 
   void validate() const;  // throws UsageError
 };

@@ -28,7 +28,8 @@ Handle open_file(const std::string& path) {
   if (::access(path.c_str(), R_OK) != 0) throw IoError("cannot open " + path + ": " + std::strerror(errno));
   io::note_input(path);
   Handle f(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
-  if (!f.ok()) throw InputError::at_byte(path, 0, "not a readable HDF5 file (no HDF5 signature, or truncated or damaged)");
+  if (!f.ok())
+    throw InputError::at_byte(path, 0, "not a readable HDF5 file (no HDF5 signature, or truncated or damaged)");
   return f;
 }
 
@@ -102,12 +103,12 @@ struct Dataset {
 
 class Hdf5PointReader final : public PointReader {
  public:
-  Hdf5PointReader(const std::string& path, std::vector<std::string> names, bool one_of_many)
-      : file_(open_file(path)) {
+  Hdf5PointReader(const std::string& path, std::vector<std::string> names, bool one_of_many) : file_(open_file(path)) {
     source_name_ = path;
     if (names.empty()) {
       const auto list = list_datasets(file_.get());
-      if (list.size() != 1) throw UsageError(path + ": name the dataset to read with --dataset (" + candidates(list) + ")");
+      if (list.size() != 1)
+        throw UsageError(path + ": name the dataset to read with --dataset (" + candidates(list) + ")");
       names.push_back(list[0].path);
     }
     std::uint64_t total = 0;
@@ -186,7 +187,8 @@ class Hdf5PointReader final : public PointReader {
 
   std::string location(std::uint64_t index) const override {
     for (const auto& d : datasets_)
-      if (index >= d.first && index - d.first < d.rows) return "dataset " + d.path + " row " + std::to_string(index - d.first);
+      if (index >= d.first && index - d.first < d.rows)
+        return "dataset " + d.path + " row " + std::to_string(index - d.first);
     return "point " + std::to_string(index);
   }
 

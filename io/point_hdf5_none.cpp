@@ -5,7 +5,8 @@
 namespace tetstream::io {
 namespace {
 [[noreturn]] void unavailable(const std::string& path) {
-  throw UsageError(path + ": this tetstream was built without HDF5 (install libhdf5-dev and rebuild with -DTETSTREAM_HDF5=ON)");
+  throw UsageError(
+      path + ": this tetstream was built without HDF5 (install libhdf5-dev and rebuild with -DTETSTREAM_HDF5=ON)");
 }
 }  // namespace
 

@@ -130,8 +130,10 @@ LasFields las_fields_of(const char* record, int format) {
     f.number_of_returns = returns >> 4;
     f.classification = std::uint8_t(record[16]);
   }
-  if (format >= 6) f.gps_time = le_at<double>(record + 22);
-  else if (format == 1 || format >= 3) f.gps_time = le_at<double>(record + 20);
+  if (format >= 6)
+    f.gps_time = le_at<double>(record + 22);
+  else if (format == 1 || format >= 3)
+    f.gps_time = le_at<double>(record + 20);
   return f;
 }
 
@@ -141,11 +143,18 @@ LasFields las_fields_of(const char* record, int format) {
 // reader hands the kept points' fields to a sink (`convert --las-attributes`).
 class LasFilteredReader final : public PointReader {
  public:
-  LasFilteredReader(std::unique_ptr<ByteSource> src, std::uint64_t records, std::uint64_t data_start, std::size_t stride,
-                    int format, const double scale[3], const double offset[3], std::string format_name,
-                    const PointReadOptions& options, std::function<void(ByteSource&)> after, LasFieldSink sink)
-      : src_(std::move(src)), records_(records), data_start_(data_start), stride_(stride), format_(format),
-        returns_(options.las_returns), after_(std::move(after)), sink_(std::move(sink)) {
+  LasFilteredReader(std::unique_ptr<ByteSource> src, std::uint64_t records, std::uint64_t data_start,
+                    std::size_t stride, int format, const double scale[3], const double offset[3],
+                    std::string format_name, const PointReadOptions& options, std::function<void(ByteSource&)> after,
+                    LasFieldSink sink)
+      : src_(std::move(src)),
+        records_(records),
+        data_start_(data_start),
+        stride_(stride),
+        format_(format),
+        returns_(options.las_returns),
+        after_(std::move(after)),
+        sink_(std::move(sink)) {
     format_name_ = std::move(format_name);
     source_name_ = src_->name();
     for (int c = 0; c < 3; ++c) scale_[c] = scale[c], offset_[c] = offset[c];
@@ -170,7 +179,8 @@ class LasFilteredReader final : public PointReader {
       for (; i < k && n < max_points; ++i, r += stride_) {
         const LasFields f = las_fields_of(r, format_);
         if (!keep(f)) continue;
-        for (int c = 0; c < 3; ++c) xyz[3 * n + c] = scaled(double(le_at<std::int32_t>(r + 4 * c)), c, scale_, offset_, rounded_);
+        for (int c = 0; c < 3; ++c)
+          xyz[3 * n + c] = scaled(double(le_at<std::int32_t>(r + 4 * c)), c, scale_, offset_, rounded_);
         if (sink_) sink_(f);
         kept_.push_back(record_ + i);
         ++n;
@@ -203,8 +213,8 @@ class LasFilteredReader final : public PointReader {
     std::vector<std::pair<std::string, std::string>> d = {
         {"scale", triple(scale_)}, {"offset", triple(offset_)}, {"exact", exactness(rounded_, points_read_)}};
     if (!filters_.empty()) {
-      d.emplace_back("filter", filters_ + ": " + std::to_string(points_read_) + " of " + std::to_string(record_) +
-                                   " points kept");
+      d.emplace_back(
+          "filter", filters_ + ": " + std::to_string(points_read_) + " of " + std::to_string(record_) + " points kept");
     }
     return d;
   }
@@ -213,13 +223,18 @@ class LasFilteredReader final : public PointReader {
   bool keep(const LasFields& f) const {
     if (!any_class_ && !classes_[f.classification]) return false;
     switch (returns_) {
-      case PointReadOptions::LasReturns::kAll: return true;
-      case PointReadOptions::LasReturns::kFirst: return f.return_number == 1;
-      case PointReadOptions::LasReturns::kLast: return f.return_number == f.number_of_returns;
+      case PointReadOptions::LasReturns::kAll:
+        return true;
+      case PointReadOptions::LasReturns::kFirst:
+        return f.return_number == 1;
+      case PointReadOptions::LasReturns::kLast:
+        return f.return_number == f.number_of_returns;
     }
     return true;
   }
-  std::string record_location(std::uint64_t record) const { return "byte " + std::to_string(data_start_ + record * stride_); }
+  std::string record_location(std::uint64_t record) const {
+    return "byte " + std::to_string(data_start_ + record * stride_);
+  }
 
   std::unique_ptr<ByteSource> src_;
   std::uint64_t records_, data_start_;
@@ -245,7 +260,8 @@ class LasFilteredReader final : public PointReader {
 
 }  // namespace
 
-std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const PointReadOptions& options, LasFieldSink sink) {
+std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const PointReadOptions& options,
+                                      LasFieldSink sink) {
   const std::string file = src->name();
   const auto dot = file.find_last_of('.');
   if (dot != std::string::npos && (file.substr(dot) == ".laz" || file.substr(dot) == ".LAZ")) laz(file, "");
@@ -253,39 +269,48 @@ std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const Poi
   if (src->available() < 4 || std::memcmp(src->data(), "LASF", 4) != 0)
     throw InputError::at_byte(file, 0, "not a LAS file: it does not start with 'LASF'");
   if (src->available() < 227)
-    throw InputError::at_byte(file, src->available(), "truncated LAS header (" + std::to_string(src->available()) + " of 227 bytes)");
+    throw InputError::at_byte(file, src->available(),
+                              "truncated LAS header (" + std::to_string(src->available()) + " of 227 bytes)");
   const char* h = src->data();
   const int major = std::uint8_t(h[24]), minor = std::uint8_t(h[25]);
   if (major != 1 || minor > 4)
-    throw InputError::at_byte(file, 24, "unsupported LAS version " + std::to_string(major) + "." + std::to_string(minor) + " (1.0-1.4)");
+    throw InputError::at_byte(
+        file, 24, "unsupported LAS version " + std::to_string(major) + "." + std::to_string(minor) + " (1.0-1.4)");
   const std::uint16_t header_size = le_at<std::uint16_t>(h + 94);
   const std::uint32_t data_offset = le_at<std::uint32_t>(h + 96);
   const std::uint8_t format_id = std::uint8_t(h[104]);
   const std::uint16_t record_length = le_at<std::uint16_t>(h + 105);
   const std::uint16_t need = minor >= 4 ? 375 : minor == 3 ? 235 : 227;
   if (header_size < need) {
-    throw InputError::at_byte(file, 94, "header size " + std::to_string(header_size) + " is less than the " +
-                                            std::to_string(need) + " bytes of a LAS 1." + std::to_string(minor) + " header");
+    throw InputError::at_byte(file, 94,
+                              "header size " + std::to_string(header_size) + " is less than the " +
+                                  std::to_string(need) + " bytes of a LAS 1." + std::to_string(minor) + " header");
   }
   if (src->available() < need)
-    throw InputError::at_byte(file, src->available(), "truncated LAS header (" + std::to_string(src->available()) + " of " + std::to_string(need) + " bytes)");
+    throw InputError::at_byte(
+        file, src->available(),
+        "truncated LAS header (" + std::to_string(src->available()) + " of " + std::to_string(need) + " bytes)");
   if (data_offset < header_size)
-    throw InputError::at_byte(file, 96, "offset to point data " + std::to_string(data_offset) + " lies inside the " +
-                                            std::to_string(header_size) + "-byte header");
+    throw InputError::at_byte(file, 96,
+                              "offset to point data " + std::to_string(data_offset) + " lies inside the " +
+                                  std::to_string(header_size) + "-byte header");
   if (format_id & 0xC0) laz(file, "byte 104: ");
-  if (format_id > 10) throw InputError::at_byte(file, 104, "unknown point data format " + std::to_string(format_id) + " (0-10)");
+  if (format_id > 10)
+    throw InputError::at_byte(file, 104, "unknown point data format " + std::to_string(format_id) + " (0-10)");
   if (record_length < kMinRecord[format_id]) {
-    throw InputError::at_byte(file, 105, "record length " + std::to_string(record_length) + " is shorter than the " +
-                                             std::to_string(kMinRecord[format_id]) + " bytes of point format " +
-                                             std::to_string(format_id));
+    throw InputError::at_byte(file, 105,
+                              "record length " + std::to_string(record_length) + " is shorter than the " +
+                                  std::to_string(kMinRecord[format_id]) + " bytes of point format " +
+                                  std::to_string(format_id));
   }
   // The point count: 1.4 has a 64-bit field; the legacy 32-bit one must then be 0 or agree.
   std::uint64_t count = le_at<std::uint32_t>(h + 107);
   if (minor >= 4) {
     const std::uint64_t count64 = le_at<std::uint64_t>(h + 247);
     if (count64 != 0 && count != 0 && count != count64) {
-      throw InputError::at_byte(file, 107, "the header's point counts disagree: legacy " + std::to_string(count) +
-                                               ", 64-bit " + std::to_string(count64));
+      throw InputError::at_byte(file, 107,
+                                "the header's point counts disagree: legacy " + std::to_string(count) + ", 64-bit " +
+                                    std::to_string(count64));
     }
     if (count64 != 0) count = count64;
   }
@@ -294,7 +319,9 @@ std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const Poi
     scale[c] = le_at<double>(h + 131 + 8 * c);
     offset[c] = le_at<double>(h + 155 + 8 * c);
     if (!std::isfinite(scale[c]) || scale[c] == 0)
-      throw InputError::at_byte(file, 131 + 8 * c, std::string(1, "xyz"[c]) + " scale " + shortest(scale[c]) + " is not a finite non-zero number");
+      throw InputError::at_byte(
+          file, 131 + 8 * c,
+          std::string(1, "xyz"[c]) + " scale " + shortest(scale[c]) + " is not a finite non-zero number");
     if (!std::isfinite(offset[c]))
       throw InputError::at_byte(file, 155 + 8 * c, std::string(1, "xyz"[c]) + " offset is not finite");
   }
@@ -306,7 +333,8 @@ std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const Poi
     if (evlr != 0 && (accounted == 0 || evlr < accounted)) accounted = evlr;
   }
   if (src->skip(data_offset) < data_offset)
-    throw InputError::at_byte(file, src->offset(), "truncated: the file ends before the point data at byte " + std::to_string(data_offset));
+    throw InputError::at_byte(file, src->offset(),
+                              "truncated: the file ends before the point data at byte " + std::to_string(data_offset));
 
   BinaryLayout layout;
   layout.data_start = data_offset;
@@ -325,19 +353,22 @@ std::unique_ptr<PointReader> open_las(std::unique_ptr<ByteSource> src, const Poi
     const std::uint64_t end = s.offset();
     if (accounted >= end || s.at_end()) return;
     const std::string amount = s.size() ? std::to_string(*s.size() - end) + " bytes" : "data";
-    spdlog::warn("{}: byte {}: {} after the point records that the header does not account for (ignored)", file, end, amount);
+    spdlog::warn("{}: byte {}: {} after the point records that the header does not account for (ignored)", file, end,
+                 amount);
   };
-  const std::string name = "las " + std::to_string(major) + "." + std::to_string(minor) + " point format " + std::to_string(format_id);
+  const std::string name =
+      "las " + std::to_string(major) + "." + std::to_string(minor) + " point format " + std::to_string(format_id);
   if (options.las_filtered() || sink) {
     // The checks make_binary_reader does for the unfiltered reader, before any work.
     std::uint64_t bytes = 0;
     if (!checked_mul(count, record_length, bytes) || !checked_add(bytes, data_offset, bytes))
-      throw InputError::at_byte(file, 107, "the header declares " + std::to_string(count) + " point records: more than any file can hold");
+      throw InputError::at_byte(
+          file, 107, "the header declares " + std::to_string(count) + " point records: more than any file can hold");
     if (count == 0) throw InputError::at_byte(file, data_offset, "the header declares 0 point records: no points");
     if (src->size() && *src->size() < bytes) {
-      throw InputError::at_byte(file, *src->size(), "truncated: the header promises " + std::to_string(count) +
-                                                        " point records of " + std::to_string(record_length) +
-                                                        " bytes from byte " + std::to_string(data_offset));
+      throw InputError::at_byte(file, *src->size(),
+                                "truncated: the header promises " + std::to_string(count) + " point records of " +
+                                    std::to_string(record_length) + " bytes from byte " + std::to_string(data_offset));
     }
     return std::make_unique<LasFilteredReader>(std::move(src), count, data_offset, record_length, format_id, scale,
                                                offset, name, options, std::move(layout.after), std::move(sink));

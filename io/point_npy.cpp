@@ -32,9 +32,12 @@ bool dict_value(std::string_view header, std::string_view key, std::string_view&
   int depth = 0;
   while (j < header.size()) {
     const char c = header[j];
-    if (c == '(' || c == '[') ++depth;
-    else if (c == ')' || c == ']') --depth;
-    else if ((c == ',' || c == '}') && depth == 0) break;
+    if (c == '(' || c == '[')
+      ++depth;
+    else if (c == ')' || c == ']')
+      --depth;
+    else if ((c == ',' || c == '}') && depth == 0)
+      break;
     ++j;
   }
   value = header.substr(i, j - i);
@@ -75,8 +78,8 @@ std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src, const Poi
   const std::string header(src->data() + header_start, static_cast<std::size_t>(header_len));
   src->consume(total);
   auto bad = [&](const std::string& problem) {
-    return InputError::at_byte(file, header_start, problem + " in .npy header " +
-                                                       std::string(header.substr(0, header.find('}') + 1)));
+    return InputError::at_byte(file, header_start,
+                               problem + " in .npy header " + std::string(header.substr(0, header.find('}') + 1)));
   };
 
   std::string_view descr, fortran, shape;
@@ -144,7 +147,8 @@ std::unique_ptr<PointReader> open_npy(std::unique_ptr<ByteSource> src, const Poi
   layout.records = "rows";
   std::string name = "npy " + std::string(dt);
   if (!columns.empty()) {
-    name += " columns " + std::to_string(columns[0]) + "," + std::to_string(columns[1]) + "," + std::to_string(columns[2]);
+    name +=
+        " columns " + std::to_string(columns[0]) + "," + std::to_string(columns[1]) + "," + std::to_string(columns[2]);
   }
   return make_binary_reader(std::move(src), layout, dims[0], /*promised=*/true, std::move(name));
 }

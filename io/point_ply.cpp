@@ -16,8 +16,8 @@ enum class PlyEncoding { kAscii, kBinaryLittle, kBinaryBig };
 struct PlyProperty {
   std::string name;
   bool is_list = false;
-  Scalar type = Scalar::kF64;        // scalar type, or the item type of a list
-  Scalar count_type = Scalar::kU8;   // list length type
+  Scalar type = Scalar::kF64;       // scalar type, or the item type of a list
+  Scalar count_type = Scalar::kU8;  // list length type
 };
 
 struct PlyElement {
@@ -39,12 +39,10 @@ struct PlyElement {
 
 bool parse_scalar_type(std::string_view s, Scalar& t) {
   static const std::pair<std::string_view, Scalar> table[] = {
-      {"char", Scalar::kI8},     {"int8", Scalar::kI8},     {"uchar", Scalar::kU8},
-      {"uint8", Scalar::kU8},    {"short", Scalar::kI16},   {"int16", Scalar::kI16},
-      {"ushort", Scalar::kU16},  {"uint16", Scalar::kU16},  {"int", Scalar::kI32},
-      {"int32", Scalar::kI32},   {"uint", Scalar::kU32},    {"uint32", Scalar::kU32},
-      {"float", Scalar::kF32},   {"float32", Scalar::kF32}, {"double", Scalar::kF64},
-      {"float64", Scalar::kF64}};
+      {"char", Scalar::kI8},   {"int8", Scalar::kI8},     {"uchar", Scalar::kU8},   {"uint8", Scalar::kU8},
+      {"short", Scalar::kI16}, {"int16", Scalar::kI16},   {"ushort", Scalar::kU16}, {"uint16", Scalar::kU16},
+      {"int", Scalar::kI32},   {"int32", Scalar::kI32},   {"uint", Scalar::kU32},   {"uint32", Scalar::kU32},
+      {"float", Scalar::kF32}, {"float32", Scalar::kF32}, {"double", Scalar::kF64}, {"float64", Scalar::kF64}};
   for (const auto& [name, type] : table) {
     if (s == name) {
       t = type;
@@ -77,12 +75,39 @@ std::uint64_t read_list_length(ByteSource& src, Scalar t, bool big_endian) {
   if (big_endian != !kHostLittle) std::reverse(b, b + w);
   std::int64_t v = 0;
   switch (t) {
-    case Scalar::kI8: { std::int8_t x; std::memcpy(&x, b, 1); v = x; break; }
-    case Scalar::kU8: v = b[0]; break;
-    case Scalar::kI16: { std::int16_t x; std::memcpy(&x, b, 2); v = x; break; }
-    case Scalar::kU16: { std::uint16_t x; std::memcpy(&x, b, 2); v = x; break; }
-    case Scalar::kI32: { std::int32_t x; std::memcpy(&x, b, 4); v = x; break; }
-    case Scalar::kU32: { std::uint32_t x; std::memcpy(&x, b, 4); v = x; break; }
+    case Scalar::kI8: {
+      std::int8_t x;
+      std::memcpy(&x, b, 1);
+      v = x;
+      break;
+    }
+    case Scalar::kU8:
+      v = b[0];
+      break;
+    case Scalar::kI16: {
+      std::int16_t x;
+      std::memcpy(&x, b, 2);
+      v = x;
+      break;
+    }
+    case Scalar::kU16: {
+      std::uint16_t x;
+      std::memcpy(&x, b, 2);
+      v = x;
+      break;
+    }
+    case Scalar::kI32: {
+      std::int32_t x;
+      std::memcpy(&x, b, 4);
+      v = x;
+      break;
+    }
+    case Scalar::kU32: {
+      std::uint32_t x;
+      std::memcpy(&x, b, 4);
+      v = x;
+      break;
+    }
     default:
       throw InputError::at_byte(src.name(), src.offset(), "list length type must be an integer");
   }
@@ -93,9 +118,9 @@ std::uint64_t read_list_length(ByteSource& src, Scalar t, bool big_endian) {
 void skip_exactly(ByteSource& src, std::uint64_t n, const std::string& what) {
   const std::uint64_t start = src.offset();
   if (src.skip(n) < n) {
-    throw InputError::at_byte(src.name(), src.offset(),
-                              "truncated: input ends inside " + what + " (started at byte " +
-                                  std::to_string(start) + ")");
+    throw InputError::at_byte(
+        src.name(), src.offset(),
+        "truncated: input ends inside " + what + " (started at byte " + std::to_string(start) + ")");
   }
 }
 
@@ -148,9 +173,9 @@ void find_coordinates(const std::string& file, const PlyElement& vertex, const s
     if (index[c] >= 0) continue;
     std::string have;
     for (const auto& p : vertex.props) have += (have.empty() ? "" : ", ") + p.name;
-    throw InputError::at_line(file, vertex.header_line,
-                              "vertex element has no '" + names[c] + "' property (it has: " + have +
-                                  "; choose with --properties)");
+    throw InputError::at_line(
+        file, vertex.header_line,
+        "vertex element has no '" + names[c] + "' property (it has: " + have + "; choose with --properties)");
   }
 }
 
@@ -181,17 +206,22 @@ class PlyAsciiReader final : public PointReader {
       const std::uint64_t ln = lines_->line_number();
       const int fields = parse_numbers(line, values_.data(), int(nprops_), bad);
       if (fields == 0) continue;
-      if (fields < 0) throw InputError::at_line(source_name_, ln, "not a number: '" + std::string(bad.substr(0, 40)) + "'");
+      if (fields < 0)
+        throw InputError::at_line(source_name_, ln, "not a number: '" + std::string(bad.substr(0, 40)) + "'");
       if (std::size_t(fields) != nprops_) {
-        throw InputError::at_line(source_name_, ln, "expected " + std::to_string(nprops_) +
-                                                        " vertex properties, found " + std::to_string(fields));
+        throw InputError::at_line(
+            source_name_, ln,
+            "expected " + std::to_string(nprops_) + " vertex properties, found " + std::to_string(fields));
       }
       for (int c = 0; c < 3; ++c) {
         const double v = values_[index_[c]];
         if (!std::isfinite(v)) {
           throw InputError::at_line(source_name_, ln,
                                     std::string("non-finite coordinate (") + "xyz"[c] + " = " +
-                                        (std::isnan(v) ? "nan" : v > 0 ? "inf" : "-inf") + ")");
+                                        (std::isnan(v) ? "nan"
+                                         : v > 0       ? "inf"
+                                                       : "-inf") +
+                                        ")");
         }
         xyz[3 * n + c] = v;
       }
@@ -225,8 +255,9 @@ class PlyAsciiReader final : public PointReader {
     }
     while (lines_->next(line)) {
       if (line.find_first_not_of(" \t") != std::string_view::npos) {
-        throw InputError::at_line(source_name_, lines_->line_number(),
-                                  "trailing data after the last element the header declares (a wrong count in the header?)");
+        throw InputError::at_line(
+            source_name_, lines_->line_number(),
+            "trailing data after the last element the header declares (a wrong count in the header?)");
       }
     }
   }
@@ -273,10 +304,14 @@ std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src, const Poi
       ended = true;
     } else if (w[0] == "format") {
       if (w.size() < 2) throw InputError::at_line(file, ln, "PLY format line without an encoding");
-      if (w[1] == "ascii") encoding = PlyEncoding::kAscii;
-      else if (w[1] == "binary_little_endian") encoding = PlyEncoding::kBinaryLittle;
-      else if (w[1] == "binary_big_endian") encoding = PlyEncoding::kBinaryBig;
-      else throw InputError::at_line(file, ln, "unknown PLY format '" + std::string(w[1]) + "'");
+      if (w[1] == "ascii")
+        encoding = PlyEncoding::kAscii;
+      else if (w[1] == "binary_little_endian")
+        encoding = PlyEncoding::kBinaryLittle;
+      else if (w[1] == "binary_big_endian")
+        encoding = PlyEncoding::kBinaryBig;
+      else
+        throw InputError::at_line(file, ln, "unknown PLY format '" + std::string(w[1]) + "'");
       have_format = true;
     } else if (w[0] == "element") {
       if (w.size() != 3) throw InputError::at_line(file, ln, "malformed element line (expected: element NAME COUNT)");
@@ -313,7 +348,10 @@ std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src, const Poi
 
   std::size_t vi = elements.size();
   for (std::size_t i = 0; i < elements.size(); ++i)
-    if (elements[i].name == "vertex") { vi = i; break; }
+    if (elements[i].name == "vertex") {
+      vi = i;
+      break;
+    }
   if (vi == elements.size()) throw InputError::at_line(file, header_end_line, "PLY header has no 'vertex' element");
   const PlyElement& vertex = elements[vi];
   int index[3];
@@ -338,8 +376,8 @@ std::unique_ptr<PointReader> open_ply(std::unique_ptr<ByteSource> src, const Poi
       if (!checked_add(after_lines, elements[i].count, after_lines))
         throw InputError::at_line(file, elements[i].header_line, "element counts overflow");
     }
-    return std::make_unique<PlyAsciiReader>(std::move(src), std::move(lines), vertex.count,
-                                            vertex.props.size(), index, after_lines);
+    return std::make_unique<PlyAsciiReader>(std::move(src), std::move(lines), vertex.count, vertex.props.size(), index,
+                                            after_lines);
   }
 
   const bool big = encoding == PlyEncoding::kBinaryBig;

@@ -50,11 +50,12 @@ std::string join(const std::vector<std::string>& v) {
 // silently ignored.
 void check_applies(PointFormat format, const PointReadOptions& o, const std::string& name) {
   auto refuse = [&](const char* option, const char* formats) {
-    throw UsageError(std::string(option) + " applies to " + formats + " input only, not " + to_string(format) +
-                     " (" + name + ")");
+    throw UsageError(std::string(option) + " applies to " + formats + " input only, not " + to_string(format) + " (" +
+                     name + ")");
   };
   if (format != PointFormat::kRaw && (o.stride != 0 || o.offset != 0)) refuse("--stride and --offset", "raw");
-  if (format != PointFormat::kText && format != PointFormat::kNpy && !o.columns.empty()) refuse("--columns", "text and npy");
+  if (format != PointFormat::kText && format != PointFormat::kNpy && !o.columns.empty())
+    refuse("--columns", "text and npy");
   if (format != PointFormat::kPly && !o.properties.empty()) refuse("--properties", "PLY");
   if (format != PointFormat::kHdf5 && !o.datasets.empty()) refuse("--dataset", "HDF5");
   if (format != PointFormat::kLas && o.las_filtered()) refuse("--las-classes and --las-returns", "LAS");
@@ -95,12 +96,19 @@ std::unique_ptr<PointReader> open_one(const std::string& path, const PointReadOp
   if (type == ScalarType::kAuto) type = ScalarType::kFloat64;
 
   switch (format) {
-    case PointFormat::kRaw: return detail::open_raw(std::move(src), type, options);
-    case PointFormat::kPly: return detail::open_ply(std::move(src), options);
-    case PointFormat::kNpy: return detail::open_npy(std::move(src), options);
-    case PointFormat::kText: return detail::open_text(std::move(src), options);
-    case PointFormat::kLas: return detail::open_las(std::move(src), options);
-    case PointFormat::kHdf5: case PointFormat::kAuto: break;
+    case PointFormat::kRaw:
+      return detail::open_raw(std::move(src), type, options);
+    case PointFormat::kPly:
+      return detail::open_ply(std::move(src), options);
+    case PointFormat::kNpy:
+      return detail::open_npy(std::move(src), options);
+    case PointFormat::kText:
+      return detail::open_text(std::move(src), options);
+    case PointFormat::kLas:
+      return detail::open_las(std::move(src), options);
+    case PointFormat::kHdf5:
+    case PointFormat::kAuto:
+      break;
   }
   throw UsageError("no reader for " + path);
 }
@@ -132,18 +140,21 @@ void PointReadOptions::validate() const {
   }
   if (block_bytes < 4096) throw UsageError("read block must be at least 4096 bytes");
   if (!columns.empty()) {
-    if (columns.size() != 3) throw UsageError("--columns takes three column numbers (x,y,z), got " + std::to_string(columns.size()));
+    if (columns.size() != 3)
+      throw UsageError("--columns takes three column numbers (x,y,z), got " + std::to_string(columns.size()));
     for (std::size_t i = 0; i < 3; ++i) {
       if (columns[i] == 0 || columns[i] > kMaxRecordBytes) {
-        throw UsageError("--columns: column " + std::to_string(columns[i]) + " is out of range (columns count from 1, at most " +
-                         std::to_string(kMaxRecordBytes) + ")");
+        throw UsageError("--columns: column " + std::to_string(columns[i]) +
+                         " is out of range (columns count from 1, at most " + std::to_string(kMaxRecordBytes) + ")");
       }
       for (std::size_t j = 0; j < i; ++j)
-        if (columns[j] == columns[i]) throw UsageError("--columns names column " + std::to_string(columns[i]) + " twice");
+        if (columns[j] == columns[i])
+          throw UsageError("--columns names column " + std::to_string(columns[i]) + " twice");
     }
   }
   if (!properties.empty()) {
-    if (properties.size() != 3) throw UsageError("--properties takes three names (x,y,z), got " + std::to_string(properties.size()));
+    if (properties.size() != 3)
+      throw UsageError("--properties takes three names (x,y,z), got " + std::to_string(properties.size()));
     for (std::size_t i = 0; i < 3; ++i) {
       if (properties[i].empty()) throw UsageError("--properties: empty property name");
       for (std::size_t j = 0; j < i; ++j)
@@ -160,8 +171,8 @@ std::string PointReadOptions::identity() const {
   std::vector<std::string> cols;
   for (auto c : columns) cols.push_back(std::to_string(c));
   return std::string("format=") + to_string(format) + " type=" + to_string(type) + " stride=" + std::to_string(stride) +
-         " offset=" + std::to_string(offset) + " byte_order=" + to_string(byte_order) + " more_inputs=" +
-         join(more_inputs) + " datasets=" + join(datasets) + " columns=" + join(cols) +
+         " offset=" + std::to_string(offset) + " byte_order=" + to_string(byte_order) +
+         " more_inputs=" + join(more_inputs) + " datasets=" + join(datasets) + " columns=" + join(cols) +
          " properties=" + join(properties) + las_identity();
 }
 
@@ -172,7 +183,8 @@ std::string PointReadOptions::las_identity() const {
     for (auto c : las_classes) codes.push_back(std::to_string(c));
     s += " las_classes=" + join(codes);
   }
-  if (las_returns != LasReturns::kAll) s += std::string(" las_returns=") + (las_returns == LasReturns::kLast ? "last" : "first");
+  if (las_returns != LasReturns::kAll)
+    s += std::string(" las_returns=") + (las_returns == LasReturns::kLast ? "last" : "first");
   return s;
 }
 
@@ -204,7 +216,8 @@ std::vector<std::string> expand_inputs(const std::vector<std::string>& args) {
     std::sort(matches.begin(), matches.end(), natural_less);
     files.insert(files.end(), matches.begin(), matches.end());
   }
-  if (files.size() > 1 && std::find_if(files.begin(), files.end(), [](const std::string& f) { return is_std_stream(f); }) != files.end())
+  if (files.size() > 1 &&
+      std::find_if(files.begin(), files.end(), [](const std::string& f) { return is_std_stream(f); }) != files.end())
     throw UsageError("stdin (-) cannot be one of several inputs");
   return files;
 }

@@ -24,11 +24,11 @@
 namespace tetstream::io {
 
 struct PointReadOptions {
-  PointFormat format = PointFormat::kAuto;  // kAuto: from the extension, else sniffed
-  ScalarType type = ScalarType::kAuto;      // raw only; kAuto: from the extension, else float64
-  std::uint64_t stride = 0;                 // raw only: bytes per record; 0: 3 * scalar size
-  std::uint64_t offset = 0;                 // raw only: byte offset of x within a record
-  ByteOrder byte_order = ByteOrder::kLittle;  // raw only (PLY and npy say it in the header)
+  PointFormat format = PointFormat::kAuto;         // kAuto: from the extension, else sniffed
+  ScalarType type = ScalarType::kAuto;             // raw only; kAuto: from the extension, else float64
+  std::uint64_t stride = 0;                        // raw only: bytes per record; 0: 3 * scalar size
+  std::uint64_t offset = 0;                        // raw only: byte offset of x within a record
+  ByteOrder byte_order = ByteOrder::kLittle;       // raw only (PLY and npy say it in the header)
   std::size_t block_bytes = std::size_t(8) << 20;  // read(2) block size
   // Further files of the same input, read after the first one in this order: the
   // points of all of them are one point set, indexed across the files (file-major).

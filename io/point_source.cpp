@@ -49,8 +49,7 @@ std::size_t ByteSource::read_some(char* dst, std::size_t n) {
       return static_cast<std::size_t>(r);
     }
     if (errno == EINTR) continue;
-    throw IoError("cannot read " + name_ + " at byte " + std::to_string(offset()) + ": " +
-                  std::strerror(errno));
+    throw IoError("cannot read " + name_ + " at byte " + std::to_string(offset()) + ": " + std::strerror(errno));
   }
 }
 

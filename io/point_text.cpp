@@ -69,7 +69,7 @@ bool FieldSplitter::next(std::string_view& field) {
 bool parse_double(std::string_view field, double& v) {
   const char* p = field.data();
   const char* end = p + field.size();
-  if (p < end && *p == '+') ++p;  // from_chars rejects a leading '+'
+  if (p < end && *p == '+') ++p;                                                // from_chars rejects a leading '+'
   if (p == end || *p == '+' || (*p == '-' && p != field.data())) return false;  // "+-1", "++1"
   const auto [ptr, ec] = std::from_chars(p, end, v);
   if (ptr != end || ptr == p) return false;
@@ -142,7 +142,10 @@ class TextPointReader final : public PointReader {
         if (!std::isfinite(v[c])) {
           throw InputError::at_line(source_name_, ln,
                                     std::string("non-finite coordinate (") + "xyz"[c] + " = " +
-                                        (std::isnan(v[c]) ? "nan" : v[c] > 0 ? "inf" : "-inf") + ")");
+                                        (std::isnan(v[c]) ? "nan"
+                                         : v[c] > 0       ? "inf"
+                                                          : "-inf") +
+                                        ")");
         }
         xyz[3 * n + c] = v[c];
       }
@@ -182,9 +185,9 @@ class TextPointReader final : public PointReader {
     if (fields < 0) return skip_or_throw(line, ln, bad);
     seen_data_ = true;
     if (fields != 3) {
-      throw InputError::at_line(source_name_, ln,
-                                "expected 3 coordinates (x y z), found " + std::to_string(fields) +
-                                    " fields (choose three with --columns)");
+      throw InputError::at_line(
+          source_name_, ln,
+          "expected 3 coordinates (x y z), found " + std::to_string(fields) + " fields (choose three with --columns)");
     }
     return fields;
   }
@@ -210,13 +213,15 @@ class TextPointReader final : public PointReader {
       return 0;
     }
     if (found < 3) {
-      throw InputError::at_line(source_name_, ln, "--columns " + std::to_string(columns_[0]) + "," +
-                                                      std::to_string(columns_[1]) + "," + std::to_string(columns_[2]) +
-                                                      ": the line has only " + std::to_string(k) + " fields");
+      throw InputError::at_line(source_name_, ln,
+                                "--columns " + std::to_string(columns_[0]) + "," + std::to_string(columns_[1]) + "," +
+                                    std::to_string(columns_[2]) + ": the line has only " + std::to_string(k) +
+                                    " fields");
     }
     if (seen_data_ && fields_ != 0 && k != fields_) {
-      throw InputError::at_line(source_name_, ln, "expected " + std::to_string(fields_) + " fields like the first data line, found " +
-                                                      std::to_string(k));
+      throw InputError::at_line(
+          source_name_, ln,
+          "expected " + std::to_string(fields_) + " fields like the first data line, found " + std::to_string(k));
     }
     seen_data_ = true;
     fields_ = k;

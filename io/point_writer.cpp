@@ -54,8 +54,7 @@ void PointWriter::flush() {
     const ssize_t r = ::write(fd_, p, left);
     if (r < 0) {
       if (errno == EINTR) continue;
-      throw IoError("cannot write " + (to_stdout_ ? std::string("<stdout>") : path_) + ": " +
-                    std::strerror(errno));
+      throw IoError("cannot write " + (to_stdout_ ? std::string("<stdout>") : path_) + ": " + std::strerror(errno));
     }
     p += r;
     left -= static_cast<std::size_t>(r);
@@ -107,8 +106,8 @@ void PointWriter::write(const double* xyz, std::size_t n) {
 
 void PointWriter::commit() {
   if (count_ != kUnknownCount && points_ != count_) {
-    throw std::logic_error("PointWriter: " + std::to_string(points_) + " points written, " +
-                           std::to_string(count_) + " declared");
+    throw std::logic_error("PointWriter: " + std::to_string(points_) + " points written, " + std::to_string(count_) +
+                           " declared");
   }
   finish();
   flush();
@@ -169,9 +168,7 @@ class RawWriter : public PointWriter {
 };
 
 // Shortest round-trip text of a double ("0.1", "-3e-07", "12345.678").
-inline char* format_double(char* p, char* end, double v) {
-  return std::to_chars(p, end, v).ptr;
-}
+inline char* format_double(char* p, char* end, double v) { return std::to_chars(p, end, v).ptr; }
 
 class TextWriter : public PointWriter {
  public:
@@ -245,9 +242,7 @@ class PlyWriter : public RawWriter {
 // .npy v1: the header dict padded with blanks so the data starts on a 64-byte boundary.
 class NpyWriter : public RawWriter {
  public:
-  NpyWriter(bool f32, bool big) : RawWriter(f32, big) {
-    descr_ = std::string(big ? ">" : "<") + (f32 ? "f4" : "f8");
-  }
+  NpyWriter(bool f32, bool big) : RawWriter(f32, big) { descr_ = std::string(big ? ">" : "<") + (f32 ? "f4" : "f8"); }
 
   void write_header() {
     const std::string h = header(count_ == kUnknownCount ? std::string(kCountWidth, '9') : std::to_string(count_), 0);
@@ -316,10 +311,12 @@ std::unique_ptr<PointWriter> create_points(const std::string& path, const PointW
       w = std::move(npy);
       break;
     }
-    case PointFormat::kLas: case PointFormat::kHdf5:
+    case PointFormat::kLas:
+    case PointFormat::kHdf5:
       throw UsageError(std::string("points cannot be written as ") + to_string(format) +
                        " (input only): write f32, f64, ply, npy or text");
-    case PointFormat::kAuto: break;
+    case PointFormat::kAuto:
+      break;
   }
   w->count_ = count;
   w->open(path, options.buffer_bytes);

@@ -26,10 +26,10 @@ namespace tetstream::io {
 class OutputClaim;
 
 struct PointWriteOptions {
-  PointFormat format = PointFormat::kAuto;  // kAuto: from the extension
-  ScalarType type = ScalarType::kAuto;      // raw, PLY binary, npy; kAuto: extension, else float64
+  PointFormat format = PointFormat::kAuto;    // kAuto: from the extension
+  ScalarType type = ScalarType::kAuto;        // raw, PLY binary, npy; kAuto: extension, else float64
   ByteOrder byte_order = ByteOrder::kLittle;  // raw, PLY binary, npy
-  bool ascii = false;                       // PLY: ASCII instead of binary
+  bool ascii = false;                         // PLY: ASCII instead of binary
   std::size_t buffer_bytes = std::size_t(8) << 20;
 };
 
@@ -65,8 +65,7 @@ class PointWriter {
   bool to_stdout_ = false;
 
  private:
-  friend std::unique_ptr<PointWriter> create_points(const std::string&, const PointWriteOptions&,
-                                                    std::uint64_t);
+  friend std::unique_ptr<PointWriter> create_points(const std::string&, const PointWriteOptions&, std::uint64_t);
   void open(const std::string& path, std::size_t buffer_bytes);
 
   std::unique_ptr<OutputClaim> claim_;  // PATH.partial, locked until the writer goes

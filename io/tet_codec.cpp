@@ -338,8 +338,7 @@ struct FrameEncoder::Impl {
   template <class L>
   void encode(std::span<const L> labels, EncodedFrame& out);
   template <class L>
-  void sort_by_smallest(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp, std::uint64_t base,
-                        std::uint64_t max_m);
+  void sort_by_smallest(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp, std::uint64_t base, std::uint64_t max_m);
 
   ZSTD_CCtx* cctx;
   Context ctx;
@@ -347,17 +346,17 @@ struct FrameEncoder::Impl {
   std::vector<Canon<std::uint32_t>> c32, tmp32;
   std::vector<Canon<std::uint64_t>> c64, tmp64;
   std::vector<std::uint32_t> counts;
-  std::vector<std::uint8_t> codes;       // per label of a group: its position in K(m), or kNewLabel
-  std::vector<std::uint64_t> fresh;      // the new labels of a group, sorted
-  std::vector<std::uint32_t> fresh_pos;  // their positions in U(m)
-  std::vector<std::uint64_t> ulabels;    // U(m)
-  std::vector<std::uint64_t> keys;       // a group's tets as packed positions in U(m), see kMaxPackedPosition
+  std::vector<std::uint8_t> codes;                 // per label of a group: its position in K(m), or kNewLabel
+  std::vector<std::uint64_t> fresh;                // the new labels of a group, sorted
+  std::vector<std::uint32_t> fresh_pos;            // their positions in U(m)
+  std::vector<std::uint64_t> ulabels;              // U(m)
+  std::vector<std::uint64_t> keys;                 // a group's tets as packed positions in U(m), see kMaxPackedPosition
   std::vector<std::array<std::uint64_t, 4>> wide;  // the same, for groups too big to pack
 };
 
 template <class L>
-void FrameEncoder::Impl::sort_by_smallest(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp,
-                                          std::uint64_t base, std::uint64_t max_m) {
+void FrameEncoder::Impl::sort_by_smallest(std::vector<Canon<L>>& c, std::vector<Canon<L>>& tmp, std::uint64_t base,
+                                          std::uint64_t max_m) {
   // A counting sort when the labels are dense (the pipeline's batches are), else a
   // comparison sort. The order within a group does not matter: it is sorted later, by
   // positions in U(m).
@@ -713,7 +712,8 @@ void FrameDecoder::Impl::decode(std::span<const std::uint8_t> payload, std::vect
       if (hi > (std::numeric_limits<std::uint64_t>::max() >> 8)) fail(kGapHi, "gap overflows");
       const std::uint64_t g = hi << 8 | *lp++;
       const std::uint64_t v = prev + g + 1;
-      if (v <= prev || v > h.max_label) fail(kGapHi, "new label out of range in the group of label " + std::to_string(m));
+      if (v <= prev || v > h.max_label)
+        fail(kGapHi, "new label out of range in the group of label " + std::to_string(m));
       prev = v;
       while (kq < nk && known[kq] < v) U[nu++] = known[kq++];
       if (kq < nk && known[kq] == v) fail(kGapHi, "new label already known");

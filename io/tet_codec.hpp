@@ -31,7 +31,7 @@ namespace tetstream::io {
 
 inline constexpr std::uint32_t kMaxFrameTets = 1u << 24;      // format.md §3.5
 inline constexpr std::uint32_t kDefaultFrameTets = 1u << 20;  // the writer's frame size
-inline constexpr int kDefaultZstdLevel = 1;  // the streams are already small; see bench-format
+inline constexpr int kDefaultZstdLevel = 1;                   // the streams are already small; see bench-format
 inline constexpr std::size_t kFrameHeaderSize = 48;
 inline constexpr std::uint8_t kCodecLowerStar = 1;
 inline constexpr int kFrameStreams = 6;

@@ -52,8 +52,8 @@ std::uint32_t crc32c_soft(const std::uint8_t* p, std::size_t n, std::uint32_t c)
   const auto& t = tables.t;
   while (n >= 8) {
     const std::uint32_t lo = get_u32(p) ^ c, hi = get_u32(p + 4);
-    c = t[7][lo & 0xFF] ^ t[6][(lo >> 8) & 0xFF] ^ t[5][(lo >> 16) & 0xFF] ^ t[4][lo >> 24] ^
-        t[3][hi & 0xFF] ^ t[2][(hi >> 8) & 0xFF] ^ t[1][(hi >> 16) & 0xFF] ^ t[0][hi >> 24];
+    c = t[7][lo & 0xFF] ^ t[6][(lo >> 8) & 0xFF] ^ t[5][(lo >> 16) & 0xFF] ^ t[4][lo >> 24] ^ t[3][hi & 0xFF] ^
+        t[2][(hi >> 8) & 0xFF] ^ t[1][(hi >> 16) & 0xFF] ^ t[0][hi >> 24];
     p += 8, n -= 8;
   }
   while (n--) c = (c >> 8) ^ t[0][(c ^ *p++) & 0xFF];
@@ -61,8 +61,7 @@ std::uint32_t crc32c_soft(const std::uint8_t* p, std::size_t n, std::uint32_t c)
 }
 
 #ifdef TETSTREAM_HAVE_SSE42_CRC
-__attribute__((target("sse4.2"))) std::uint32_t crc32c_hw(const std::uint8_t* p, std::size_t n,
-                                                            std::uint32_t c) {
+__attribute__((target("sse4.2"))) std::uint32_t crc32c_hw(const std::uint8_t* p, std::size_t n, std::uint32_t c) {
   std::uint64_t c64 = c;
   while (n >= 8) {
     std::uint64_t v;
@@ -219,8 +218,7 @@ std::string parse_head(std::span<const std::uint8_t> p, TetFileHeader& h) {
 
 // ---------------------------------------------------------------- INDX and footer
 
-std::vector<std::uint8_t> serialize_index(std::span<const SectionEntry> sections,
-                                          std::span<const FrameEntry> frames) {
+std::vector<std::uint8_t> serialize_index(std::span<const SectionEntry> sections, std::span<const FrameEntry> frames) {
   std::vector<std::uint8_t> b;
   b.reserve(12 + sections.size() * kSectionEntrySize + frames.size() * kFrameEntrySize);
   append_u32(b, std::uint32_t(sections.size()));

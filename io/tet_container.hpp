@@ -78,7 +78,7 @@ struct FrameEntry {
   std::uint64_t offset = 0;     // of the TETF section's tag
   std::uint64_t first_tet = 0;  // ordinal of its first tet in the file
   std::uint32_t tet_count = 0;
-  std::uint32_t length = 0;     // TETF payload length
+  std::uint32_t length = 0;  // TETF payload length
   std::uint64_t base_label = 0, max_label = 0;
 };
 inline constexpr std::size_t kFrameEntrySize = 40;
@@ -87,8 +87,7 @@ struct Footer {
   std::uint64_t index_offset = 0, tet_count = 0, frame_count = 0, point_count = 0;
 };
 
-std::vector<std::uint8_t> serialize_index(std::span<const SectionEntry> sections,
-                                          std::span<const FrameEntry> frames);
+std::vector<std::uint8_t> serialize_index(std::span<const SectionEntry> sections, std::span<const FrameEntry> frames);
 std::array<std::uint8_t, kFooterSize> serialize_footer(const Footer& f);
 // Both return an empty string on success, else the problem.
 std::string parse_footer(std::span<const std::uint8_t, kFooterSize> bytes, Footer& f);

@@ -82,13 +82,14 @@ TetReader::TetReader(std::string path) : path_(std::move(path)) {
     version_major_ = get_u16(data_ + 8);
     version_minor_ = get_u16(data_ + 10);
     if (version_major_ != kVersionMajor) {
-      fail(8, "unsupported container version " + std::to_string(version_major_) + "." +
-                  std::to_string(version_minor_) + " (this reader reads " + std::to_string(kVersionMajor) + ".x)");
+      fail(8, "unsupported container version " + std::to_string(version_major_) + "." + std::to_string(version_minor_) +
+                  " (this reader reads " + std::to_string(kVersionMajor) + ".x)");
     }
     // §3.7 footer.
     if (size_ < kPreambleSize + kFooterSize) fail(size_, "truncated: no footer");
     const std::uint64_t footer_at = size_ - kFooterSize;
-    if (const std::string p = parse_footer(std::span<const std::uint8_t, kFooterSize>(data_ + footer_at, kFooterSize), footer_);
+    if (const std::string p =
+            parse_footer(std::span<const std::uint8_t, kFooterSize>(data_ + footer_at, kFooterSize), footer_);
         !p.empty()) {
       fail(footer_at, p);
     }
@@ -98,14 +99,16 @@ TetReader::TetReader(std::string path) : path_(std::move(path)) {
         get_u64(data_ + ix + 8) != footer_at - ix - kSectionHeaderSize - kSectionTrailerSize) {
       fail(footer_at, "footer does not point at an index that ends at the footer");
     }
-    const auto index = section_payload(ix, kTagIndex, footer_at - ix - kSectionHeaderSize - kSectionTrailerSize, "index");
+    const auto index =
+        section_payload(ix, kTagIndex, footer_at - ix - kSectionHeaderSize - kSectionTrailerSize, "index");
     if (const std::string p = parse_index(index, sections_, frames_); !p.empty()) fail(ix + kSectionHeaderSize, p);
 
     // The directory: HEAD and PNTS, and no critical section this reader does not know.
     const SectionEntry* head = nullptr;
     const SectionEntry* pnts = nullptr;
     for (const auto& s : sections_) {
-      if (s.offset > ix || s.length > ix - s.offset || ix - s.offset - s.length < kSectionHeaderSize + kSectionTrailerSize) {
+      if (s.offset > ix || s.length > ix - s.offset ||
+          ix - s.offset - s.length < kSectionHeaderSize + kSectionTrailerSize) {
         fail(ix + kSectionHeaderSize, "directory entry for section " + tag_name(s.tag) + " lies outside the file");
       }
       if (s.tag == kTagHead && !head) {
@@ -133,7 +136,8 @@ TetReader::TetReader(std::string path) : path_(std::move(path)) {
     std::uint64_t tets = 0, prev_end = pnts->offset + kSectionHeaderSize + pnts->length + kSectionTrailerSize;
     for (std::uint64_t k = 0; k < frames_.size(); ++k) {
       const FrameEntry& f = frames_[k];
-      const std::uint64_t entry_at = ix + kSectionHeaderSize + 4 + sections_.size() * kSectionEntrySize + 8 + k * kFrameEntrySize;
+      const std::uint64_t entry_at =
+          ix + kSectionHeaderSize + 4 + sections_.size() * kSectionEntrySize + 8 + k * kFrameEntrySize;
       if (f.offset < prev_end || f.offset > ix || ix - f.offset < kSectionHeaderSize + kSectionTrailerSize ||
           f.length > ix - f.offset - kSectionHeaderSize - kSectionTrailerSize) {
         fail(entry_at, frame_name(k) + "index entry points outside the frames");
@@ -182,8 +186,8 @@ std::span<const std::uint8_t> TetReader::frame_payload(std::uint64_t k) const {
 
 namespace {
 template <class L>
-void read_frame_impl(const TetReader& r, std::uint64_t k, std::span<const std::uint8_t> payload,
-                     std::vector<L>& labels, std::uint64_t offset) {
+void read_frame_impl(const TetReader& r, std::uint64_t k, std::span<const std::uint8_t> payload, std::vector<L>& labels,
+                     std::uint64_t offset) {
   thread_local FrameDecoder decoder;
   const FrameEntry& f = r.frames()[k];
   FrameHeader h;

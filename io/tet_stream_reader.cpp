@@ -100,7 +100,8 @@ bool TetStreamReader::next_frame(std::vector<std::uint64_t>& labels) {
     if (tag == kTagFrame) {
       read_payload(payload_, len, what);
       FrameHeader h;
-      if (const std::string p = parse_frame_header(payload_, h); !p.empty()) fail(at + kSectionHeaderSize, what + ": " + p);
+      if (const std::string p = parse_frame_header(payload_, h); !p.empty())
+        fail(at + kSectionHeaderSize, what + ": " + p);
       if (h.max_label >= header_.point_count) fail(at + kSectionHeaderSize, what + ": a label beyond the points");
       try {
         decoder_.decode(payload_, labels);

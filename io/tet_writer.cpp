@@ -105,7 +105,8 @@ std::unique_ptr<TetWriter> TetWriter::resume(std::string path, TetFileHeader hea
   const std::vector<std::uint8_t> lead = leading_bytes(w->header_);
   const std::uint64_t pnts_at = lead.size() - kSectionHeaderSize;
   const std::uint64_t pnts_len = w->header_.point_count * w->header_.point_record_bytes();
-  w->sections_.push_back({kTagHead, kSectionCritical, kPreambleSize, pnts_at - kPreambleSize - kSectionHeaderSize - kSectionTrailerSize});
+  w->sections_.push_back(
+      {kTagHead, kSectionCritical, kPreambleSize, pnts_at - kPreambleSize - kSectionHeaderSize - kSectionTrailerSize});
   w->sections_.push_back({kTagPoints, kSectionCritical, pnts_at, pnts_len});
   w->points_end_ = pnts_at + kSectionHeaderSize + pnts_len + kSectionTrailerSize;
   const std::string partial = w->path_ + ".partial";
@@ -238,17 +239,16 @@ std::vector<FrameEntry> place_fragment(const std::string& fragment, const std::s
   OutputPart out(container_partial, container_file);
   std::vector<FrameEntry> placed;
   std::uint64_t tets = 0, offset = at;
-  for_each_fragment_frame(fragment, point_count,
-                          [&](std::uint64_t len, const std::vector<std::uint8_t>& section, const FrameHeader& fh) {
-                            placed.push_back({offset, tets, fh.tet_count, std::uint32_t(len), fh.base_label,
-                                              fh.max_label});
-                            // The bytes the container's own writer would write here.
-                            const auto h = section_header(kTagFrame, kSectionCritical, len);
-                            out.write_at(h.data(), h.size(), offset);
-                            out.write_at(section.data(), section.size(), offset + h.size());
-                            offset += h.size() + section.size();
-                            tets += fh.tet_count;
-                          });
+  for_each_fragment_frame(
+      fragment, point_count, [&](std::uint64_t len, const std::vector<std::uint8_t>& section, const FrameHeader& fh) {
+        placed.push_back({offset, tets, fh.tet_count, std::uint32_t(len), fh.base_label, fh.max_label});
+        // The bytes the container's own writer would write here.
+        const auto h = section_header(kTagFrame, kSectionCritical, len);
+        out.write_at(h.data(), h.size(), offset);
+        out.write_at(section.data(), section.size(), offset + h.size());
+        offset += h.size() + section.size();
+        tets += fh.tet_count;
+      });
   out.sync();
   return placed;
 }
@@ -342,12 +342,8 @@ void TetWriter::add_points_impl(const F* xyz, const std::uint64_t* ids, std::siz
   }
 }
 
-void TetWriter::add_points(const double* xyz, const std::uint64_t* ids, std::size_t n) {
-  add_points_impl(xyz, ids, n);
-}
-void TetWriter::add_points(const float* xyz, const std::uint64_t* ids, std::size_t n) {
-  add_points_impl(xyz, ids, n);
-}
+void TetWriter::add_points(const double* xyz, const std::uint64_t* ids, std::size_t n) { add_points_impl(xyz, ids, n); }
+void TetWriter::add_points(const float* xyz, const std::uint64_t* ids, std::size_t n) { add_points_impl(xyz, ids, n); }
 
 void TetWriter::add_frame(const EncodedFrame& frame) {
   if (finished_) throw std::logic_error("TetWriter: add_frame after finish");
@@ -355,8 +351,8 @@ void TetWriter::add_frame(const EncodedFrame& frame) {
     throw std::logic_error("TetWriter: tets before all " + std::to_string(header_.point_count) + " points");
   }
   if (frame.max_label >= header_.point_count) {
-    throw std::invalid_argument("TetWriter: label " + std::to_string(frame.max_label) + " is not below the point count " +
-                                std::to_string(header_.point_count));
+    throw std::invalid_argument("TetWriter: label " + std::to_string(frame.max_label) +
+                                " is not below the point count " + std::to_string(header_.point_count));
   }
   const std::uint64_t at = out_->offset();
   write_section_start(kTagFrame, frame.payload.size());
@@ -364,7 +360,8 @@ void TetWriter::add_frame(const EncodedFrame& frame) {
   std::uint8_t crc[4];
   put_u32(crc, frame.crc);
   out_->write(crc, 4);
-  frames_.push_back({at, tets_, frame.tet_count, std::uint32_t(frame.payload.size()), frame.base_label, frame.max_label});
+  frames_.push_back(
+      {at, tets_, frame.tet_count, std::uint32_t(frame.payload.size()), frame.base_label, frame.max_label});
   tets_ += frame.tet_count;
 }
 
@@ -380,8 +377,10 @@ void TetWriter::add_tets_impl(std::span<const std::span<const L>> batches) {
   }
   const std::size_t frames = pieces.size();
   if (frames == 0) return;
-  const int threads = int(std::min<std::size_t>(frames, options_.threads > 0 ? options_.threads : omp_get_max_threads()));
-  while (encoders_.size() < std::size_t(threads)) encoders_.push_back(std::make_unique<FrameEncoder>(options_.zstd_level));
+  const int threads =
+      int(std::min<std::size_t>(frames, options_.threads > 0 ? options_.threads : omp_get_max_threads()));
+  while (encoders_.size() < std::size_t(threads))
+    encoders_.push_back(std::make_unique<FrameEncoder>(options_.zstd_level));
   batch_.resize(std::max<std::size_t>(batch_.size(), std::size_t(threads)));
   // In waves of `threads` frames, so memory stays bounded whatever the batch size.
   for (std::size_t wave = 0; wave < frames; wave += threads) {

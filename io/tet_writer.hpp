@@ -16,8 +16,8 @@
 //
 // Frames: add_tets() splits a batch into frames of at most options.frame_tets and
 // encodes them on up to options.threads OpenMP threads (1 by default, so a writer stage
-// does not compete with the kernel's threads); the bytes do not depend on the count. A pipeline that encodes elsewhere uses io::FrameEncoder (one per thread)
-// and hands the frames to add_frame() in sequence order.
+// does not compete with the kernel's threads); the bytes do not depend on the count. A pipeline that encodes elsewhere
+// uses io::FrameEncoder (one per thread) and hands the frames to add_frame() in sequence order.
 //
 // Memory: one write buffer, the frame index (40 bytes per frame), and per encoding
 // thread one frame's scratch (about 40 bytes per tet of frame_tets) and encoded bytes.

@@ -95,7 +95,8 @@ class Stdout {
  private:
   static constexpr std::size_t kSize = std::size_t(1) << 20;
   static void put(const void* p, std::size_t n) {
-    if (n && std::fwrite(p, 1, n, stdout) != n) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
+    if (n && std::fwrite(p, 1, n, stdout) != n)
+      throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
   }
   std::unique_ptr<char[]> buf_;
   std::size_t used_ = 0;
@@ -127,7 +128,8 @@ void run_cat_stream(const CatArgs& args, Context& ctx) {
   if (args.points || !args.frames.empty()) throw UsageError("cat -: --points and --frames need a container file");
   io::TetStreamReader r(STDIN_FILENO, "standard input", args.original_ids);
   const std::uint64_t top = args.original_ids ? std::max(r.header().input_count, r.point_count()) : r.point_count();
-  if (args.format == "u32" && top > (std::uint64_t(1) << 32)) throw UsageError("values do not fit 32 bits: use --format u64");
+  if (args.format == "u32" && top > (std::uint64_t(1) << 32))
+    throw UsageError("values do not fit 32 bits: use --format u64");
   Stdout out;
   std::vector<std::uint64_t> labels;
   std::vector<std::uint32_t> narrow;
@@ -137,7 +139,8 @@ void run_cat_stream(const CatArgs& args, Context& ctx) {
   }
   out.flush();
   if (std::fflush(stdout) != 0) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
-  ctx.summary = {{"command", "cat"}, {"file", "-"}, {"format", args.format}, {"tets", r.tets_read()},
+  ctx.summary = {{"command", "cat"},          {"file", "-"},
+                 {"format", args.format},     {"tets", r.tets_read()},
                  {"frames", r.frames_read()}, {"original_ids", args.original_ids}};
 }
 
@@ -197,13 +200,15 @@ void run_cat(const CatArgs& args, Context& ctx) {
 
   // A 32-bit output must hold every value: decide before writing anything.
   if (args.format == "u32") {
-    const std::uint64_t top = args.original_ids ? std::max(r.header().input_count, r.point_count())
-                                                : (first < last ? std::max_element(r.frames().begin() + first,
-                                                                                   r.frames().begin() + last,
-                                                                                   [](const auto& a, const auto& b) {
-                                                                                     return a.max_label < b.max_label;
-                                                                                   })->max_label + 1
-                                                                : 0);
+    const std::uint64_t top = args.original_ids
+                                  ? std::max(r.header().input_count, r.point_count())
+                                  : (first < last ? std::max_element(
+                                                        r.frames().begin() + first, r.frames().begin() + last,
+                                                        [](const auto& a, const auto& b) {
+                                                          return a.max_label < b.max_label;
+                                                        })->max_label +
+                                                        1
+                                                  : 0);
     if (top > (std::uint64_t(1) << 32)) throw UsageError("values do not fit 32 bits: use --format u64");
   }
 
@@ -222,14 +227,15 @@ void run_cat(const CatArgs& args, Context& ctx) {
   out.flush();
   if (std::fflush(stdout) != 0) throw IoError("stdout: write failed: " + std::string(std::strerror(errno)));
   progress.finish();
-  ctx.summary = {{"command", "cat"},       {"file", args.path},          {"format", args.format},
-                 {"tets", written},        {"frames", {first, last}},    {"original_ids", args.original_ids}};
+  ctx.summary = {{"command", "cat"}, {"file", args.path},       {"format", args.format},
+                 {"tets", written},  {"frames", {first, last}}, {"original_ids", args.original_ids}};
 }
 
 void setup_cat(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<CatArgs>();
-  CLI::App* cmd = app.add_subcommand("cat", "Write a .tets container's tets (or points) to stdout, for pipes\n"
-                                             "(quiet unless -v; --json goes to stderr)");
+  CLI::App* cmd = app.add_subcommand("cat",
+                                     "Write a .tets container's tets (or points) to stdout, for pipes\n"
+                                     "(quiet unless -v; --json goes to stderr)");
   cmd->add_option("file", args->path, ".tets container, or - to read one from standard input as it is written")
       ->required();
   cmd->add_option("--format", args->format,

@@ -46,11 +46,13 @@ void run_clean(const CleanArgs& args, Context& ctx) {
 
 void setup_clean(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<CleanArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "clean", "Remove the work directories that killed jobs left in DIR (default: .): only directories\n"
-               "tetstream made whose job no longer runs, and only the files it wrote in them");
+  CLI::App* cmd =
+      app.add_subcommand("clean",
+                         "Remove the work directories that killed jobs left in DIR (default: .): only directories\n"
+                         "tetstream made whose job no longer runs, and only the files it wrote in them");
   cmd->add_option("dirs", args->dirs, "Directories to look in (not recursively)");
-  cmd->add_flag("--checkpoints", args->checkpoints, "Remove stale checkpoints too (their jobs cannot be resumed after)");
+  cmd->add_flag("--checkpoints", args->checkpoints,
+                "Remove stale checkpoints too (their jobs cannot be resumed after)");
   cmd->add_flag("-n,--dry-run", args->dry_run, "Only list what would be removed");
   cmd->callback([args, &ctx] { run_clean(*args, ctx); });
 }

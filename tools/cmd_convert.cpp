@@ -31,11 +31,13 @@ struct ConvertArgs {
 std::pair<std::string, io::PointReadOptions> container_input(const io::TetReader& reader) {
   const nlohmann::json made = nlohmann::json::parse(reader.header().options, nullptr, false);
   if (!made.is_object() || !made.contains("input") || !made["input"].is_string())
-    throw InputError(reader.path() + ": its header does not name the input it was made from (--las-attributes needs it)");
+    throw InputError(reader.path() +
+                     ": its header does not name the input it was made from (--las-attributes needs it)");
   if (made.contains("more_inputs"))
     throw InputError(reader.path() + ": made from several files: --las-attributes reads one LAS file");
   io::PointReadOptions read;
-  for (const auto& c : made.value("las_classes", nlohmann::json::array())) read.las_classes.push_back(c.get<std::uint8_t>());
+  for (const auto& c : made.value("las_classes", nlohmann::json::array()))
+    read.las_classes.push_back(c.get<std::uint8_t>());
   const std::string returns = made.value("las_returns", std::string("all"));
   read.las_returns = returns == "last"    ? io::PointReadOptions::LasReturns::kLast
                      : returns == "first" ? io::PointReadOptions::LasReturns::kFirst
@@ -73,7 +75,8 @@ void run_convert(const ConvertArgs& args, Context& ctx) {
                  {"outputs", result.files},
                  {"binary", args.binary},
                  {"compress_level", args.compress},
-                 {"point_data", [&] {
+                 {"point_data",
+                  [&] {
                     std::vector<std::string> names;
                     for (const auto& a : options.point_data) names.push_back(a.name);
                     return names;
@@ -86,13 +89,15 @@ void run_convert(const ConvertArgs& args, Context& ctx) {
 
 void setup_convert(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<ConvertArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "convert", "Convert a .tets container to a mesh: .vtu (VTK XML), .vtk (legacy VTK), .mesh (Medit),\n"
-                 ".msh (Gmsh 4.1), .node (TetGen .node + .ele) or .xdmf (XDMF + HDF5 .h5 beside it);\n"
-                 "the format comes from the extension. Each point carries its input index as\n"
-                 "\"original_id\" where the format has point data (.vtu .vtk .msh .xdmf; .node: attribute 1)");
+  CLI::App* cmd =
+      app.add_subcommand("convert",
+                         "Convert a .tets container to a mesh: .vtu (VTK XML), .vtk (legacy VTK), .mesh (Medit),\n"
+                         ".msh (Gmsh 4.1), .node (TetGen .node + .ele) or .xdmf (XDMF + HDF5 .h5 beside it);\n"
+                         "the format comes from the extension. Each point carries its input index as\n"
+                         "\"original_id\" where the format has point data (.vtu .vtk .msh .xdmf; .node: attribute 1)");
   cmd->add_option("input", args->input, ".tets container")->required();
-  cmd->add_option("output", args->output, "mesh.vtu, mesh.vtk, mesh.mesh, mesh.msh, mesh.node or mesh.xdmf")->required();
+  cmd->add_option("output", args->output, "mesh.vtu, mesh.vtk, mesh.mesh, mesh.msh, mesh.node or mesh.xdmf")
+      ->required();
   cmd->add_flag("--binary", args->binary, ".msh and .vtk: binary instead of ASCII");
   cmd->add_option("--point-data", args->point_data,
                   "Point data from a 1-D .npy array (float64, float32 or integers), one value per point in\n"
@@ -103,7 +108,8 @@ void setup_convert(CLI::App& app, Context& ctx) {
                 "Container made from a LAS file: read its intensity, classification, return number and\n"
                 "GPS time (when the point format has it) again, by original id, as point data; refused\n"
                 "when the file is gone or changed");
-  cmd->add_flag("--compress{6}", args->compress, ".vtu: zlib-compress the data (vtkZLibDataCompressor); --compress=L for level 1-9");
+  cmd->add_flag("--compress{6}", args->compress,
+                ".vtu: zlib-compress the data (vtkZLibDataCompressor); --compress=L for level 1-9");
   cmd->callback([args, &ctx] { run_convert(*args, ctx); });
 }
 

@@ -58,11 +58,13 @@ void run_field(FieldArgs& args, Context& ctx) {
   o.density = !args.density.empty();
   if (!args.grid.empty()) o.grid = pipeline::parse_grid(args.grid);
   if (!args.box.empty()) o.box = pipeline::parse_box(args.box), o.has_box = true;
-  if (args.hull != "nan" && args.hull != "open") throw UsageError("field: --hull must be nan or open, not '" + args.hull + "'");
+  if (args.hull != "nan" && args.hull != "open")
+    throw UsageError("field: --hull must be nan or open, not '" + args.hull + "'");
   o.hull = args.hull == "open" ? pipeline::HullMode::kOpen : pipeline::HullMode::kNan;
   if (args.dtype != "float64" && args.dtype != "float32" && args.dtype != "f8" && args.dtype != "f4")
     throw UsageError("field: --dtype must be float32 or float64, not '" + args.dtype + "'");
-  o.dtype = args.dtype == "float32" || args.dtype == "f4" ? pipeline::FieldType::kFloat32 : pipeline::FieldType::kFloat64;
+  o.dtype =
+      args.dtype == "float32" || args.dtype == "f4" ? pipeline::FieldType::kFloat32 : pipeline::FieldType::kFloat64;
   if (args.index_dtype != "auto" && args.index_dtype != "int64")
     throw UsageError("field: --index-dtype must be auto or int64, not '" + args.index_dtype + "'");
   o.neighbour_int64 = args.index_dtype == "int64";
@@ -72,36 +74,38 @@ void run_field(FieldArgs& args, Context& ctx) {
   spdlog::info("{} points ({} on the hull), {} tets in {} batches (window {} labels) in {:.2f}s", s.points,
                s.hull_points, s.tets, s.batches, s.window_labels, s.seconds);
   for (const auto& f : s.files) spdlog::info("wrote {}", f.path);
-  ctx.summary = {{"command", "field"},
-                 {"input", o.input},
-                 {"files", files},
-                 {"points", s.points},
-                 {"hull_points", s.hull_points},
-                 {"tets", s.tets},
-                 {"frames", s.frames},
-                 {"batches", s.batches},
-                 {"window_labels", s.window_labels},
-                 {"ring_labels", s.ring_labels},
-                 {"far_labels_peak", s.far_labels_peak},
-                 {"hull_volume", s.tet_volume},
-                 {"interior_voronoi_volume", s.interior_voronoi},
-                 {"voronoi_total_with_hull_pieces", s.voronoi_total},
-                 {"total_mass", s.total_mass},
-                 {"neighbour_entries", s.neighbour_entries},
-                 {"neighbour_dtype", s.neighbour_dtype.empty() ? nlohmann::json(nullptr) : nlohmann::json(s.neighbour_dtype)},
-                 {"grid_points", s.grid_points},
-                 {"grid_inside", s.grid_inside},
-                 {"hull", args.hull},
-                 {"dtype", o.dtype == pipeline::FieldType::kFloat32 ? "float32" : "float64"},
-                 {"memory_planned", s.memory_planned},
-                 {"seconds", s.seconds}};
+  ctx.summary = {
+      {"command", "field"},
+      {"input", o.input},
+      {"files", files},
+      {"points", s.points},
+      {"hull_points", s.hull_points},
+      {"tets", s.tets},
+      {"frames", s.frames},
+      {"batches", s.batches},
+      {"window_labels", s.window_labels},
+      {"ring_labels", s.ring_labels},
+      {"far_labels_peak", s.far_labels_peak},
+      {"hull_volume", s.tet_volume},
+      {"interior_voronoi_volume", s.interior_voronoi},
+      {"voronoi_total_with_hull_pieces", s.voronoi_total},
+      {"total_mass", s.total_mass},
+      {"neighbour_entries", s.neighbour_entries},
+      {"neighbour_dtype", s.neighbour_dtype.empty() ? nlohmann::json(nullptr) : nlohmann::json(s.neighbour_dtype)},
+      {"grid_points", s.grid_points},
+      {"grid_inside", s.grid_inside},
+      {"hull", args.hull},
+      {"dtype", o.dtype == pipeline::FieldType::kFloat32 ? "float32" : "float64"},
+      {"memory_planned", s.memory_planned},
+      {"seconds", s.seconds}};
   if (!ctx.global.json)
     for (const auto& f : s.files) std::cout << f.path << "\n";
 }
 
 void setup_field(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<FieldArgs>();
-  CLI::App* cmd = app.add_subcommand("field", "Per-point fields from a .tets container: DTFE density, Voronoi volumes, neighbours, grids");
+  CLI::App* cmd = app.add_subcommand(
+      "field", "Per-point fields from a .tets container: DTFE density, Voronoi volumes, neighbours, grids");
   cmd->footer(kFieldHelp);
   cmd->add_option("input", args->options.input, "The container (.tets)")->required();
   cmd->add_option("-o,--output", args->options.output,
@@ -111,15 +115,18 @@ void setup_field(CLI::App& app, Context& ctx) {
   cmd->add_flag("--voronoi-volume", args->options.voronoi, "Per-point Voronoi cell volume");
   cmd->add_flag("--neighbours,--neighbors", args->options.neighbours, "Delaunay neighbours of each point (CSR)");
   cmd->add_option("--grid", args->grid, "DTFE density on a grid of N^3 or NX,NY,NZ cells (values at the centres)");
-  cmd->add_option("--box", args->box, "The grid's box xmin,ymin,zmin,xmax,ymax,zmax (default: the points' bounding box)");
+  cmd->add_option("--box", args->box,
+                  "The grid's box xmin,ymin,zmin,xmax,ymax,zmax (default: the points' bounding box)");
   cmd->add_option("--hull", args->hull, "Density at hull points: nan or open")->capture_default_str();
-  cmd->add_option("--mass", args->options.mass, "Per-point masses in input order (.npy float64/float32, or raw float64)");
+  cmd->add_option("--mass", args->options.mass,
+                  "Per-point masses in input order (.npy float64/float32, or raw float64)");
   cmd->add_option("--dtype", args->dtype, "float64 or float32 (density, Voronoi volume, grid)")->capture_default_str();
   cmd->add_option("--index-dtype", args->index_dtype,
                   "The neighbour arrays: auto (int32 when every offset and index fits, else int64) or int64")
       ->capture_default_str();
   cmd->add_option("--memory", args->memory, "Memory budget, e.g. 512M, 4G")->capture_default_str();
-  cmd->add_option("--tmpdir", args->options.tmpdir, "Directory for temporary files (default: $TMPDIR, else the output's)");
+  cmd->add_option("--tmpdir", args->options.tmpdir,
+                  "Directory for temporary files (default: $TMPDIR, else the output's)");
   cmd->callback([args, &ctx] { run_field(*args, ctx); });
 }
 

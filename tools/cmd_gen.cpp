@@ -44,7 +44,8 @@ void plan_gen_disk(const std::string& output, const std::string& format, std::ui
   const std::string::size_type slash = output.rfind('/');
   const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : output.substr(0, slash);
   struct statvfs vfs {};
-  if (::statvfs(dir.c_str(), &vfs) != 0) throw IoError(dir + ": cannot examine the filesystem: " + std::strerror(errno));
+  if (::statvfs(dir.c_str(), &vfs) != 0)
+    throw IoError(dir + ": cannot examine the filesystem: " + std::strerror(errno));
   const std::uint64_t available = std::uint64_t(vfs.f_bavail) * std::uint64_t(vfs.f_frsize);
   const unsigned __int128 need = static_cast<unsigned __int128>(points) * per_point;
   if (need > available)
@@ -69,8 +70,10 @@ void run_gen(const GenArgs& args, Context& ctx) {
 
   io::PointWriteOptions wopt;
   if (!args.format.empty()) io::parse_format_name(args.format, wopt.format, wopt.type);
-  if (args.type == "f32") wopt.type = io::ScalarType::kFloat32;
-  else if (args.type == "f64") wopt.type = io::ScalarType::kFloat64;
+  if (args.type == "f32")
+    wopt.type = io::ScalarType::kFloat32;
+  else if (args.type == "f64")
+    wopt.type = io::ScalarType::kFloat64;
   wopt.byte_order = io::parse_byte_order(args.byte_order);
   wopt.ascii = args.ascii;
 
@@ -113,8 +116,9 @@ void setup_gen(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<GenArgs>();
   CLI::App* cmd = app.add_subcommand("gen", "Generate a seeded synthetic point set");
   cmd->footer(io::distribution_help());
-  cmd->add_option("--dist", args->dist, "Distribution: uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain, two-plates;\n"
-                                           "the surface zoo: hills, roofs, canopy, water, strips, scan-lines, survey, indoor")
+  cmd->add_option("--dist", args->dist,
+                  "Distribution: uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain, two-plates;\n"
+                  "the surface zoo: hills, roofs, canopy, water, strips, scan-lines, survey, indoor")
       ->capture_default_str();
   cmd->add_option("-n,--n", args->gen.n, "Number of points, e.g. 1000000 or 1e6 (grid: rounded to the nearest cube)")
       ->transform(scientific_count())

@@ -130,8 +130,11 @@ void info_points(const InfoArgs& args, Context& ctx) {
     std::printf("format:  %s\n", reader->format_name().c_str());
     std::printf("points:  %llu\n", static_cast<unsigned long long>(points));
     for (int c = 0; c < 3; ++c) {
-      std::printf("%s:       [%s, %s]\n", c == 0 ? "x" : c == 1 ? "y" : "z", shortest(lo[c]).c_str(),
-                  shortest(hi[c]).c_str());
+      std::printf("%s:       [%s, %s]\n",
+                  c == 0   ? "x"
+                  : c == 1 ? "y"
+                           : "z",
+                  shortest(lo[c]).c_str(), shortest(hi[c]).c_str());
     }
     std::printf("bytes:   %llu (%s)\n", static_cast<unsigned long long>(bytes),
                 pipeline::human_bytes(double(bytes)).c_str());
@@ -140,8 +143,8 @@ void info_points(const InfoArgs& args, Context& ctx) {
     }
     std::fflush(stdout);
   }
-  spdlog::debug("read {} in {} ({:.0f} MB/s)", pipeline::human_bytes(double(bytes)),
-                pipeline::human_duration(seconds), seconds > 0 ? double(bytes) / seconds / 1e6 : 0.0);
+  spdlog::debug("read {} in {} ({:.0f} MB/s)", pipeline::human_bytes(double(bytes)), pipeline::human_duration(seconds),
+                seconds > 0 ? double(bytes) / seconds / 1e6 : 0.0);
   ctx.summary = {{"command", "info"},
                  {"file", reader->source_name()},
                  {"format", reader->format_name()},
@@ -155,9 +158,10 @@ void info_points(const InfoArgs& args, Context& ctx) {
 
 void setup_info(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<InfoArgs>();
-  CLI::App* cmd = app.add_subcommand(
-      "info", "Show a point file's count, bounding box and format (reads it all and checks every\n"
-              "coordinate), or a .tets container's summary");
+  CLI::App* cmd =
+      app.add_subcommand("info",
+                         "Show a point file's count, bounding box and format (reads it all and checks every\n"
+                         "coordinate), or a .tets container's summary");
   add_point_input_files(cmd, "file", args->path, args->read,
                         "Point file ('-' for stdin; several files are one input) or .tets container; an HDF5 file "
                         "without --dataset: its (N, 3) datasets");

@@ -45,24 +45,27 @@ void info_tets(const std::string& path, Context& ctx, bool check) {
   if (!ctx.global.json) {
     std::printf("file:     %s\n", path.c_str());
     std::printf("format:   .tets container %s\n", version.c_str());
-    std::printf("points:   %llu (%s coordinates, %u-bit original indices", static_cast<unsigned long long>(h.point_count),
-                coords, h.id_width);
+    std::printf("points:   %llu (%s coordinates, %u-bit original indices",
+                static_cast<unsigned long long>(h.point_count), coords, h.id_width);
     if (h.input_count) std::printf(", %llu input points", static_cast<unsigned long long>(h.input_count));
     std::printf(")\n");
-    std::printf("tets:     %llu in %llu frames (%u-bit labels), %.2f per point\n", static_cast<unsigned long long>(tets),
-                static_cast<unsigned long long>(r.frame_count()), h.label_width,
+    std::printf("tets:     %llu in %llu frames (%u-bit labels), %.2f per point\n",
+                static_cast<unsigned long long>(tets), static_cast<unsigned long long>(r.frame_count()), h.label_width,
                 h.point_count ? double(tets) / double(h.point_count) : 0.0);
     std::printf("size:     %s; tets %s = %.3f bytes per tet (%.1fx smaller than 16 raw)\n",
-                pipeline::human_bytes(double(r.file_bytes())).c_str(), pipeline::human_bytes(double(r.tet_bytes())).c_str(),
-                per_tet, per_tet > 0 ? 16.0 / per_tet : 0.0);
+                pipeline::human_bytes(double(r.file_bytes())).c_str(),
+                pipeline::human_bytes(double(r.tet_bytes())).c_str(), per_tet, per_tet > 0 ? 16.0 / per_tet : 0.0);
     for (int c = 0; c < 3; ++c) {
-      std::printf("%s:        [%s, %s]\n", c == 0 ? "x" : c == 1 ? "y" : "z", shortest(h.bbox_min[c]).c_str(),
-                  shortest(h.bbox_max[c]).c_str());
+      std::printf("%s:        [%s, %s]\n",
+                  c == 0   ? "x"
+                  : c == 1 ? "y"
+                           : "z",
+                  shortest(h.bbox_min[c]).c_str(), shortest(h.bbox_max[c]).c_str());
     }
     std::printf("made by:  %s\n", h.tool.empty() ? "(unknown)" : h.tool.c_str());
     std::printf("options:  %s\n", h.options.empty() ? "(none)" : h.options.c_str());
     std::printf("checked:  %s\n", check ? "header, index, footer, every point and frame (CRCs, decoding)"
-                                         : "header, index, footer (--check reads the points and frames too)");
+                                        : "header, index, footer (--check reads the points and frames too)");
     std::fflush(stdout);
   }
   ctx.summary = {{"command", "info"},

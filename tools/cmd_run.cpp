@@ -52,16 +52,16 @@ void run_run(RunArgs& args, Context& ctx) {
   const pipeline::RunSummary s = comm.size() > 1 ? pipeline::run_job_distributed(o, comm) : pipeline::run_job(o);
   if (comm.rank() != 0) return;
   const double tets_per_s = s.seconds_total > 0 ? double(s.tets) / s.seconds_total : 0;
-  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments ({} zones); {} written, tets {:.2f} B/tet", s.points,
-               s.duplicates, s.tets, s.segments, s.zones, pipeline::human_bytes(double(s.output_bytes)),
+  spdlog::info("{} points ({} duplicates merged) -> {} tets in {} segments ({} zones); {} written, tets {:.2f} B/tet",
+               s.points, s.duplicates, s.tets, s.segments, s.zones, pipeline::human_bytes(double(s.output_bytes)),
                s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0);
-  spdlog::info("time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
-               "{:.1f}% (segment buffers {}, zone buffers {} = {:.1f}% of insertions, hull {}, repairs {}), {} queries "
-               "({} exact tests); segments: build {:.1f}s, check {:.1f}s (summed)",
-               s.seconds_sort, s.seconds_triangulate, s.seconds_write, s.seconds_total,
-               pipeline::human_count(tets_per_s), 100 * s.redundant_ratio(), s.segment_buffer_points,
-               s.zone_buffer_points, 100 * s.zone_buffer_share(), s.hull_window_points, s.repair_points, s.queries,
-               s.query_points, s.seconds_build, s.seconds_check);
+  spdlog::info(
+      "time: sort {:.2f}s, triangulate {:.2f}s, write {:.2f}s, total {:.2f}s ({} tets/s); redundant insertion "
+      "{:.1f}% (segment buffers {}, zone buffers {} = {:.1f}% of insertions, hull {}, repairs {}), {} queries "
+      "({} exact tests); segments: build {:.1f}s, check {:.1f}s (summed)",
+      s.seconds_sort, s.seconds_triangulate, s.seconds_write, s.seconds_total, pipeline::human_count(tets_per_s),
+      100 * s.redundant_ratio(), s.segment_buffer_points, s.zone_buffer_points, 100 * s.zone_buffer_share(),
+      s.hull_window_points, s.repair_points, s.queries, s.query_points, s.seconds_build, s.seconds_check);
   ctx.summary = pipeline::run_summary_json(o, s);
   if (!mesh) return;
   std::vector<std::string> files;

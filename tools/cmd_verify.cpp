@@ -61,7 +61,8 @@ void run_verify(VerifyArgs& args, Context& ctx) {
 
 void setup_verify(CLI::App& app, Context& ctx) {
   auto args = std::make_shared<VerifyArgs>();
-  CLI::App* cmd = app.add_subcommand("verify", "Check that a .tets container is the Delaunay triangulation of its points");
+  CLI::App* cmd =
+      app.add_subcommand("verify", "Check that a .tets container is the Delaunay triangulation of its points");
   cmd->footer(kVerifyHelp);
   cmd->add_option("input", args->input, "The container (.tets)")->required();
   cmd->add_option("--sample", args->options.sample, "Check a seeded fraction in (0, 1] of tets and facets (quick look)")
@@ -69,7 +70,8 @@ void setup_verify(CLI::App& app, Context& ctx) {
   cmd->add_option("--seed", args->options.seed, "Seed of the sample")->capture_default_str();
   cmd->add_option("--memory", args->memory, "Memory budget, e.g. 512M, 4G (beyond it, open facets spill to --tmpdir)")
       ->capture_default_str();
-  cmd->add_option("--tmpdir", args->options.tmpdir, "Directory for spilled records (default: $TMPDIR, else the input's)");
+  cmd->add_option("--tmpdir", args->options.tmpdir,
+                  "Directory for spilled records (default: $TMPDIR, else the input's)");
   cmd->add_option("--max-listed", args->options.max_listed, "Violations listed per kind (all are counted)")
       ->capture_default_str();
   cmd->add_option("--volume-tolerance", args->options.volume_tolerance, "Relative tolerance of the volume check")

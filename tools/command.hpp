@@ -18,12 +18,12 @@
 namespace tetstream::cli {
 
 struct GlobalOptions {
-  int threads = 0;               // 0: all cores
+  int threads = 0;  // 0: all cores
   std::string log_level = "info";
-  bool json = false;             // machine-readable summary on stdout at the end
-  bool quiet = false;            // no progress line, warnings and errors only
-  bool verbose = false;          // progress also where a command is quiet by default (cat)
-  std::string json_file;         // the --json summary goes to this file instead
+  bool json = false;      // machine-readable summary on stdout at the end
+  bool quiet = false;     // no progress line, warnings and errors only
+  bool verbose = false;   // progress also where a command is quiet by default (cat)
+  std::string json_file;  // the --json summary goes to this file instead
 };
 
 struct Context {
@@ -44,9 +44,7 @@ struct CommandRegistration {
 std::vector<CommandRegistration>& command_registry();
 
 struct CommandRegistrar {
-  CommandRegistrar(int order, CommandSetup setup) {
-    command_registry().push_back({order, std::move(setup)});
-  }
+  CommandRegistrar(int order, CommandSetup setup) { command_registry().push_back({order, std::move(setup)}); }
 };
 
 }  // namespace tetstream::cli

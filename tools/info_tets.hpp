@@ -9,4 +9,4 @@ namespace tetstream::cli {
 // check: also read every point and frame and check their CRCs (and the frames'
 // decoding): InputError naming the first damaged byte.
 void info_tets(const std::string& path, Context& ctx, bool check = false);
-}
+}  // namespace tetstream::cli

@@ -47,9 +47,10 @@ constexpr const char* kExitCodes =
 void warn_if_fewer_cores_than_threads(int threads) {
   const int cores = omp_get_num_procs();
   if (cores > 0 && threads > cores)
-    spdlog::warn("--threads {} but this process may run on {} core{} (its CPU affinity; under mpirun, add "
-                 "--bind-to none, or give each rank its cores with --map-by ...:PE={}): the threads will take turns",
-                 threads, cores, cores == 1 ? "" : "s", threads);
+    spdlog::warn(
+        "--threads {} but this process may run on {} core{} (its CPU affinity; under mpirun, add "
+        "--bind-to none, or give each rank its cores with --map-by ...:PE={}): the threads will take turns",
+        threads, cores, cores == 1 ? "" : "s", threads);
 }
 
 // Without --threads a rank takes the cores its affinity allows; with mpirun's default
@@ -62,9 +63,10 @@ void warn_if_ranks_leave_cores_idle() {
   const int cores = omp_get_num_procs();
   const long online = ::sysconf(_SC_NPROCESSORS_ONLN);
   if (ranks_here > 0 && cores > 0 && long(ranks_here) * cores < online)
-    spdlog::warn("each rank may use {} of this node's {} cores ({} rank{} here; mpirun binds ranks to cores): for "
-                 "more threads a rank, add --bind-to none, or --map-by ppr:R:node:PE=T with --threads T",
-                 cores, online, ranks_here, ranks_here == 1 ? "" : "s");
+    spdlog::warn(
+        "each rank may use {} of this node's {} cores ({} rank{} here; mpirun binds ranks to cores): for "
+        "more threads a rank, add --bind-to none, or --map-by ppr:R:node:PE=T with --threads T",
+        cores, online, ranks_here, ranks_here == 1 ? "" : "s");
 }
 
 // Edit distance, for "unknown subcommand runn; did you mean run?".
@@ -98,7 +100,8 @@ std::string unknown_subcommand(const CLI::App& app, int argc, char** argv) {
     std::string best;
     std::size_t best_distance = 3;  // suggest only close names
     for (const CLI::App* sub : app.get_subcommands({}))
-      if (const std::size_t d = edit_distance(a, sub->get_name()); d < best_distance) best_distance = d, best = sub->get_name();
+      if (const std::size_t d = edit_distance(a, sub->get_name()); d < best_distance)
+        best_distance = d, best = sub->get_name();
     return "unknown subcommand '" + a + "'" + (best.empty() ? "" : "; did you mean '" + best + "'?");
   }
   return "";
@@ -142,28 +145,32 @@ int main(int argc, char** argv) {
   const bool other_rank = world().rank() != 0;
 
   Context ctx;
-  CLI::App app{"tetstream: exact 3D Delaunay triangulation of point sets larger than memory,\n"
-               "streamed to a compressed container of tetrahedra.",
-               "tetstream"};
+  CLI::App app{
+      "tetstream: exact 3D Delaunay triangulation of point sets larger than memory,\n"
+      "streamed to a compressed container of tetrahedra.",
+      "tetstream"};
   app.footer(kExitCodes);
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("tetstream 0.1.0"));
   // Capped: each thread holds a kernel and buffers, and OpenMP runtimes fail (or crash)
   // long before 65536 threads; more threads than cores never help.
-  app.add_option("--threads", ctx.global.threads, "Worker threads (0: all cores; at most " + std::to_string(kMaxThreads) + ")")
+  app.add_option("--threads", ctx.global.threads,
+                 "Worker threads (0: all cores; at most " + std::to_string(kMaxThreads) + ")")
       ->check(CLI::Range(0, kMaxThreads));
   app.add_option("--log-level", ctx.global.log_level, "trace, debug, info, warn, error, critical, off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}));
-  app.add_flag("--json", ctx.global.json, "Print a machine-readable summary at the end (on stdout; on stderr when stdout\ncarries data: cat, run -o -)");
-  app.add_option("--json-file", ctx.global.json_file, "Write the --json summary to FILE (implies --json)")->type_name("FILE");
+  app.add_flag(
+      "--json", ctx.global.json,
+      "Print a machine-readable summary at the end (on stdout; on stderr when stdout\ncarries data: cat, run -o -)");
+  app.add_option("--json-file", ctx.global.json_file, "Write the --json summary to FILE (implies --json)")
+      ->type_name("FILE");
   app.add_flag("-q,--quiet", ctx.global.quiet, "No progress line; warnings and errors only");
   app.add_flag("-v,--verbose", ctx.global.verbose, "Progress also from commands that are quiet by default (cat)");
   // Global options may be given before or after the subcommand.
   app.fallthrough();
 
   auto& registry = command_registry();
-  std::stable_sort(registry.begin(), registry.end(),
-                   [](const auto& a, const auto& b) { return a.order < b.order; });
+  std::stable_sort(registry.begin(), registry.end(), [](const auto& a, const auto& b) { return a.order < b.order; });
   for (auto& reg : registry) reg.setup(app, ctx);
 
   app.parse_complete_callback([&ctx, &app, other_rank] {
@@ -200,7 +207,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     // One line, like every other error (CLI11 would add a second, "Run with --help").
     const std::string unknown = unknown_subcommand(app, argc, argv);
-    std::cerr << "tetstream: error: " << (unknown.empty() ? std::string(e.what()) : unknown) << " (see tetstream --help)\n";
+    std::cerr << "tetstream: error: " << (unknown.empty() ? std::string(e.what()) : unknown)
+              << " (see tetstream --help)\n";
     return static_cast<int>(ExitCode::kUsage);
   } catch (const pipeline::PeerFailed& e) {
     return static_cast<int>(e.code());  // the failing rank printed the job's error line

@@ -39,9 +39,12 @@ void add_point_input_options(CLI::App* app, io::PointReadOptions& options) {
   app->add_option_function<std::string>(
          "--type",
          [&options](const std::string& v) {
-           if (v == "f32" || v == "float32") options.type = io::ScalarType::kFloat32;
-           else if (v == "f64" || v == "float64") options.type = io::ScalarType::kFloat64;
-           else throw CLI::ValidationError("--type", "expected f32 or f64, got '" + v + "'");
+           if (v == "f32" || v == "float32")
+             options.type = io::ScalarType::kFloat32;
+           else if (v == "f64" || v == "float64")
+             options.type = io::ScalarType::kFloat64;
+           else
+             throw CLI::ValidationError("--type", "expected f32 or f64, got '" + v + "'");
          },
          "Raw input scalar type: f32 or f64 (default: from the extension, else f64)")
       ->group(group);
@@ -101,10 +104,14 @@ void add_point_input_options(CLI::App* app, io::PointReadOptions& options) {
          "--las-returns",
          [&options](const std::string& v) {
            using R = io::PointReadOptions::LasReturns;
-           if (v == "all") options.las_returns = R::kAll;
-           else if (v == "first") options.las_returns = R::kFirst;
-           else if (v == "last") options.las_returns = R::kLast;
-           else throw UsageError("--las-returns: expected last, first or all, got '" + v + "'");
+           if (v == "all")
+             options.las_returns = R::kAll;
+           else if (v == "first")
+             options.las_returns = R::kFirst;
+           else if (v == "last")
+             options.las_returns = R::kLast;
+           else
+             throw UsageError("--las-returns: expected last, first or all, got '" + v + "'");
          },
          "LAS input: keep only last returns (return number = number of returns), first returns\n"
          "(return number 1), or all (default)")

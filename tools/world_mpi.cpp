@@ -111,8 +111,8 @@ class MpiWorld final : public Communicator {
     MPI_Datatype record;
     check(MPI_Type_contiguous(int(record_bytes), MPI_BYTE, &record), "exchange");
     check(MPI_Type_commit(&record), "exchange");
-    const int rc = MPI_Alltoallv(send, sn.data(), sd.data(), record, receive, rn.data(), rd.data(), record,
-                                 MPI_COMM_WORLD);
+    const int rc =
+        MPI_Alltoallv(send, sn.data(), sd.data(), record, receive, rn.data(), rd.data(), record, MPI_COMM_WORLD);
     MPI_Type_free(&record);
     check(rc, "exchange");
   }

@@ -58,15 +58,15 @@ Triangulation triangulate(std::span<const double> xyz, int threads = 0);
 // raw .f64/.f32, PLY, .npy, text, LAS, HDF5; docs/inputs.md).
 struct RunOptions {
   std::vector<std::string> inputs;
-  std::string output;                               // the .tets container
+  std::string output;  // the .tets container
   std::uint64_t memory_bytes = std::uint64_t(1) << 30;
-  int threads = 0;                                  // 0: all cores
-  std::string tmpdir;                               // empty: the output's directory
-  bool checkpoint = true;                           // resumable (OUTPUT.ckpt)
-  bool resume = false;                              // continue a checkpointed job
-  bool force = false;                               // discard a checkpoint and start over
-  bool progress = false;                            // the job's info lines through spdlog (else warnings only)
-  std::vector<std::string> datasets;                // HDF5: the (N, 3) datasets to read
+  int threads = 0;                    // 0: all cores
+  std::string tmpdir;                 // empty: the output's directory
+  bool checkpoint = true;             // resumable (OUTPUT.ckpt)
+  bool resume = false;                // continue a checkpointed job
+  bool force = false;                 // discard a checkpoint and start over
+  bool progress = false;              // the job's info lines through spdlog (else warnings only)
+  std::vector<std::string> datasets;  // HDF5: the (N, 3) datasets to read
 };
 
 struct RunSummary {

@@ -28,9 +28,7 @@ constexpr std::size_t kSamplesPerRank = 1024;
 struct Key {
   double c[3];
 };
-Key key_of(const double* xyz, int axis) {
-  return Key{{xyz[axis], xyz[(axis + 1) % 3], xyz[(axis + 2) % 3]}};
-}
+Key key_of(const double* xyz, int axis) { return Key{{xyz[axis], xyz[(axis + 1) % 3], xyz[(axis + 2) % 3]}}; }
 bool key_less(const Key& a, const Key& b) {
   for (int k = 0; k < 3; ++k)
     if (a.c[k] != b.c[k]) return a.c[k] < b.c[k];
@@ -78,8 +76,8 @@ struct InputRange {
 // Moves a fresh reader to point `first` (this rank's range).
 void skip_to(io::PointReader& reader, std::uint64_t first) {
   if (reader.skip(first) != first)
-    throw InputError(reader.source_name() + ": changed while being read (ended before point " +
-                     std::to_string(first) + ")");
+    throw InputError(reader.source_name() + ": changed while being read (ended before point " + std::to_string(first) +
+                     ")");
 }
 
 // Reads exactly n points (the input's count said they are there).
@@ -95,19 +93,18 @@ void read_exactly(io::PointReader& reader, double* xyz, std::size_t n) {
 // hull labels (this rank's, from 0) and crc32c (of this rank's part); returns the
 // offset where its part was written.
 template <class R>
-std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
-                                                           const io::PointReadOptions& read_options,
-                                                           const PointSortOptions& options,
-                                                           const std::string& dir, const std::string& runs_name,
-                                                           const InputRange& range,
-                                                           const std::vector<Key>& splitters, io::OutputPart& out,
-                                                           const DistributedSortTarget& target, SortedPoints& result) {
+std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input, const io::PointReadOptions& read_options,
+                                 const PointSortOptions& options, const std::string& dir, const std::string& runs_name,
+                                 const InputRange& range, const std::vector<Key>& splitters, io::OutputPart& out,
+                                 const DistributedSortTarget& target, SortedPoints& result) {
   const std::size_t ranks = std::size_t(comm.size());
   const bool root = comm.rank() == 0;
   const int axis = result.axis;
   std::optional<MemoryBudget> own_budget;
   MemoryBudget* budget = options.budget;
-  if (!budget) budget = &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
+  if (!budget)
+    budget =
+        &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
   budget->set_points(result.input_count);
   const SortShares shares = budget->plan_sort();
   const std::size_t run_points = options.run_points ? options.run_points : shares.run_points;
@@ -155,7 +152,8 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input,
       got = at < range.end ? std::size_t(std::min<std::uint64_t>(chunk, range.end - at)) : 0;
       read_exactly(*reader, xyz.data(), got);
       std::vector<std::uint32_t> to(got);
-      for (std::size_t i = 0; i < got; ++i) ++counts[to[i] = std::uint32_t(rank_of(splitters, key_of(&xyz[3 * i], axis)))];
+      for (std::size_t i = 0; i < got; ++i)
+        ++counts[to[i] = std::uint32_t(rank_of(splitters, key_of(&xyz[3 * i], axis)))];
       for (std::size_t r = 0, s = 0; r < ranks; ++r) slot[r] = s, s += counts[r];
       for (std::size_t i = 0; i < got; ++i) {
         send[slot[to[i]]++].set(&xyz[3 * i], at + i);  // exact: R holds the input's own values
@@ -329,14 +327,21 @@ SortedPoints close_parts(Communicator& comm, io::OutputPart* out, const Distribu
     // Towards the start in rank order, then towards the end in reverse order: a
     // part's place overlaps only parts that have moved already (see the header).
     for (std::size_t r = 0; r < ranks; ++r)
-      if (place[r] < offsets[r]) together(comm, [&] { if (r == me) move_mine(); });
+      if (place[r] < offsets[r])
+        together(comm, [&] {
+          if (r == me) move_mine();
+        });
     for (std::size_t r = ranks; r-- > 0;)
-      if (place[r] > offsets[r]) together(comm, [&] { if (r == me) move_mine(); });
+      if (place[r] > offsets[r])
+        together(comm, [&] {
+          if (r == me) move_mine();
+        });
   }
   together(comm, [&] {
     if (!root) return;
     std::uint32_t crc = 0;
-    for (std::size_t r = 0; r < ranks; ++r) crc = io::crc32c_combine(crc, std::uint32_t(crcs[r]), counts[r] * record_bytes);
+    for (std::size_t r = 0; r < ranks; ++r)
+      crc = io::crc32c_combine(crc, std::uint32_t(crcs[r]), counts[r] * record_bytes);
     const std::vector<std::uint8_t> lead_bytes = points_lead(target.header, whole);
     std::uint8_t trailer[4];
     io::put_u32(trailer, crc);
@@ -404,8 +409,8 @@ SortedPoints sort_points_distributed(Communicator& comm, const std::string& inpu
   together(comm, [&] { out.emplace(target.partial, target.identity); });
   std::uint64_t written_at = 0;
   with_record(result.layout, [&](auto r) {
-    written_at = exchange_and_merge<decltype(r)>(comm, input, read_options, options, dir, runs_name, range,
-                                                 splitters, *out, target, result);
+    written_at = exchange_and_merge<decltype(r)>(comm, input, read_options, options, dir, runs_name, range, splitters,
+                                                 *out, target, result);
   });
 
   // ---- close: the ranks' parts into one section ----

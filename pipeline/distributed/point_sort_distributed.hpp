@@ -46,8 +46,8 @@ namespace tetstream::pipeline {
 
 // Where the ranks write the sorted points: the claimed output's partial file.
 struct DistributedSortTarget {
-  std::string partial;                  // OUT.partial
-  io::OutputPart::Identity identity;    // the file rank 0's claim holds (every rank checks it)
+  std::string partial;                // OUT.partial
+  io::OutputPart::Identity identity;  // the file rank 0's claim holds (every rank checks it)
   // Rank 0: the container header for given sorted points (SortStage::points_header).
   std::function<io::TetFileHeader(const SortedPoints&)> header;
 };
@@ -58,10 +58,10 @@ struct DistributedSortTarget {
 bool sorts_by_ranges(const std::string& input, const io::PointReadOptions& read_options);
 
 // Every rank calls it, in the same step. `dir`: the job's work directory, where this
-// rank's runs are `runs_name`-K.run (each rank a name of its own). Rank 0 returns the SortedPoints of the whole sort (its path and offset in
-// the output's partial file); the others return their part's counts only. Errors as
-// together() reports them (pipeline/communicator.hpp): one line from the lowest rank
-// that failed (an input error at the first bad record in input order, as one process).
+// rank's runs are `runs_name`-K.run (each rank a name of its own). Rank 0 returns the SortedPoints of the whole sort
+// (its path and offset in the output's partial file); the others return their part's counts only. Errors as together()
+// reports them (pipeline/communicator.hpp): one line from the lowest rank that failed (an input error at the first bad
+// record in input order, as one process).
 SortedPoints sort_points_distributed(Communicator& comm, const std::string& input,
                                      const io::PointReadOptions& read_options, const PointSortOptions& options,
                                      const std::string& dir, const std::string& runs_name,

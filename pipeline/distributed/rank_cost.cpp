@@ -89,7 +89,8 @@ std::vector<std::uint64_t> rank_label_bounds(std::uint64_t count, std::uint64_t 
   if (!costs.empty() && costs.size() != blocks) throw std::logic_error("rank_label_bounds: a cost a block");
   // prefix[i]: the cost of blocks [0, i) (i itself without costs).
   std::vector<std::uint64_t> prefix(std::size_t(blocks) + 1, 0);
-  for (std::uint64_t i = 0; i < blocks; ++i) prefix[std::size_t(i) + 1] = prefix[std::size_t(i)] + (costs.empty() ? 1 : costs[std::size_t(i)]);
+  for (std::uint64_t i = 0; i < blocks; ++i)
+    prefix[std::size_t(i) + 1] = prefix[std::size_t(i)] + (costs.empty() ? 1 : costs[std::size_t(i)]);
   // The block boundary in [from, to] whose cost from `from` is nearest part j of
   // `parts` of the cost of [from, to) (the lower one on a tie), in exact integers.
   auto cut = [&](std::uint64_t from, std::uint64_t to, std::uint64_t parts, std::uint64_t j) {

@@ -45,12 +45,18 @@ SortedPoints sorted_from_json(const json& j) {
 }
 
 json rank_json(const RunSummary::Rank& r, const WrittenWork& work) {
-  return {{"first_label", r.first_label},       {"end_label", r.end_label},
-          {"segments", r.segments},             {"zones", r.zones},
-          {"tets", r.tets},                     {"frame_bytes", r.frame_bytes},
-          {"seconds_index", r.seconds_index},   {"seconds_triangulate", r.seconds_triangulate},
-          {"seconds_write", r.seconds_write},   {"message_bytes", r.message_bytes},
-          {"expected_cost_share", r.expected_cost_share}, {"work", counters_json(work)}};
+  return {{"first_label", r.first_label},
+          {"end_label", r.end_label},
+          {"segments", r.segments},
+          {"zones", r.zones},
+          {"tets", r.tets},
+          {"frame_bytes", r.frame_bytes},
+          {"seconds_index", r.seconds_index},
+          {"seconds_triangulate", r.seconds_triangulate},
+          {"seconds_write", r.seconds_write},
+          {"message_bytes", r.message_bytes},
+          {"expected_cost_share", r.expected_cost_share},
+          {"work", counters_json(work)}};
 }
 
 RunSummary::Rank rank_from(const json& j) {

@@ -129,7 +129,8 @@ class RankJob {
     // Rank 0's frames so far (an earlier process's record, maybe on another number of
     // ranks) stay in its range.
     std::string written;
-    if (root) written = std::to_string(state_.contains("output") ? state_["output"].at("next_label").get<std::uint64_t>() : 0);
+    if (root)
+      written = std::to_string(state_.contains("output") ? state_["output"].at("next_label").get<std::uint64_t>() : 0);
     const std::uint64_t rank0_done = std::stoull(comm_.broadcast(written, 0));
     const std::vector<std::uint64_t> costs = block_costs(index, count, block);
     const std::vector<std::uint64_t> bounds = rank_label_bounds(count, block, size, rank0_done, costs);
@@ -140,7 +141,8 @@ class RankJob {
         return double(c);
       };
       const double total = cost_of(0, count);
-      mine.expected_cost_share = total > 0 ? cost_of(bounds[std::size_t(comm_.rank())], bounds[std::size_t(comm_.rank()) + 1]) / total : 0;
+      mine.expected_cost_share =
+          total > 0 ? cost_of(bounds[std::size_t(comm_.rank())], bounds[std::size_t(comm_.rank()) + 1]) / total : 0;
     }
     mine.first_label = bounds[std::size_t(comm_.rank())];
     mine.end_label = bounds[std::size_t(comm_.rank()) + 1];
@@ -151,10 +153,10 @@ class RankJob {
 
   // Triangulates this rank's labels: its frames go to the output (rank 0) or to its
   // fragment. A rank whose fragment an earlier process finished only reads its record.
-  WrittenWork triangulate_step(const SortedPoints& sorted, IndexStage& index,
-                               const TriangulatePlan& plan, WriteStage& write,
-                               std::optional<TriangulateStage>& triangulate, const std::string& fragment,
-                               bool fragment_done, bool job_progress, RunSummary::Rank& mine) {
+  WrittenWork triangulate_step(const SortedPoints& sorted, IndexStage& index, const TriangulatePlan& plan,
+                               WriteStage& write, std::optional<TriangulateStage>& triangulate,
+                               const std::string& fragment, bool fragment_done, bool job_progress,
+                               RunSummary::Rank& mine) {
     const bool root = comm_.rank() == 0;
     const int size = comm_.size();
     WrittenWork work;
@@ -231,9 +233,8 @@ class RankJob {
       std::uint64_t at = place.at(0).get<std::uint64_t>();
       for (int r = 1; r < comm_.rank(); ++r) at += sizes[std::size_t(r)];
       maybe_inject_fault("place", 0);
-      const std::vector<io::FrameEntry> frames =
-          io::place_fragment(fragment, partial, at, sorted.count,
-                             {place.at(1).get<std::uint64_t>(), place.at(2).get<std::uint64_t>()});
+      const std::vector<io::FrameEntry> frames = io::place_fragment(
+          fragment, partial, at, sorted.count, {place.at(1).get<std::uint64_t>(), place.at(2).get<std::uint64_t>()});
       const std::vector<std::uint8_t> bytes = io::serialize_index({}, frames);
       placed.assign(bytes.begin(), bytes.end());
     });
@@ -251,8 +252,8 @@ class RankJob {
         const std::string& text = all_placed[std::size_t(r)];
         std::vector<io::SectionEntry> none;
         std::vector<io::FrameEntry> theirs;
-        if (const std::string problem = io::parse_index(
-                {reinterpret_cast<const std::uint8_t*>(text.data()), text.size()}, none, theirs);
+        if (const std::string problem =
+                io::parse_index({reinterpret_cast<const std::uint8_t*>(text.data()), text.size()}, none, theirs);
             !problem.empty())
           throw IoError("rank " + std::to_string(r) + "'s placed frames: " + problem);
         frames.insert(frames.end(), theirs.begin(), theirs.end());
@@ -326,7 +327,9 @@ class RankJob {
       sort_options.budget = &budget_;
       sort_options.run_points = std::size_t(options_.sort_run_points);
       sort_options.progress = options_.progress;
-      sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, options_.plan_options(), threads_); };
+      sort_options.on_scanned = [this](const SortProgress& p) {
+        refuse_budget_before_sort(p, options_.plan_options(), threads_);
+      };
       SortedPoints made;
       {
         const ScopedThreads threads(threads_);
@@ -359,7 +362,8 @@ class RankJob {
   // rank r computes the r-th K-th of them from the shared index, rank 0 gathers them
   // and hands all of them to every rank, which then cut the same ranges.
   std::vector<std::uint64_t> block_costs(const IndexStage& index, std::uint64_t count, std::uint64_t block) {
-    const std::uint64_t blocks = (count + block - 1) / block, k = std::uint64_t(comm_.size()), r = std::uint64_t(comm_.rank());
+    const std::uint64_t blocks = (count + block - 1) / block, k = std::uint64_t(comm_.size()),
+                        r = std::uint64_t(comm_.rank());
     std::string mine;
     const auto start = StageClock::now();
     together(comm_, [&] {
@@ -465,9 +469,10 @@ RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) 
         if (recorded != std::uint64_t(comm.size())) {
           // The sort and rank 0's frames do not depend on the number of ranks; the
           // other ranks' records and fragments do (each held its rank's labels).
-          spdlog::warn("the job was started on {} ranks and goes on on {}: the sort and rank 0's frames are kept, "
-                       "the other ranks' labels are triangulated again",
-                       recorded, comm.size());
+          spdlog::warn(
+              "the job was started on {} ranks and goes on on {}: the sort and rank 0's frames are kept, "
+              "the other ranks' labels are triangulated again",
+              recorded, comm.size());
           remove_other_ranks_files(checkpoint->dir());
         }
         state["ranks"] = comm.size();
@@ -512,8 +517,8 @@ RunSummary run_job_distributed(const RunOptions& requested, Communicator& comm) 
   RunSummary summary;
   std::exception_ptr failure;
   try {
-    summary = RankJob(options, comm, dir, claim ? &*claim : nullptr, root ? (checkpoint ? &*checkpoint : nullptr)
-                                                                          : (member ? &*member : nullptr),
+    summary = RankJob(options, comm, dir, claim ? &*claim : nullptr,
+                      root ? (checkpoint ? &*checkpoint : nullptr) : (member ? &*member : nullptr),
                       root ? opened.state : member_state)
                   .run();
   } catch (...) {

@@ -44,5 +44,4 @@ namespace tetstream::pipeline {
 // the other ranks return theirs alone.
 RunSummary run_job_distributed(const RunOptions& options, Communicator& comm);
 
-
 }  // namespace tetstream::pipeline

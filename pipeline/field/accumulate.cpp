@@ -35,9 +35,14 @@ struct TetTerms {
 class Accumulator {
  public:
   Accumulator(const io::TetReader& reader, const BatchPlan& plan, const AccumulateSinks& sinks, Progress* progress)
-      : reader_(reader), plan_(plan), sinks_(sinks), progress_(progress), voronoi_(sinks.voronoi),
+      : reader_(reader),
+        plan_(plan),
+        sinks_(sinks),
+        progress_(progress),
+        voronoi_(sinks.voronoi),
         terms_(sinks.hull_terms || !sinks.row),
-        points_(reader, plan.ring_labels), acc_(plan.ring_labels) {}
+        points_(reader, plan.ring_labels),
+        acc_(plan.ring_labels) {}
 
   AccumulateStats run() {
     for (const FrameBatch& b : plan_.batches) {
@@ -193,8 +198,10 @@ class Accumulator {
               slot = raw;
               const std::uint64_t ar = a - lo, cr = c - lo;
               top = std::max(top, cr);
-              if (ar < alimit && c - a < span) front[ns++] = ar << dbits | (c - a);
-              else *--back = ar << 32 | cr, ++nl;
+              if (ar < alimit && c - a < span)
+                front[ns++] = ar << dbits | (c - a);
+              else
+                *--back = ar << 32 | cr, ++nl;
             }
         }
         block_short_[k] = ns, block_long_[k] = nl;
@@ -279,8 +286,9 @@ class Accumulator {
       row_length_[std::size_t(l)] = std::size_t(std::unique(row, o) - row);
     }
     for (std::size_t l = 0; l < labels; ++l)
-      sinks_.row(points_.original(retired_ + l),
-                 std::span<const std::uint32_t>(row_others_.data() + pending_start_[l] + fresh_start_[l], row_length_[l]));
+      sinks_.row(
+          points_.original(retired_ + l),
+          std::span<const std::uint32_t>(row_others_.data() + pending_start_[l] + fresh_start_[l], row_length_[l]));
 
     // What stays pending (labels >= below) is the two runs' tails, merged by label into
     // the other pending buffer: each entry is sorted once, in its batch, and merged
@@ -323,8 +331,8 @@ class Accumulator {
   std::unordered_map<std::uint64_t, Accum> far_acc_;  // sums of the far labels
   DecodedBatch batch_;
   std::vector<TetTerms> contrib_;
-  std::vector<FinalPoint> final_;  // the points a batch retires
-  std::vector<double> volumes_;  // without hull terms: the tets' volumes
+  std::vector<FinalPoint> final_;         // the points a batch retires
+  std::vector<double> volumes_;           // without hull terms: the tets' volumes
   core::PageArray<std::uint64_t> edges_;  // the batch's packed edges (its capacity: 6 a tet)
   std::vector<std::uint64_t> radix_tmp_, long_;
   // Tets ahead whose vertices' slots are prefetched: a tet's four labels are spread
@@ -334,7 +342,7 @@ class Accumulator {
   static constexpr std::size_t kBlock = 4096;  // tets a block of the edge packing
   static constexpr int kSeenBits = 14;         // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;
-  std::vector<std::uint64_t> seen_;            // the threads' tables of emitted edges
+  std::vector<std::uint64_t> seen_;  // the threads' tables of emitted edges
   std::vector<std::size_t> block_short_, block_long_;
   // Entries (label << 32 | the neighbour's original index) of the labels not retired
   // yet, sorted by label: pending_[current_][0, pending_size_) (the other buffer takes

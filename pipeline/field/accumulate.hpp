@@ -52,9 +52,9 @@ struct AccumulateSinks {
 
 struct AccumulateStats {
   std::uint64_t tets = 0, batches = 0;
-  std::uint64_t batch_edges = 0;        // unique edges per batch, summed (copies across batches included)
-  std::uint64_t batch_edge_keys = 0;    // edges sorted (before the unique): what the repeat filter left
-  std::uint64_t peak_far = 0;           // most far labels held (field_points.hpp)
+  std::uint64_t batch_edges = 0;      // unique edges per batch, summed (copies across batches included)
+  std::uint64_t batch_edge_keys = 0;  // edges sorted (before the unique): what the repeat filter left
+  std::uint64_t peak_far = 0;         // most far labels held (field_points.hpp)
 };
 
 AccumulateStats accumulate_fields(const io::TetReader& reader, const BatchPlan& plan, const AccumulateSinks& sinks,

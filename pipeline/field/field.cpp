@@ -30,7 +30,8 @@ void FieldOptions::validate() const {
   if (output.empty()) throw UsageError("field: no output given (-o PREFIX)");
   if (!density && !voronoi && !neighbours && !grid_wanted())
     throw UsageError("field: nothing to compute: give --density dtfe, --voronoi-volume, --neighbours or --grid N");
-  if (grid_wanted() && (grid[0] == 0 || grid[1] == 0 || grid[2] == 0)) throw UsageError("field: --grid sizes must be >= 1");
+  if (grid_wanted() && (grid[0] == 0 || grid[1] == 0 || grid[2] == 0))
+    throw UsageError("field: --grid sizes must be >= 1");
   if (grid_wanted() && grid[0] * grid[1] > (std::uint64_t(1) << 40) / std::max<std::uint64_t>(grid[2], 1))
     throw UsageError("field: --grid has too many points");
   if (has_box)
@@ -122,9 +123,10 @@ FieldPlan plan_field_memory(const FieldOptions& options, const io::TetReader& re
   FieldPlan fp;
   // Budget caps: window 40%, batch 25%; the output sorts get the rest (split between them).
   const std::uint64_t usable = options.memory_bytes - kReserve;
-  const std::uint64_t window_bytes = fp.window_bytes = usable / 100 * 40, batch_bytes = fp.batch_bytes = usable / 100 * 25;
-  std::uint64_t max_labels = std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)),
-                                                           std::uint64_t(1) << 32);
+  const std::uint64_t window_bytes = fp.window_bytes = usable / 100 * 40,
+                      batch_bytes = fp.batch_bytes = usable / 100 * 25;
+  std::uint64_t max_labels =
+      std::min<std::uint64_t>(std::bit_floor(window_bytes / label_bytes(options)), std::uint64_t(1) << 32);
   const std::uint64_t budget_tets = std::max<std::uint64_t>(batch_bytes / tet_bytes(options), 1);
   std::uint64_t max_tets = budget_tets;
   // Scratch reused, not re-faulted; at most 2^20 tets (the neighbours may take more,
@@ -165,8 +167,8 @@ FieldPlan plan_field_memory(const FieldOptions& options, const io::TetReader& re
                              (options.neighbours ? plan.window_labels * 512 : 0);
   const std::uint64_t sort_bytes = fp.sort_bytes = std::max(usable / 5, usable > held ? usable - held : 0);
   summary.memory_planned = kReserve + held + sort_bytes;
-  spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}",
-               n, summary.tets, summary.frames, summary.batches, plan.window_labels, plan.ring_labels,
+  spdlog::info("field: {} points, {} tets in {} frames, {} batches; window {} labels (ring {}), planned {}", n,
+               summary.tets, summary.frames, summary.batches, plan.window_labels, plan.ring_labels,
                human_bytes(double(summary.memory_planned)));
   return fp;
 }
@@ -195,7 +197,8 @@ void write_grid(const io::TetReader& reader, const BatchPlan& plan, const FieldO
   for (std::size_t k = 0; k < 3; ++k) {
     g.lo[k] = options.has_box ? options.box[k] : h.bbox_min[k];
     g.hi[k] = options.has_box ? options.box[k + 3] : h.bbox_max[k];
-    if (!(g.hi[k] > g.lo[k])) throw UsageError("field: the points are flat along axis " + std::to_string(k) + ": give --box");
+    if (!(g.hi[k] > g.lo[k]))
+      throw UsageError("field: the points are flat along axis " + std::to_string(k) + ": give --box");
   }
   const double ext[3] = {h.bbox_max[0] - h.bbox_min[0], h.bbox_max[1] - h.bbox_min[1], h.bbox_max[2] - h.bbox_min[2]};
   const int axis = int(std::max_element(ext, ext + 3) - ext);  // the sort axis of `run` (point_sort.cpp)
@@ -228,7 +231,8 @@ FieldSummary compute_fields(const FieldOptions& options) {
 
   // The mass file is checked (length, format) before any work; its values when read.
   std::unique_ptr<io::ScalarFileReader> masses;
-  if (!options.mass.empty()) masses = std::make_unique<io::ScalarFileReader>(options.mass, h.input_count ? h.input_count : n);
+  if (!options.mass.empty())
+    masses = std::make_unique<io::ScalarFileReader>(options.mass, h.input_count ? h.input_count : n);
   TempDir tmp(default_tmpdir(options), "tetstream-field");
   const bool grid = options.grid_wanted();
   const bool need_points = options.density || options.voronoi || (grid && !options.mass.empty());
@@ -251,9 +255,10 @@ FieldSummary compute_fields(const FieldOptions& options) {
     // Entries = twice the edges; a triangulated ball has V + T + F_hull / 2 - 1 edges
     // and F_hull <= 2 V, so 2 (2 N + T) bounds them (it only plans the buckets).
     const std::uint64_t bound = 2 * (2 * n + summary.tets);
-    const std::uint64_t share = options.neighbour_memory ? options.neighbour_memory : sort_options("neighbours").memory_bytes;
-    neighbours = std::make_unique<NeighbourRows>(std::max(h.input_count, n), n, bound, share,
-                                                 tmp.path("neighbour-rows.u32"));
+    const std::uint64_t share =
+        options.neighbour_memory ? options.neighbour_memory : sort_options("neighbours").memory_bytes;
+    neighbours =
+        std::make_unique<NeighbourRows>(std::max(h.input_count, n), n, bound, share, tmp.path("neighbour-rows.u32"));
   }
   const std::string rho_path = tmp.path("rho-by-label.f64");
   std::unique_ptr<BinaryFile> rho_file;

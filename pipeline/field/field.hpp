@@ -35,18 +35,19 @@ struct FieldOptions {
   bool neighbours = false;
   std::array<std::uint64_t, 3> grid{0, 0, 0};  // all 0: no grid
   bool has_box = false;
-  std::array<double, 6> box{};   // xmin, ymin, zmin, xmax, ymax, zmax; default: the points' bbox
+  std::array<double, 6> box{};  // xmin, ymin, zmin, xmax, ymax, zmax; default: the points' bbox
   HullMode hull = HullMode::kNan;
   FieldType dtype = FieldType::kFloat64;
   bool neighbour_int64 = false;  // the neighbour arrays in int64 even when int32 holds them
-  std::string mass;    // per-point masses in input order (.npy 1-D f4/f8, or raw little-endian f64); empty: 1
+  std::string mass;              // per-point masses in input order (.npy 1-D f4/f8, or raw little-endian f64); empty: 1
   std::uint64_t memory_bytes = std::uint64_t(1) << 30;
   std::string tmpdir;  // empty: $TMPDIR, else the output's directory
   bool progress = true;
-  std::uint64_t batch_tets = 0;  // 0: from the budget (tests force small batches)
-  std::uint64_t ring_labels = 0; // a power of two; 0: from the budget (tests force far labels)
+  std::uint64_t batch_tets = 0;        // 0: from the budget (tests force small batches)
+  std::uint64_t ring_labels = 0;       // a power of two; 0: from the budget (tests force far labels)
   std::uint64_t neighbour_memory = 0;  // bytes for the neighbour rows; 0: from the budget (tests force spills)
-  std::uint64_t point_memory = 0;  // bytes for placing the points by original index; 0: from the budget (tests force the sort)
+  std::uint64_t point_memory =
+      0;  // bytes for placing the points by original index; 0: from the budget (tests force the sort)
 
   bool grid_wanted() const { return grid[0] > 0; }
   void validate() const;  // throws UsageError
@@ -61,8 +62,8 @@ struct FieldSummary {
   std::uint64_t hull_points = 0;
   std::uint64_t window_labels = 0, ring_labels = 0;  // the widest window, its ring
   std::uint64_t neighbour_entries = 0;
-  std::string neighbour_dtype;  // "int32" or "int64"; empty without --neighbours
-  std::uint64_t far_labels_peak = 0;  // most labels held beyond the dense window
+  std::string neighbour_dtype;                     // "int32" or "int64"; empty without --neighbours
+  std::uint64_t far_labels_peak = 0;               // most labels held beyond the dense window
   std::uint64_t grid_points = 0, grid_inside = 0;  // grid points, those inside the hull
   double total_mass = 0.0;
   double tet_volume = 0.0;        // sum of the tets' volumes (the hull's volume)

@@ -199,7 +199,7 @@ double tet_interpolate(const double* const p[4], const double* f, const double* 
   for (int i = 0; i < 4; ++i) v[i] = {p[i][0] - g[0], p[i][1] - g[1], p[i][2] - g[2]};
   // lambda_i = det with g in place of vertex i / det of the tet; with everything
   // relative to g, g is the origin.
-  const double l0 = det3(sub(v[1], v[0]) , sub(v[2], v[0]), sub(v[3], v[0]));
+  const double l0 = det3(sub(v[1], v[0]), sub(v[2], v[0]), sub(v[3], v[0]));
   const double w0 = det3(v[1], v[2], v[3]);
   const double w1 = -det3(v[0], v[2], v[3]);
   const double w2 = det3(v[0], v[1], v[3]);

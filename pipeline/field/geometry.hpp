@@ -34,8 +34,8 @@ namespace tetstream::pipeline {
 
 // What one tet adds to each of its vertices (in the tet's vertex order).
 struct TetContribution {
-  double volume;       // V(t), the same for all four vertices
-  double voronoi[4];   // the Voronoi pieces of t at each vertex
+  double volume;      // V(t), the same for all four vertices
+  double voronoi[4];  // the Voronoi pieces of t at each vertex
 };
 
 // p: the four vertices, 3 doubles each, positively oriented. Without `voronoi` the
@@ -70,9 +70,9 @@ class TetLocator {
 
  private:
   const double* p_[4];
-  double base_[4][3];   // a point of each face
-  double normal_[4][3]; // oriented so that inside is positive
-  double scale_[4];     // |u|max |v|max of each face, for the margin
+  double base_[4][3];    // a point of each face
+  double normal_[4][3];  // oriented so that inside is positive
+  double scale_[4];      // |u|max |v|max of each face, for the margin
 };
 
 // The linear interpolant at g of the values f[0..3] at the vertices: barycentric

@@ -37,9 +37,16 @@ class GridSampler {
  public:
   GridSampler(const io::TetReader& reader, const BatchPlan& plan, const GridSpec& grid, int axis,
               const std::string& rho_path, const FieldOptions& options, std::uint64_t budget, const std::string& tmpdir)
-      : reader_(reader), plan_(plan), g_(grid), axis_(axis), u_((axis + 1) % 3 < (axis + 2) % 3 ? (axis + 1) % 3 : (axis + 2) % 3),
-        w_(3 - axis - u_), f32_(options.dtype == FieldType::kFloat32), points_(reader, plan.ring_labels),
-        rho_(plan.ring_labels), rho_file_(rho_path, "rb"),
+      : reader_(reader),
+        plan_(plan),
+        g_(grid),
+        axis_(axis),
+        u_((axis + 1) % 3 < (axis + 2) % 3 ? (axis + 1) % 3 : (axis + 2) % 3),
+        w_(3 - axis - u_),
+        f32_(options.dtype == FieldType::kFloat32),
+        points_(reader, plan.ring_labels),
+        rho_(plan.ring_labels),
+        rho_file_(rho_path, "rb"),
         out_(options.output + ".grid.npy", f32_ ? "<f4" : "<f8", {grid.n[0], grid.n[1], grid.n[2]}),
         rho_path_(rho_path) {
     plane_size_ = g_.n[std::size_t(u_)] * g_.n[std::size_t(w_)];
@@ -103,7 +110,8 @@ class GridSampler {
   // The last plane index whose centre is <= x (or 0 when none), clamped to the grid.
   std::uint64_t plane_at_or_below(double x) const {
     const double t = (x - g_.lo[std::size_t(axis_)]) / (g_.hi[std::size_t(axis_)] - g_.lo[std::size_t(axis_)]) *
-                         double(g_.n[std::size_t(axis_)]) - 0.5;
+                         double(g_.n[std::size_t(axis_)]) -
+                     0.5;
     if (!(t > 0)) return 0;
     return std::min<std::uint64_t>(g_.n[std::size_t(axis_)] - 1, std::uint64_t(t));
   }
@@ -111,8 +119,9 @@ class GridSampler {
   void grow_to(std::uint64_t end) {
     while (first_plane_ + planes_.size() < end) {
       if (planes_.size() + 1 > max_planes_)
-        throw UsageError("field: the grid's slab window needs more than " + std::to_string(max_planes_) + " planes of " +
-                         human_bytes(double(plane_size_ * sizeof(double))) + ": raise --memory or use a coarser grid");
+        throw UsageError("field: the grid's slab window needs more than " + std::to_string(max_planes_) +
+                         " planes of " + human_bytes(double(plane_size_ * sizeof(double))) +
+                         ": raise --memory or use a coarser grid");
       planes_.emplace_back(plane_size_, std::numeric_limits<double>::quiet_NaN());
       stats_.peak_planes = std::max<std::uint64_t>(stats_.peak_planes, planes_.size());
     }
@@ -127,7 +136,8 @@ class GridSampler {
   void range(int axis, double a, double b, std::int64_t& first, std::int64_t& last) const {
     const std::size_t k = std::size_t(axis);
     const double scale = double(g_.n[k]) / (g_.hi[k] - g_.lo[k]);
-    const double slack = 1e-9 + 1e-14 * (std::fabs(a) + std::fabs(b) + std::fabs(g_.lo[k]) + std::fabs(g_.hi[k])) * scale;
+    const double slack =
+        1e-9 + 1e-14 * (std::fabs(a) + std::fabs(b) + std::fabs(g_.lo[k]) + std::fabs(g_.hi[k])) * scale;
     first = std::int64_t(std::ceil(std::max(-1.0, (a - g_.lo[k]) * scale - 0.5 - slack)));
     last = std::int64_t(std::floor(std::min(double(g_.n[k]), (b - g_.lo[k]) * scale - 0.5 + slack)));
     std::int64_t lo = 0, hi = std::int64_t(g_.n[k]) - 1;
@@ -242,8 +252,10 @@ class GridSampler {
   }
 
   void put(double v) {
-    if (f32_) buf32_.push_back(float(v));
-    else buf64_.push_back(v);
+    if (f32_)
+      buf32_.push_back(float(v));
+    else
+      buf64_.push_back(v);
     if (buf32_.size() + buf64_.size() >= (1 << 16)) flush();
   }
   void flush() {

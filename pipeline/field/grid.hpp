@@ -30,7 +30,8 @@ struct GridSpec {
   std::array<std::uint64_t, 3> n{0, 0, 0};
   std::array<double, 3> lo{}, hi{};
   double centre(int axis, std::uint64_t i) const {
-    return lo[std::size_t(axis)] + (double(i) + 0.5) * (hi[std::size_t(axis)] - lo[std::size_t(axis)]) / double(n[std::size_t(axis)]);
+    return lo[std::size_t(axis)] +
+           (double(i) + 0.5) * (hi[std::size_t(axis)] - lo[std::size_t(axis)]) / double(n[std::size_t(axis)]);
   }
 };
 

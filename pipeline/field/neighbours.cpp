@@ -97,8 +97,9 @@ class ChunkReader {
 // Writes the rows of data (whole rows [original, degree, neighbours...], originals in
 // [lo, hi)) in original order; at: entries written so far.
 template <class Index>
-void write_rows(const std::vector<std::uint32_t>& data, std::uint64_t lo, std::uint64_t hi, std::vector<std::uint64_t>& pos,
-                IntArray<Index>& offsets, IntArray<Index>& indices, std::uint64_t& at, std::uint64_t& rows) {
+void write_rows(const std::vector<std::uint32_t>& data, std::uint64_t lo, std::uint64_t hi,
+                std::vector<std::uint64_t>& pos, IntArray<Index>& offsets, IntArray<Index>& indices, std::uint64_t& at,
+                std::uint64_t& rows) {
   pos.assign(std::size_t(hi - lo), kNone);
   for (std::size_t i = 0; i < data.size(); i += 2 + std::size_t(data[i + 1])) {
     std::uint64_t& p = pos[std::size_t(data[i] - lo)];
@@ -131,7 +132,8 @@ NeighbourRows::NeighbourRows(std::uint64_t original_end, std::uint64_t point_cou
   const std::uint64_t rows_bytes = sizeof(std::uint32_t) * (2 * point_count + entries_bound);
   const std::uint64_t placement_bytes = sizeof(std::uint64_t) * original_end_;
   std::uint64_t b = 1;
-  if (rows_bytes > pass1 || rows_bytes + placement_bytes > budget) b = (rows_bytes + placement_bytes + pass1 - 1) / pass1;
+  if (rows_bytes > pass1 || rows_bytes + placement_bytes > budget)
+    b = (rows_bytes + placement_bytes + pass1 - 1) / pass1;
   b = std::min(b, original_end_);
   width_ = (original_end_ + b - 1) / b;
   b = (original_end_ + width_ - 1) / width_;
@@ -204,7 +206,8 @@ bool NeighbourRows::needs_int64() const {
 
 void NeighbourRows::write(const std::string& offsets_path, const std::string& indices_path, bool wide) {
   if (rows_ != point_count_)
-    throw std::logic_error("field: " + std::to_string(rows_) + " neighbour rows, expected " + std::to_string(point_count_));
+    throw std::logic_error("field: " + std::to_string(rows_) + " neighbour rows, expected " +
+                           std::to_string(point_count_));
   if (wide) return write_as<std::int64_t>(offsets_path, indices_path);
   if (needs_int64()) throw std::logic_error("field: the neighbour arrays do not fit int32");
   write_as<std::int32_t>(offsets_path, indices_path);
@@ -246,7 +249,8 @@ void NeighbourRows::write_as(const std::string& offsets_path, const std::string&
     }
   }
   if (rows != point_count_ || at != entries_)
-    throw std::logic_error("field: " + std::to_string(rows) + " neighbour rows written, expected " + std::to_string(point_count_));
+    throw std::logic_error("field: " + std::to_string(rows) + " neighbour rows written, expected " +
+                           std::to_string(point_count_));
   offsets.commit();
   indices.commit();
 }

@@ -74,9 +74,9 @@ class NeighbourRows {
 
   std::uint64_t original_end_, point_count_, width_, words_per_bucket_, half_words_;
   std::string scratch_;
-  std::vector<std::vector<std::uint32_t>> buffers_;  // a bucket's rows not spilled yet
-  std::vector<std::vector<NeighbourRowsChunk>> chunks_;           // a bucket's spilled rows
-  std::vector<std::uint64_t> bucket_words_;          // a bucket's rows, buffered and spilled
+  std::vector<std::vector<std::uint32_t>> buffers_;      // a bucket's rows not spilled yet
+  std::vector<std::vector<NeighbourRowsChunk>> chunks_;  // a bucket's spilled rows
+  std::vector<std::uint64_t> bucket_words_;              // a bucket's rows, buffered and spilled
   std::unique_ptr<BinaryFile> file_;
   std::uint64_t file_words_ = 0, entries_ = 0, rows_ = 0;
   bool spilled_ = false;

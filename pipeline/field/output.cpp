@@ -33,8 +33,10 @@ class Column {
  private:
   static constexpr std::size_t kBuffer = 1 << 16;
   void flush() {
-    if (f32_) w_.write(f_.data(), f_.size() * sizeof(float)), f_.clear();
-    else w_.write(d_.data(), d_.size() * sizeof(double)), d_.clear();
+    if (f32_)
+      w_.write(f_.data(), f_.size() * sizeof(float)), f_.clear();
+    else
+      w_.write(d_.data(), d_.size() * sizeof(double)), d_.clear();
   }
   bool f32_;
   io::NpyArrayWriter w_;
@@ -112,9 +114,9 @@ std::string field_path(const FieldOptions& options, const std::string& what) {
   return options.output + "." + what + ".npy";
 }
 
-void write_point_fields(PointOrder& records, const FieldOptions& options,
-                        std::uint64_t point_count, io::ScalarFileReader* masses,
-                        const std::function<void(std::uint64_t, double)>& by_label, FieldSummary& summary) {
+void write_point_fields(PointOrder& records, const FieldOptions& options, std::uint64_t point_count,
+                        io::ScalarFileReader* masses, const std::function<void(std::uint64_t, double)>& by_label,
+                        FieldSummary& summary) {
   std::optional<Column> density, voronoi;
   if (options.density) density.emplace(field_path(options, "density"), options.dtype, point_count);
   if (options.voronoi) voronoi.emplace(field_path(options, "voronoi"), options.dtype, point_count);
@@ -131,7 +133,8 @@ void write_point_fields(PointOrder& records, const FieldOptions& options,
     }
   });
   if (seen != point_count)
-    throw std::logic_error("field: " + std::to_string(seen) + " points ordered, expected " + std::to_string(point_count));
+    throw std::logic_error("field: " + std::to_string(seen) + " points ordered, expected " +
+                           std::to_string(point_count));
   if (density) density->commit(), summary.files.push_back({"density", field_path(options, "density")});
   if (voronoi) voronoi->commit(), summary.files.push_back({"voronoi", field_path(options, "voronoi")});
 }

@@ -65,9 +65,9 @@ inline double dtfe_density(double mass, double volume, bool hull, HullMode mode)
 // order, with masses from `masses` (nullptr: unit masses). Calls by_label(label, rho)
 // for every point when set (the grid needs densities by label). Adds the files to
 // summary.files and the totals to summary.
-void write_point_fields(PointOrder& records, const FieldOptions& options,
-                        std::uint64_t point_count, io::ScalarFileReader* masses,
-                        const std::function<void(std::uint64_t, double)>& by_label, FieldSummary& summary);
+void write_point_fields(PointOrder& records, const FieldOptions& options, std::uint64_t point_count,
+                        io::ScalarFileReader* masses, const std::function<void(std::uint64_t, double)>& by_label,
+                        FieldSummary& summary);
 
 std::string field_path(const FieldOptions& options, const std::string& what);  // OUTPUT.what.npy
 

@@ -73,7 +73,7 @@ class WindowPoints {
   std::unordered_map<std::uint64_t, Far> far_;
   std::uint64_t next_ = 0;  // labels below were loaded into the rings
   int axis_ = -1;
-  double last_ = 0.0;       // the previous label's coordinate on axis_
+  double last_ = 0.0;  // the previous label's coordinate on axis_
 };
 
 }  // namespace tetstream::pipeline

@@ -16,9 +16,10 @@ BatchPlan plan_batches(const std::vector<io::FrameEntry>& frames, std::uint64_t 
   for (std::size_t k = 0; k < nf; ++k) {
     const io::FrameEntry& f = frames[k];
     if (f.max_label >= point_count || f.base_label > f.max_label)
-      throw InputError::at_byte(path, f.offset, "frame " + std::to_string(k) + ": label range [" +
-                                                    std::to_string(f.base_label) + ", " + std::to_string(f.max_label) +
-                                                    "] outside the " + std::to_string(point_count) + " points");
+      throw InputError::at_byte(path, f.offset,
+                                "frame " + std::to_string(k) + ": label range [" + std::to_string(f.base_label) + ", " +
+                                    std::to_string(f.max_label) + "] outside the " + std::to_string(point_count) +
+                                    " points");
     if (k > 0 && f.base_label < frames[k - 1].base_label)
       throw InputError::at_byte(path, f.offset,
                                 "frame " + std::to_string(k) + ": base label " + std::to_string(f.base_label) +

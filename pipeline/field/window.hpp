@@ -26,7 +26,7 @@ namespace tetstream::pipeline {
 
 struct FrameBatch {
   std::size_t first_frame = 0, end_frame = 0;  // frames [first, end)
-  std::uint64_t lo = 0;            // base label of the first frame: the window's start
+  std::uint64_t lo = 0;                        // base label of the first frame: the window's start
   std::uint64_t hi = 0;            // the batch's largest label (frames' max_label), at least retire_below - 1
   std::uint64_t retire_below = 0;  // labels < this are final after the batch (next batch's lo, or N)
   std::uint64_t tets = 0;

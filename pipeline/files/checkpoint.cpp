@@ -102,7 +102,7 @@ nlohmann::json Checkpoint::load() const {
     throw DamagedCheckpoint(file + ": not a tetstream checkpoint");
   if (state.value("version", 0) != kVersion)
     throw DamagedCheckpoint(file + ": checkpoint version " + std::to_string(state.value("version", 0)) +
-                     ", this tetstream reads version " + std::to_string(kVersion));
+                            ", this tetstream reads version " + std::to_string(kVersion));
   const std::uint32_t stored = state["crc32c"].get<std::uint32_t>();
   state.erase("crc32c");
   if (state_crc(state) != stored) throw DamagedCheckpoint(file + ": damaged checkpoint (checksum mismatch)");
@@ -119,8 +119,7 @@ void Checkpoint::save(nlohmann::json state) {
 }
 
 void Checkpoint::remove() {
-  if (work_ && !work_->remove())
-    spdlog::warn("{} is left in place: it holds files that tetstream did not write", dir_);
+  if (work_ && !work_->remove()) spdlog::warn("{} is left in place: it holds files that tetstream did not write", dir_);
   work_.reset();
 }
 

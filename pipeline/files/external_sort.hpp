@@ -45,14 +45,14 @@ namespace tetstream::pipeline {
 
 struct ExternalSortOptions {
   std::size_t memory_bytes = std::size_t(256) << 20;
-  std::string dir;             // directory for run files (normally a TempDir's)
+  std::string dir;  // directory for run files (normally a TempDir's)
   // When `dir` is empty, called once at the first spill to create the directory, so
   // a sort that fits in memory creates nothing on disk.
   std::function<std::string()> make_dir;
-  std::string name = "sort";   // run files are DIR/NAME-K.run
-  bool parallel = true;        // sort runs on all OpenMP threads
-  std::size_t min_block_bytes = std::size_t(1) << 20;   // smallest read block in a merge
-  std::size_t batch_records = std::size_t(1) << 16;     // records per merge() callback (most)
+  std::string name = "sort";                           // run files are DIR/NAME-K.run
+  bool parallel = true;                                // sort runs on all OpenMP threads
+  std::size_t min_block_bytes = std::size_t(1) << 20;  // smallest read block in a merge
+  std::size_t batch_records = std::size_t(1) << 16;    // records per merge() callback (most)
   // For a resumable job: run files are fsynced when written, and never removed by the
   // sorter (not after a merge, not in the destructor): a checkpoint may still name
   // them, so their owner removes them once it no longer does.
@@ -111,7 +111,6 @@ int max_threads();   // omp_get_max_threads()
 bool in_parallel();  // omp_in_parallel(): no nested teams
 int team_size();     // omp_get_num_threads()
 int thread_id();     // omp_get_thread_num()
-
 
 // The heap of a k-way merge: a binary min-heap of source indices, ordered by the
 // sources' current heads (`before(a, b)`: source a's head comes first; ties go to the
@@ -387,9 +386,12 @@ class ExternalSorter {
   }
 
   void sort_and_reduce(T* data, std::size_t& n) {
-    if (run_sort_) run_sort_(data, n);
-    else if (opt_.parallel) parallel_sort(data, data + n, less_);
-    else std::sort(data, data + n, less_);
+    if (run_sort_)
+      run_sort_(data, n);
+    else if (opt_.parallel)
+      parallel_sort(data, data + n, less_);
+    else
+      std::sort(data, data + n, less_);
     if (reducer_) n = reducer_(data, n);
   }
 
@@ -415,7 +417,8 @@ class ExternalSorter {
 
   void write_run(const T* data, std::size_t n) {
     if (opt_.dir.empty() && opt_.make_dir) opt_.dir = opt_.make_dir();
-    if (opt_.dir.empty()) throw IoError("external sort '" + opt_.name + "': out of memory budget and no temporary directory");
+    if (opt_.dir.empty())
+      throw IoError("external sort '" + opt_.name + "': out of memory budget and no temporary directory");
     Run r{run_path(next_run_id_++), n, 0};
     BinaryFile f(r.path, "wb");
     f.write(data, sizeof(T), n);

@@ -48,7 +48,10 @@ void release_mapped_pages(const void* data, std::size_t bytes) {
 }
 
 MappedRegions::MappedRegions(const void* data, std::size_t bytes, std::size_t max_regions, const std::string& path)
-    : base_(static_cast<const char*>(data)), bytes_(bytes), max_regions_(std::max<std::size_t>(1, max_regions)), path_(path) {
+    : base_(static_cast<const char*>(data)),
+      bytes_(bytes),
+      max_regions_(std::max<std::size_t>(1, max_regions)),
+      path_(path) {
   if (!path.empty()) {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd_ < 0) throw IoError(path + ": cannot open: " + errno_text());
@@ -105,7 +108,8 @@ void MappedRegions::hold(std::size_t region) {
     // per region faulted in, not per read).
     std::size_t oldest = 0;
     for (std::size_t i = 1; i < held_.size(); ++i)
-      if (last_read_[held_[i]].load(std::memory_order_relaxed) < last_read_[held_[oldest]].load(std::memory_order_relaxed))
+      if (last_read_[held_[i]].load(std::memory_order_relaxed) <
+          last_read_[held_[oldest]].load(std::memory_order_relaxed))
         oldest = i;
     release_region(held_[oldest]);
     held_[oldest] = held_.back();

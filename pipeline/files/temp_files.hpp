@@ -103,7 +103,7 @@ class MappedRegions {
   std::uint64_t releases() const { return releases_.load(std::memory_order_relaxed); }
 
  private:
-  void hold(std::size_t region);  // makes room first, unless another thread held it meanwhile
+  void hold(std::size_t region);            // makes room first, unless another thread held it meanwhile
   void release_region(std::size_t region);  // under the lock; the caller drops it from held_
   // Whether a read of region r should go through the mapping: it is held, or this
   // read makes kAdmitReads recent ones (then it is to be held).
@@ -117,7 +117,7 @@ class MappedRegions {
   std::unique_ptr<std::atomic<std::uint64_t>[]> cold_reads_;
   std::unique_ptr<std::atomic<std::uint64_t>[]> last_read_;  // per region: epoch of its last read, 0 when not held
   std::atomic<std::uint64_t> clock_{1}, releases_{0};
-  mutable std::mutex mutex_;     // over held_ and the holds and releases
+  mutable std::mutex mutex_;       // over held_ and the holds and releases
   std::vector<std::size_t> held_;  // the regions with last_read_ != 0
 };
 

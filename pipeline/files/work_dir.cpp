@@ -133,8 +133,10 @@ WorkDir WorkDir::open_or_create(const std::string& path) {
       if (errno == ENOENT) {
         const std::string::size_type slash = path.rfind('/');
         const std::string parent = slash == std::string::npos ? "." : path.substr(0, slash);
-        throw UsageError(parent + " does not exist: the directory given for the work files (--checkpoint DIR, "
-                                  "--tmpdir DIR) must exist; tetstream makes " + path + " inside it");
+        throw UsageError(parent +
+                         " does not exist: the directory given for the work files (--checkpoint DIR, "
+                         "--tmpdir DIR) must exist; tetstream makes " +
+                         path + " inside it");
       }
       throw IoError(path + ": cannot create the work directory: " + errno_text());
     }
@@ -238,8 +240,7 @@ void remove_orphaned_partial(const std::string& dir) {
   unsigned char magic[8] = {};
   const bool ours = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_nlink == 1 && st.st_uid == ::geteuid() &&
                     ::pread(fd, magic, sizeof magic, 0) == ssize_t(sizeof magic) &&
-                    std::memcmp(magic, io::kFileMagic.data(), sizeof magic) == 0 &&
-                    ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+                    std::memcmp(magic, io::kFileMagic.data(), sizeof magic) == 0 && ::flock(fd, LOCK_EX | LOCK_NB) == 0;
   struct stat at {};
   if (ours && ::lstat(partial.c_str(), &at) == 0 && at.st_dev == st.st_dev && at.st_ino == st.st_ino)
     ::unlink(partial.c_str());

@@ -42,15 +42,23 @@ std::uint64_t parse_memory_size(const std::string& text) {
   }
   std::string unit = text.substr(used);
   for (char& c : unit) c = char(std::toupper(static_cast<unsigned char>(c)));
-  if (unit.size() == 3 && unit.substr(1) == "IB") unit = unit.substr(0, 1);  // KiB, MiB, ...
-  else if (unit.size() == 2 && unit[1] == 'B') unit = unit.substr(0, 1);     // KB, MB, ...
+  if (unit.size() == 3 && unit.substr(1) == "IB")
+    unit = unit.substr(0, 1);  // KiB, MiB, ...
+  else if (unit.size() == 2 && unit[1] == 'B')
+    unit = unit.substr(0, 1);  // KB, MB, ...
   double scale = 0;
-  if (unit == "" || unit == "B") scale = 1;
-  else if (unit == "K") scale = 1024.0;
-  else if (unit == "M") scale = 1024.0 * 1024;
-  else if (unit == "G") scale = 1024.0 * 1024 * 1024;
-  else if (unit == "T") scale = 1024.0 * 1024 * 1024 * 1024;
-  else throw UsageError("bad memory size '" + text + "': unknown unit '" + text.substr(used) + "' (use K, M, G, T)");
+  if (unit == "" || unit == "B")
+    scale = 1;
+  else if (unit == "K")
+    scale = 1024.0;
+  else if (unit == "M")
+    scale = 1024.0 * 1024;
+  else if (unit == "G")
+    scale = 1024.0 * 1024 * 1024;
+  else if (unit == "T")
+    scale = 1024.0 * 1024 * 1024 * 1024;
+  else
+    throw UsageError("bad memory size '" + text + "': unknown unit '" + text.substr(used) + "' (use K, M, G, T)");
   if (!(value > 0) || !std::isfinite(value) || value * scale >= 0x1p63)
     throw UsageError("bad memory size '" + text + "': must be positive and below 8 EiB");
   return std::uint64_t(value * scale);
@@ -64,7 +72,6 @@ void RunOptions::validate() const {
   if (!(buffer_spacings >= 0) || buffer_spacings > 1000) throw UsageError("--buffer must be in [0, 1000]");
   read.validate();
 }
-
 
 using nlohmann::json;
 
@@ -99,7 +106,8 @@ std::string identity_difference(const json& saved, const json& now) {
   // Not "memory": a resumed job may take another budget (the header keeps the budget
   // it was written with, and so do the frames; see WriteStage::prepare).
   for (const char* key : {"output", "buffer_spacings", "sort_run_points", "read"})
-    if (saved.at(key) != now.at(key)) return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
+    if (saved.at(key) != now.at(key))
+      return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
   return "";
 }
 }  // namespace detail
@@ -125,8 +133,8 @@ class Job {
  private:
   const RunOptions& options_;
   std::string dir_;
-  Checkpoint* checkpoint_;  // null: not resumable
-  json state_;              // what the checkpoint holds (maintained even without one)
+  Checkpoint* checkpoint_;        // null: not resumable
+  json state_;                    // what the checkpoint holds (maintained even without one)
   const io::OutputClaim* claim_;  // the output, locked for this job since it began
   const int threads_;             // the zones triangulated at once
   MemoryBudget budget_;           // the ledger: every stage's share of --memory
@@ -152,8 +160,8 @@ RunSummary Job::run() {
   summary.duplicates = sorted.duplicates;
   summary.axis = sorted.axis;
   summary.seconds_sort = seconds_since(start_);
-  spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs, {:.1f}s", sorted.count,
-               sorted.duplicates, "xyz"[sorted.axis], sorted.runs, summary.seconds_sort);
+  spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs, {:.1f}s", sorted.count, sorted.duplicates,
+               "xyz"[sorted.axis], sorted.runs, summary.seconds_sort);
   if (sorted.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
 
   // ---- index: the spatial index and the global hull ----
@@ -209,7 +217,8 @@ namespace detail {
 // Where a job's working files go: --tmpdir, else the output's directory.
 std::string work_parent(const RunOptions& options) {
   std::string dir = options.tmpdir;
-  if (dir.empty() && !io::is_std_stream(options.output)) dir = std::filesystem::path(options.output).parent_path().string();
+  if (dir.empty() && !io::is_std_stream(options.output))
+    dir = std::filesystem::path(options.output).parent_path().string();
   return dir.empty() ? "." : dir;
 }
 }  // namespace detail
@@ -269,8 +278,8 @@ RunOptions capped_options(const RunOptions& requested) {
   requested.validate();
   RunOptions options = requested;
   if (const std::uint64_t ram = physical_memory_bytes(); options.memory_bytes > ram) {
-    spdlog::warn("--memory {} is more than this machine's {} of memory: capped there", human_bytes(double(options.memory_bytes)),
-                 human_bytes(double(ram)));
+    spdlog::warn("--memory {} is more than this machine's {} of memory: capped there",
+                 human_bytes(double(options.memory_bytes)), human_bytes(double(ram)));
     options.memory_bytes = ram;
   }
   return options;
@@ -320,7 +329,8 @@ RunSummary run_job(const RunOptions& requested) {
   if (opened.finished) return *opened.finished;
   try {
     RunSummary summary;
-    trusting_checkpoint(checkpoint, [&] { summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim).run(); });
+    trusting_checkpoint(checkpoint,
+                        [&] { summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim).run(); });
     checkpoint.remove();
     summary.disk_planned_bytes = opened.disk;
     return summary;
@@ -342,7 +352,8 @@ OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoin
       spdlog::info("--force: discarding the checkpoint in {}", checkpoint.dir());
       checkpoint.clear();  // the job's files only; the partial output is truncated by the writer
     } else if (!options.resume) {
-      throw UsageError(checkpoint.dir() + " holds the checkpoint of an unfinished job: rerun with --resume to continue "
+      throw UsageError(checkpoint.dir() +
+                       " holds the checkpoint of an unfinished job: rerun with --resume to continue "
                        "it, or with --force to discard it and start over");
     } else {
       std::string difference;

@@ -27,13 +27,13 @@ struct RunOptions {
   std::string output;  // the .tets container
   io::PointReadOptions read;
   std::uint64_t memory_bytes = std::uint64_t(1) << 30;
-  std::string tmpdir;       // empty: the output's directory
-  int threads = 0;          // 0: all cores
+  std::string tmpdir;  // empty: the output's directory
+  int threads = 0;     // 0: all cores
   // Buffer thickness in point spacings. Thinner buffers insert fewer redundant points
   // and leave more tets to the emptiness queries; 1.5 is where the two costs meet on
   // uniform points (scripts/bench-pipeline --buffer compares others).
   double buffer_spacings = 1.5;
-  std::uint64_t segment_points = 0;  // labels a segment owns; 0: from the memory budget (tests force many segments)
+  std::uint64_t segment_points = 0;   // labels a segment owns; 0: from the memory budget (tests force many segments)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
   // Zones per segment (strips across the sort axis, zone_plan.hpp plan_for_budget): 0 picks
   // the number that wastes the least on buffers for the budget. The zones of all
@@ -61,7 +61,7 @@ struct RunSummary {
   std::uint64_t input_points = 0, points = 0, duplicates = 0;
   std::uint64_t segments = 0, zones = 0, segment_labels = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
-  std::uint64_t query_points = 0;   // exact conflict tests the queries made
+  std::uint64_t query_points = 0;  // exact conflict tests the queries made
   // 2 MiB regions of the sorted file that the queries' reads mapped and that were
   // handed back to keep them within their share of the budget (this process's)
   std::uint64_t query_region_releases = 0;
@@ -82,8 +82,8 @@ struct RunSummary {
   // Wall clock. seconds_write: the segment loop waiting on the writer stage (a full
   // queue, checkpoints) and the writer's finish; its own work is seconds_writer_busy.
   double seconds_sort = 0, seconds_triangulate = 0, seconds_write = 0, seconds_total = 0;
-  double seconds_index = 0;  // the indexes and the global hull (under mpirun: the slowest rank)
-  double seconds_segments = 0;  // summed over segments (more than the wall time with threads)
+  double seconds_index = 0;        // the indexes and the global hull (under mpirun: the slowest rank)
+  double seconds_segments = 0;     // summed over segments (more than the wall time with threads)
   double seconds_writer_busy = 0;  // the writer thread compressing and writing (overlapped)
   double seconds_writer_wait = 0;  // the segment loop blocked on the writer (full queue, drains)
   // The ledger (pipeline/memory_budget.hpp): --memory after any cap, and each share as

@@ -40,9 +40,9 @@ inline double seconds_since(StageClock::time_point t0) {
 // save() is skipped.
 struct StageContext {
   const RunOptions& options;
-  std::string dir;           // the job's working files: the checkpoint's directory, or a TempDir
-  Checkpoint* checkpoint;    // null: the job is not resumable
-  nlohmann::json& state;     // what the checkpoint holds
+  std::string dir;            // the job's working files: the checkpoint's directory, or a TempDir
+  Checkpoint* checkpoint;     // null: the job is not resumable
+  nlohmann::json& state;      // what the checkpoint holds
   DiskMeter* disk = nullptr;  // sampled at every save (pipeline/disk_meter.hpp)
   void save() const {
     if (checkpoint) checkpoint->save(state);

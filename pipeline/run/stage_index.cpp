@@ -70,8 +70,8 @@ int open_shared(const std::string& path, int flags) {
 void IndexStage::create_shared_file(const std::string& path, std::uint64_t total_nodes) const {
   // A stopped job's file is rebuilt, never trusted (nothing records it).
   const int fd = io::create_work_file(path, O_RDWR);
-  const PointIndex::FileLayout layout = PointIndex::file_layout(
-      view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
+  const PointIndex::FileLayout layout =
+      PointIndex::file_layout(view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
   const int rc = ::ftruncate(fd, off_t(layout.bytes));
   const int saved = errno;
   ::close(fd);
@@ -92,8 +92,8 @@ void IndexStage::write_shared_part(const std::string& path, std::uint64_t total_
 
 void IndexStage::attach_shared(const std::string& path, std::uint64_t total_nodes, int ranks) {
   const ScopedThreads threads(threads_);
-  const PointIndex::FileLayout layout = PointIndex::file_layout(
-      view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
+  const PointIndex::FileLayout layout =
+      PointIndex::file_layout(view_.count, total_nodes, PointIndex::blocks_for(view_.count, block_points(view_.count)));
   try {
     index_mapping_.open(path, std::size_t(layout.bytes));
   } catch (const std::exception& e) {

@@ -28,10 +28,20 @@ json to_json(const SortProgress& p) {
   for (const std::string& f : p.consumed) consumed.push_back(base_name(f));
   json runs = json::array();
   for (const SortRunFile& r : p.runs)
-    runs.push_back({{"file", base_name(r.path)}, {"records", r.records}, {"crc32c", r.crc32c},
-                    {"hull_file", base_name(r.hull_path)}, {"hull_count", r.hull_count}, {"hull_crc32c", r.hull_crc32c}});
-  return {{"scanned", p.scanned}, {"input_count", p.input_count}, {"bbox_min", bbox_json(p.bbox_min)},
-          {"bbox_max", bbox_json(p.bbox_max)}, {"axis", p.axis}, {"float32", p.float32}, {"runs", runs}, {"consumed", consumed}};
+    runs.push_back({{"file", base_name(r.path)},
+                    {"records", r.records},
+                    {"crc32c", r.crc32c},
+                    {"hull_file", base_name(r.hull_path)},
+                    {"hull_count", r.hull_count},
+                    {"hull_crc32c", r.hull_crc32c}});
+  return {{"scanned", p.scanned},
+          {"input_count", p.input_count},
+          {"bbox_min", bbox_json(p.bbox_min)},
+          {"bbox_max", bbox_json(p.bbox_max)},
+          {"axis", p.axis},
+          {"float32", p.float32},
+          {"runs", runs},
+          {"consumed", consumed}};
 }
 // The sort's progress as the checkpoint recorded it, less the runs from the first one
 // whose files are missing or fail their checksums: the sort redoes those from the
@@ -47,9 +57,12 @@ SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
   for (const json& f : j.at("consumed")) p.consumed.push_back(ckpt.path(f.get<std::string>()));
   const std::uint64_t record_bytes = RecordLayout::for_input(p.float32, p.input_count).bytes();
   for (const json& r : j.at("runs")) {
-    SortRunFile run{ckpt.path(r.at("file").get<std::string>()), r.at("records").get<std::uint64_t>(),
-                    ckpt.path(r.at("hull_file").get<std::string>()), r.at("hull_count").get<std::uint64_t>(),
-                    r.at("crc32c").get<std::uint32_t>(), r.at("hull_crc32c").get<std::uint32_t>()};
+    SortRunFile run{ckpt.path(r.at("file").get<std::string>()),
+                    r.at("records").get<std::uint64_t>(),
+                    ckpt.path(r.at("hull_file").get<std::string>()),
+                    r.at("hull_count").get<std::uint64_t>(),
+                    r.at("crc32c").get<std::uint32_t>(),
+                    r.at("hull_crc32c").get<std::uint32_t>()};
     if (!file_matches(run.path, run.records * record_bytes, run.crc32c) ||
         !file_matches(run.hull_path, run.hull_count * sizeof(std::uint64_t), run.hull_crc32c)) {
       spdlog::warn("{}: damaged or missing (size or checksum): sorting again from run {}", run.path, p.runs.size());
@@ -63,11 +76,22 @@ SortProgress sort_progress_from(const json& j, const Checkpoint& ckpt) {
 // `in_output`: the records are the points section of the partial output (the file
 // named by the job's output, not one in the checkpoint's directory).
 json to_json(const SortedPoints& s, bool in_output) {
-  return {{"file", in_output ? std::string() : base_name(s.path)}, {"in_output", in_output}, {"offset", s.offset}, {"header_memory", s.header_memory},
-          {"count", s.count},       {"input_count", s.input_count},
-          {"duplicates", s.duplicates}, {"axis", s.axis}, {"float32", s.layout.float32}, {"id64", s.layout.id64},        {"bbox_min", bbox_json(s.bbox_min)},
-          {"bbox_max", bbox_json(s.bbox_max)}, {"runs", s.runs}, {"hull_count", s.hull_labels.size()},
-          {"crc32c", s.crc32c}, {"hull_crc32c", io::crc32c(s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t))}};
+  return {{"file", in_output ? std::string() : base_name(s.path)},
+          {"in_output", in_output},
+          {"offset", s.offset},
+          {"header_memory", s.header_memory},
+          {"count", s.count},
+          {"input_count", s.input_count},
+          {"duplicates", s.duplicates},
+          {"axis", s.axis},
+          {"float32", s.layout.float32},
+          {"id64", s.layout.id64},
+          {"bbox_min", bbox_json(s.bbox_min)},
+          {"bbox_max", bbox_json(s.bbox_max)},
+          {"runs", s.runs},
+          {"hull_count", s.hull_labels.size()},
+          {"crc32c", s.crc32c},
+          {"hull_crc32c", io::crc32c(s.hull_labels.data(), s.hull_labels.size() * sizeof(std::uint64_t))}};
 }
 // The sorted file and the hull's labels as the checkpoint recorded them; nullopt when
 // either is missing or fails its checksum (the job sorts again, and must then come to
@@ -118,7 +142,8 @@ void SortStage::prepare() {
     // sorting again still finds the checksum to come to.
     expected_crc_ = state["sorted"].at("crc32c").get<std::uint32_t>();
   }
-  if (context_.checkpoint && state.contains("sort")) progress_ = sort_progress_from(state["sort"], *context_.checkpoint);
+  if (context_.checkpoint && state.contains("sort"))
+    progress_ = sort_progress_from(state["sort"], *context_.checkpoint);
 }
 
 // The output's header names the budget of the process that starts writing its frames
@@ -153,7 +178,8 @@ const SortedPoints& SortStage::adopt(SortedPoints sorted) {
 
 void SortStage::check_sorted_again() const {
   if (expected_crc_ && sorted_.crc32c != *expected_crc_)
-    throw DamagedCheckpoint(sorted_.path + ": sorted again after a checksum failure, the points differ from the "
+    throw DamagedCheckpoint(sorted_.path +
+                            ": sorted again after a checksum failure, the points differ from the "
                             "checkpoint's (damaged checkpoint, or the input changed)");
 }
 
@@ -166,7 +192,9 @@ const SortedPoints& SortStage::run() {
   sort_options.run_points = std::size_t(options.sort_run_points);
   // Before any run is written: a budget that cannot hold even the thinnest windows
   // of this many points is refused now, not after the sort.
-  sort_options.on_scanned = [this](const SortProgress& p) { refuse_budget_before_sort(p, context_.options.plan_options(), threads_); };
+  sort_options.on_scanned = [this](const SortProgress& p) {
+    refuse_budget_before_sort(p, context_.options.plan_options(), threads_);
+  };
   sort_options.progress = options.progress;
   // The budget the header names: the writer's record when it started (a sort done
   // again under committed frames), else this process's (see prepare).
@@ -195,7 +223,8 @@ const SortedPoints& SortStage::run() {
 
 void SortStage::commit() {
   if (done_ || !context_.checkpoint) return;
-  write_file_atomically(context_.dir, kHullFile, sorted_.hull_labels.data(), sorted_.hull_labels.size() * sizeof(std::uint64_t));
+  write_file_atomically(context_.dir, kHullFile, sorted_.hull_labels.data(),
+                        sorted_.hull_labels.size() * sizeof(std::uint64_t));
   context_.state["sorted"] = to_json(sorted_, sorted_.offset != 0);
   context_.state.erase("sort");
   context_.save();

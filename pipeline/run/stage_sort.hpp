@@ -62,7 +62,7 @@ class SortStage {
   MemoryBudget& budget_;
   const int threads_;
   const io::OutputClaim* claim_;
-  bool done_ = false;                         // prepare found the sort recorded
+  bool done_ = false;                          // prepare found the sort recorded
   std::optional<std::uint32_t> expected_crc_;  // of a recorded sorted file that failed its checksum
   SortProgress progress_;                      // the steps done (in: an earlier process's; out: all)
   SortedPoints sorted_;

@@ -163,12 +163,12 @@ void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentS
   } catch (...) {
     failure = std::current_exception();
   }
-  spdlog::debug("segment [{}, {}) in {} zones: windows {} (+{} repairs), {} range failures, {} queries, "
-                "{} rounds, {} tets, build {:.2f}s check {:.2f}s (summed), kernels {}",
-                plan.label_begin, plan.label_end, plan.zones.size(), segment_work_.window_points,
-                segment_work_.repair_points, segment_work_.range_failures, segment_work_.queries, segment_work_.rounds,
-                segment_work_.tets, segment_work_.seconds_build, segment_work_.seconds_check,
-                human_bytes(double(segment_work_.kernel_bytes)));
+  spdlog::debug(
+      "segment [{}, {}) in {} zones: windows {} (+{} repairs), {} range failures, {} queries, "
+      "{} rounds, {} tets, build {:.2f}s check {:.2f}s (summed), kernels {}",
+      plan.label_begin, plan.label_end, plan.zones.size(), segment_work_.window_points, segment_work_.repair_points,
+      segment_work_.range_failures, segment_work_.queries, segment_work_.rounds, segment_work_.tets,
+      segment_work_.seconds_build, segment_work_.seconds_check, human_bytes(double(segment_work_.kernel_bytes)));
   for (auto& part : parts_) output_pool_.give(std::move(part));
   parts_.clear();
   segment_work_ = SegmentStats{};

@@ -6,12 +6,11 @@
 //
 // Its records in the checkpoint state: "header_memory", the budget the output's
 // header names (the first process's: a resumed job may run with another, and the
-// frames' size depends on this one only, MemoryBudget::frame_tets_for); and "output", replaced after each segment: the partial
-// file's committed bytes, the label below which every tet is written (`next_label`),
-// the tets of the frame being filled (a file `pending-K.tets` of its own), the
-// segments written and their counters. The triangulation's progress is this record:
-// the labels below next_label are done exactly when their tets are committed, so the
-// two are recorded as one.
+// frames' size depends on this one only, MemoryBudget::frame_tets_for); and "output", replaced after each segment: the
+// partial file's committed bytes, the label below which every tet is written (`next_label`), the tets of the frame
+// being filled (a file `pending-K.tets` of its own), the segments written and their counters. The triangulation's
+// progress is this record: the labels below next_label are done exactly when their tets are committed, so the two are
+// recorded as one.
 #include "io/output_file.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/write/async_tet_writer.hpp"
@@ -61,7 +60,6 @@ class WriteStage final : public SegmentSink {
         encoders_(shares.encoders),
         file_buffer_bytes_(shares.file_buffer_bytes),
         claim_(claim) {}
-
 
   // The frames of this process's label range go to a fragment file at `path`
   // (io::TetWriter::fragment) instead of the container, which another process
@@ -124,7 +122,7 @@ class WriteStage final : public SegmentSink {
   const io::OutputClaim* claim_;
   std::string fragment_path_;  // write_fragment()
   std::string pending_prefix_ = "pending-";
-  bool resumed_ = false;  // the state held an "output" record
+  bool resumed_ = false;           // the state held an "output" record
   bool points_in_output_ = false;  // the sort merged the points into the partial output
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
   WrittenWork work_;

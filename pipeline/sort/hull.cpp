@@ -41,14 +41,15 @@ InnerBox inscribed_box(const std::vector<FacetPlane>& facets, const std::vector<
   double scale = 1;
   for (const FacetPlane& f : facets) {
     // The corner farthest along n reaches n.(center - a) + scale * sum |n_k| half_k.
-    const double depth = -f.value(center), reach = std::fabs(f.n[0]) * half[0] + std::fabs(f.n[1]) * half[1] +
-                                                      std::fabs(f.n[2]) * half[2];
+    const double depth = -f.value(center),
+                 reach = std::fabs(f.n[0]) * half[0] + std::fabs(f.n[1]) * half[1] + std::fabs(f.n[2]) * half[2];
     if (!(depth > 0)) return box;
     if (reach > 0) scale = std::min(scale, depth / reach);
   }
   scale *= 0.99;
   InnerBox candidate;
-  for (int k = 0; k < 3; ++k) candidate.lo[k] = center[k] - scale * half[k], candidate.hi[k] = center[k] + scale * half[k];
+  for (int k = 0; k < 3; ++k)
+    candidate.lo[k] = center[k] - scale * half[k], candidate.hi[k] = center[k] + scale * half[k];
   for (int corner = 0; corner < 8; ++corner) {
     double q[3];
     for (int k = 0; k < 3; ++k) q[k] = (corner >> k & 1) ? candidate.hi[k] : candidate.lo[k];
@@ -100,7 +101,8 @@ std::vector<std::uint32_t> outside_sample_hull(const double* xyz, const std::vec
   if (dt.build(sample.data(), nullptr, picks.size()) != core::BuildStatus::kOk) return survivors;
   std::vector<std::uint8_t> keep(m, 1);
   core::TetId hint = core::kNoTet;
-  for (const std::uint32_t i : core::hilbert_order(sv.data(), m)) keep[i] = !dt.strictly_inside(&sv[3 * std::size_t(i)], hint);
+  for (const std::uint32_t i : core::hilbert_order(sv.data(), m))
+    keep[i] = !dt.strictly_inside(&sv[3 * std::size_t(i)], hint);
   std::vector<std::uint32_t> out;
   for (std::size_t i = 0; i < m; ++i)
     if (keep[i]) out.push_back(survivors[i]);
@@ -138,8 +140,10 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
     const int nonzero = std::abs(dir[d][0]) + std::abs(dir[d][1]) + std::abs(dir[d][2]);
     if (nonzero != 1) continue;
     const int k = dir[d][0] != 0 ? 0 : dir[d][1] != 0 ? 1 : 2;
-    if (dir[d][k] > 0) hi[k] = best_dot[d];
-    else lo[k] = -best_dot[d];
+    if (dir[d][k] > 0)
+      hi[k] = best_dot[d];
+    else
+      lo[k] = -best_dot[d];
   }
   for (int k = 0; k < 3; ++k) extent[k] = (hi[k] - lo[k]) * (1 + 0x1p-50);
   std::vector<std::uint32_t> extreme(best, best + 26);

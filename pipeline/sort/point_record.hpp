@@ -28,9 +28,7 @@ struct [[gnu::packed]] PointRecord {
   C c[3];
   I id;
   double coord(int k) const { return double(c[k]); }
-  void xyz(double* out) const {
-    out[0] = double(c[0]), out[1] = double(c[1]), out[2] = double(c[2]);
-  }
+  void xyz(double* out) const { out[0] = double(c[0]), out[1] = double(c[1]), out[2] = double(c[2]); }
   std::uint64_t original() const { return std::uint64_t(id); }
   // From a point the caller knows fits: a float32 layout is only chosen for float32
   // input, and a 32-bit index only for inputs of at most 2^32 points.

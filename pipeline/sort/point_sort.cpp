@@ -124,7 +124,9 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
   // input's count: a small input takes little of a large budget.
   std::optional<MemoryBudget> own_budget;
   MemoryBudget* budget = options.budget;
-  if (!budget) budget = &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
+  if (!budget)
+    budget =
+        &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
   budget->set_points(result.input_count);
   const SortShares shares = budget->plan_sort();
   ExternalSortOptions sorter_options;
@@ -213,11 +215,9 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
 
   if (options.on_scanned) options.on_scanned(done);
   result.layout = RecordLayout::for_input(done.float32, done.input_count);
-  with_record(result.layout, [&](auto r) {
-    sort_runs_and_merge<decltype(r)>(source, source_options, options, dir, done, result);
-  });
+  with_record(result.layout,
+              [&](auto r) { sort_runs_and_merge<decltype(r)>(source, source_options, options, dir, done, result); });
   return result;
 }
-
 
 }  // namespace tetstream::pipeline

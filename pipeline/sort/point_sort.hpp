@@ -51,7 +51,7 @@ struct SortProgress {
   std::uint64_t input_count = 0;
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
   int axis = 0;
-  bool float32 = false;  // every coordinate of the input is a float32 (PointReader::float32_input)
+  bool float32 = false;           // every coordinate of the input is a float32 (PointReader::float32_input)
   std::vector<SortRunFile> runs;  // pass 2's finished runs, in order, in compact records
   // Files of runs the merge started to consume (it gives their space back as it
   // reads: no longer runs to adopt); removed once the sort is committed.
@@ -95,8 +95,8 @@ struct PointSortOptions {
 };
 
 struct SortedPoints {
-  std::string path;  // the sorted file: `count` records of `layout` from byte `offset` on
-  std::uint64_t offset = 0;  // 0 for a file of its own; the points section's payload in a container
+  std::string path;                 // the sorted file: `count` records of `layout` from byte `offset` on
+  std::uint64_t offset = 0;         // 0 for a file of its own; the points section's payload in a container
   std::uint64_t header_memory = 0;  // in a container: the budget its header names (pipeline/stage_sort.hpp)
   RecordLayout layout;
   std::uint64_t count = 0;        // distinct points

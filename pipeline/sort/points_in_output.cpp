@@ -104,7 +104,8 @@ void rewrite_points_header(int fd, SortedPoints& points, const io::TetFileHeader
   h.resolve_and_validate();
   const std::vector<std::uint8_t> lead = io::leading_bytes(h);
   // The records and the CRC after them.
-  move_file_bytes(fd, points.path, points.offset, lead.size(), points.count * points.layout.bytes() + io::kSectionTrailerSize);
+  move_file_bytes(fd, points.path, points.offset, lead.size(),
+                  points.count * points.layout.bytes() + io::kSectionTrailerSize);
   if (!io::pwrite_exactly(fd, lead.data(), lead.size(), 0)) fail(points.path, "write failed");
   if (sync && ::fsync(fd) != 0) fail(points.path, "write failed");
   points.offset = lead.size();

@@ -19,8 +19,8 @@ extern "C" void on_signal(int sig) {
 }  // namespace
 
 Interrupted::Interrupted(int signal)
-    : Error(ExitCode::kInterrupted, std::string("interrupted by signal ") + std::to_string(signal) +
-                                        "; no output written") {}
+    : Error(ExitCode::kInterrupted,
+            std::string("interrupted by signal ") + std::to_string(signal) + "; no output written") {}
 
 void install_interrupt_handlers() {
   struct sigaction sa {};

@@ -43,8 +43,8 @@ MemoryBudget::MemoryBudget(std::uint64_t ceiling, std::uint64_t points, int thre
   // The chunks: 8 MiB a thread, less at small budgets, whose windows' label ranges
   // are a few MiB of records at most (a 32nd of the budget a thread).
   const std::uint64_t chunks = std::min<std::uint64_t>(8 * kMiB, ceiling / 32) * std::uint64_t(threads_);
-  runtime_ = std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) + chunks,
-                                     ceiling / 8 * 5);
+  runtime_ =
+      std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) + chunks, ceiling / 8 * 5);
 }
 
 void MemoryBudget::record(const std::string& phase, const std::string& name, std::uint64_t bytes) {
@@ -71,8 +71,8 @@ SortShares MemoryBudget::plan_sort() {
   s.run_points = std::size_t(std::clamp<std::uint64_t>(avail / 3 / kRunBytesPerPoint, kMinRunPoints,
                                                        std::max<std::uint64_t>(points_, kMinRunPoints)));
   s.hull_piece_points = std::max<std::size_t>(
-      kMinHullPiece, std::min<std::size_t>(std::size_t(avail / 4 / kHullBytesPerPoint / std::uint64_t(threads_)),
-                                           s.run_points));
+      kMinHullPiece,
+      std::min<std::size_t>(std::size_t(avail / 4 / kHullBytesPerPoint / std::uint64_t(threads_)), s.run_points));
   // What a run of this input holds (the buffer is reserved for the points it will
   // hold, not the share), and the pieces at once: no more than a run has, and no more
   // than the quarter holds (many threads and a small budget: fewer than threads).
@@ -80,8 +80,8 @@ SortShares MemoryBudget::plan_sort() {
   const std::uint64_t piece_used = std::min<std::uint64_t>(s.hull_piece_points, run_used);
   const std::uint64_t piece_bytes = std::uint64_t(s.hull_piece_points) * kHullBytesPerPoint;
   const std::uint64_t pieces = (run_used + s.hull_piece_points - 1) / s.hull_piece_points;
-  s.hull_threads = int(std::max<std::uint64_t>(
-      1, std::min<std::uint64_t>({std::uint64_t(threads_), pieces, avail / 4 / piece_bytes})));
+  s.hull_threads = int(
+      std::max<std::uint64_t>(1, std::min<std::uint64_t>({std::uint64_t(threads_), pieces, avail / 4 / piece_bytes})));
   // The merge needs no more than the runs hold (ExternalSorter caps each run's block
   // by the run's size): the whole input's records at most.
   s.merge_bytes = std::size_t(std::min<std::uint64_t>(avail / 3, std::max<std::uint64_t>(points_ * 32, kMiB)));
@@ -120,8 +120,8 @@ TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, doub
   // nothing).
   t.file_buffer_bytes =
       std::size_t(std::clamp<std::uint64_t>(std::min(ceiling_ / 64, 64 * points_), 64 << 10, 8 * kMiB));
-  t.writer_bytes = writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), frame_tets_) +
-                   t.file_buffer_bytes;
+  t.writer_bytes =
+      writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), frame_tets_) + t.file_buffer_bytes;
   t.index_bytes = index_bytes;
   // What the reserve and the writer leave: 75% for the windows (less the indexes),
   // 25% for the sorted file's pages that the queries map and the allocator's slack.

@@ -46,12 +46,12 @@ struct SortShares {
 };
 
 struct TriangulateShares {
-  int encoders = 1;                 // the writer stage's compression threads
-  std::uint64_t writer_bytes = 0;   // frames in flight, the encoders' scratch, the file buffer
-  std::size_t file_buffer_bytes = 0;  // the output file's write buffer (part of writer_bytes)
+  int encoders = 1;                    // the writer stage's compression threads
+  std::uint64_t writer_bytes = 0;      // frames in flight, the encoders' scratch, the file buffer
+  std::size_t file_buffer_bytes = 0;   // the output file's write buffer (part of writer_bytes)
   std::uint64_t query_page_bytes = 0;  // mapped pages of the sorted file the queries read
-  std::uint64_t index_bytes = 0;    // the point index and the hull's (as measured)
-  double window_bytes = 0;          // the windows: kernels, coordinates, held output (the plan's "available")
+  std::uint64_t index_bytes = 0;       // the point index and the hull's (as measured)
+  double window_bytes = 0;             // the windows: kernels, coordinates, held output (the plan's "available")
 };
 
 class MemoryBudget {

@@ -19,7 +19,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr std::int64_t kTtyIntervalNs = 200'000'000;       // redraw 5 times a second
 constexpr std::int64_t kLogIntervalNs = 10'000'000'000LL;  // one log line every 10 s
-constexpr std::int64_t kShareIntervalNs = 1'000'000'000;    // a rank's shared count, once a second
+constexpr std::int64_t kShareIntervalNs = 1'000'000'000;   // a rank's shared count, once a second
 // Columns of the terminal on stderr; 0 when it says none.
 std::size_t terminal_columns() {
   struct winsize w {};
@@ -48,15 +48,22 @@ std::string human_bytes(double bytes) {
 std::string human_duration(double s) {
   char buf[32];
   if (!std::isfinite(s) || s < 0) return "?";
-  if (s < 60) std::snprintf(buf, sizeof buf, "%.1fs", s);
-  else if (s < 3600) std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
-  else std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) % 3600) / 60);
+  if (s < 60)
+    std::snprintf(buf, sizeof buf, "%.1fs", s);
+  else if (s < 3600)
+    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
+  else
+    std::snprintf(buf, sizeof buf, "%dh%02dm", int(s) / 3600, (int(s) % 3600) / 60);
   return buf;
 }
 
 Progress::Progress(std::string what, std::string unit, std::uint64_t total, bool enabled)
-    : what_(std::move(what)), unit_(std::move(unit)), total_(total), enabled_(enabled),
-      tty_(isatty(STDERR_FILENO) != 0), start_(Clock::now()) {
+    : what_(std::move(what)),
+      unit_(std::move(unit)),
+      total_(total),
+      enabled_(enabled),
+      tty_(isatty(STDERR_FILENO) != 0),
+      start_(Clock::now()) {
   next_report_ns_ = tty_ ? kTtyIntervalNs : kLogIntervalNs;
 }
 
@@ -80,7 +87,9 @@ void Progress::share_to(const std::string& path, std::uint64_t base) {
 
 void Progress::add_shared(std::vector<std::string> paths) { peers_ = std::move(paths); }
 
-std::uint64_t Progress::counted() { return done_.load(std::memory_order_relaxed) + (peers_.empty() ? 0 : peers_done()); }
+std::uint64_t Progress::counted() {
+  return done_.load(std::memory_order_relaxed) + (peers_.empty() ? 0 : peers_done());
+}
 
 std::uint64_t Progress::done_with_shared() {
   std::lock_guard lock(print_mutex_);
@@ -110,15 +119,12 @@ std::uint64_t Progress::peers_done() {
   return peers_done_ = sum;
 }
 
-double Progress::seconds() const {
-  return std::chrono::duration<double>(Clock::now() - start_).count();
-}
+double Progress::seconds() const { return std::chrono::duration<double>(Clock::now() - start_).count(); }
 
 void Progress::add(std::uint64_t n) {
   done_.fetch_add(n, std::memory_order_relaxed);
   if (!enabled_ && share_fd_ < 0) return;  // silent and not shared: nothing to time
-  const std::int64_t now =
-      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start_).count();
+  const std::int64_t now = std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start_).count();
   if (share_fd_ >= 0) {
     std::int64_t due_share = next_share_ns_.load(std::memory_order_relaxed);
     if (now >= due_share && next_share_ns_.compare_exchange_strong(due_share, now + kShareIntervalNs)) share(false);

@@ -57,7 +57,7 @@ class Progress {
   std::uint64_t share_base_ = 0;
   std::atomic<std::int64_t> next_share_ns_{0};
   std::vector<std::string> peers_;
-  std::uint64_t peers_done_ = 0;   // as last read (under print_mutex_)
+  std::uint64_t peers_done_ = 0;  // as last read (under print_mutex_)
   std::int64_t peers_read_ns_ = -1;
 };
 

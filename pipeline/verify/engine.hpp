@@ -49,7 +49,6 @@
 
 namespace tetstream::pipeline::verify_engine {
 
-
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -77,7 +76,8 @@ class ViolationLog {
 
   // Another log's counts and listed violations (a rank's, on rank 0; ranks in order, so
   // equal ordinals keep the order of the ranks).
-  void merge(const std::array<std::uint64_t, kViolationKinds>& counts, const std::vector<VerifyReport::Listed>& listed) {
+  void merge(const std::array<std::uint64_t, kViolationKinds>& counts,
+             const std::vector<VerifyReport::Listed>& listed) {
     for (std::size_t k = 0; k < std::size_t(kViolationKinds); ++k) counts_[k].fetch_add(counts[k]);
     std::lock_guard<std::mutex> lock(mutex_);
     for (const auto& l : listed) {
@@ -230,15 +230,19 @@ class PointCoords {
   };
   void assign(std::uint64_t n, bool floats) {
     floats_ = floats;
-    if (floats) f_.resize(3 * std::size_t(n)), d_ = {};
-    else d_.resize(3 * std::size_t(n)), f_ = {};
+    if (floats)
+      f_.resize(3 * std::size_t(n)), d_ = {};
+    else
+      d_.resize(3 * std::size_t(n)), f_ = {};
   }
   bool floats() const { return floats_; }
   static std::size_t bytes_per_point(bool floats) { return floats ? 3 * sizeof(float) : 3 * sizeof(double); }
   // Fills labels [first, first + n) from doubles that (when floats()) are floats.
   void store(std::uint64_t first, std::size_t n, const double* xyz) {
-    if (floats_) std::transform(xyz, xyz + 3 * n, f_.begin() + std::ptrdiff_t(3 * first), [](double x) { return float(x); });
-    else std::copy(xyz, xyz + 3 * n, d_.begin() + std::ptrdiff_t(3 * first));
+    if (floats_)
+      std::transform(xyz, xyz + 3 * n, f_.begin() + std::ptrdiff_t(3 * first), [](double x) { return float(x); });
+    else
+      std::copy(xyz, xyz + 3 * n, d_.begin() + std::ptrdiff_t(3 * first));
   }
   Point operator()(std::uint64_t l) const {
     if (floats_) return {{f_[3 * l], f_[3 * l + 1], f_[3 * l + 2]}};
@@ -370,7 +374,8 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
   }
   std::size_t w = 0;
   for (std::size_t r = 0; r < ranges; ++r) {
-    if (w != offset[r] && kept[r]) std::memmove(static_cast<void*>(out.data() + w), out.data() + offset[r], kept[r] * sizeof(T));
+    if (w != offset[r] && kept[r])
+      std::memmove(static_cast<void*>(out.data() + w), out.data() + offset[r], kept[r] * sizeof(T));
     w += kept[r];
   }
   return w;
@@ -414,7 +419,13 @@ class Engine {
   using Edge = EdgeKey<L>;
 
   Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep, Communicator& comm)
-      : src_(src), opt_(opt), rep_(rep), comm_(comm), log_(opt.max_listed), n_(src.point_count()), used_(n_),
+      : src_(src),
+        opt_(opt),
+        rep_(rep),
+        comm_(comm),
+        log_(opt.max_listed),
+        n_(src.point_count()),
+        used_(n_),
         hull_used_(n_) {
     sampled_ = opt.sample < 1.0;
     label_bits_ = std::max(1, int(std::bit_width(n_ > 0 ? n_ - 1 : 0)));
@@ -431,7 +442,9 @@ class Engine {
   };
 
   PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
-  bool tet_sampled(std::uint64_t ordinal) const { return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_; }
+  bool tet_sampled(std::uint64_t ordinal) const {
+    return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_;
+  }
   bool facet_sampled(L a, L b, L c) const {
     if (!sampled_) return true;
     return mix(mix(mix(opt_.seed ^ std::uint64_t(a)) + std::uint64_t(b)) + std::uint64_t(c)) < sample_cut_;
@@ -474,7 +487,7 @@ class Engine {
   void merge_totals(const std::vector<std::string>& parts);
   // Per-thread buffers of a step's slice of tets.
   struct Part {
-    std::vector<Facet> a, b, f, tmp;   // A and B facets, merged
+    std::vector<Facet> a, b, f, tmp;  // A and B facets, merged
     std::vector<Edge> ea, eb, e, etmp;
   };
   void process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
@@ -487,7 +500,7 @@ class Engine {
   // Combines each run of equal keys in [first, first + n) into its first record,
   // packed at the front; returns how many records remain.
   std::size_t fold_equal_keys(Facet* first, std::size_t n, std::vector<PairCheck>& checks);
-  void check_pairs();  // the pairs fold() found
+  void check_pairs();                                      // the pairs fold() found
   void check_pairs(const std::vector<PairCheck>& checks);  // on this thread
   void retire_facets(std::uint64_t threshold);
   void final_facet(const Facet& f);
@@ -526,7 +539,7 @@ class Engine {
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
   std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
 
-  int label_bits_ = 1;  // bits of the largest label
+  int label_bits_ = 1;         // bits of the largest label
   std::size_t step_tets_ = 1;  // tets a step (plan_memory())
   std::vector<Part> parts_;
   std::vector<std::vector<PairCheck>> chunk_checks_;
@@ -559,6 +572,5 @@ class Engine {
   std::uint64_t vertices_ = 0, hull_vertices_ = 0;  // of this rank's labels, then (rank 0) of all
   double seconds_points_ = 0, seconds_tets_ = 0, seconds_final_ = 0;
 };
-
 
 }  // namespace tetstream::pipeline::verify_engine

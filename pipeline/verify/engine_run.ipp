@@ -1,5 +1,5 @@
-// The memory plan, the points, the frame loop and the radix sorts (members of Engine, pipeline/verify/engine.hpp; compiled in engine.cpp).
-// Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
+// The memory plan, the points, the frame loop and the radix sorts (members of Engine, pipeline/verify/engine.hpp;
+// compiled in engine.cpp). Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
 
 template <class L>
 void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const {
@@ -18,8 +18,7 @@ template <class L>
 void Engine<L>::sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const {
   const int b = label_bits_;
   if constexpr (sizeof(L) == 4) {
-    radix_sort(v.data(), v.size(), tmp, 2 * b,
-               [b](std::uint64_t e) { return (e >> 32) << b | (e & 0xFFFFFFFFu); });
+    radix_sort(v.data(), v.size(), tmp, 2 * b, [b](std::uint64_t e) { return (e >> 32) << b | (e & 0xFFFFFFFFu); });
   } else if (2 * b <= 64) {
     radix_sort(v.data(), v.size(), tmp, 2 * b, [b](const Edge& e) { return e.u << b | e.v; });
   } else {
@@ -39,7 +38,8 @@ std::string Engine<L>::make_tmpdir() {
 
 template <class L>
 void Engine<L>::plan_memory() {
-  const std::size_t points = std::size_t(n_) * PointCoords::bytes_per_point(src_.points_are_floats()) + used_.bytes() + hull_used_.bytes();
+  const std::size_t points =
+      std::size_t(n_) * PointCoords::bytes_per_point(src_.points_are_floats()) + used_.bytes() + hull_used_.bytes();
   // A frame: two label buffers (one decoding) and flags. A step, per tet: the slices'
   // A, B, merged and radix buffers (11 facets, 15 edges), the merged copy (4 facets,
   // 6 edges) and up to 2 pair checks.
@@ -47,7 +47,8 @@ void Engine<L>::plan_memory() {
   for (std::size_t k = 0; k < src_.batch_count(); ++k)
     max_frame = std::max<std::size_t>(max_frame, std::size_t(src_.batch(k).tet_count));
   auto scratch_of = [&](std::size_t step) {
-    return max_frame * (2 * 4 * sizeof(L) + 1) + step * (15 * sizeof(Facet) + 21 * sizeof(Edge) + 2 * sizeof(PairCheck));
+    return max_frame * (2 * 4 * sizeof(L) + 1) +
+           step * (15 * sizeof(Facet) + 21 * sizeof(Edge) + 2 * sizeof(PairCheck));
   };
   // The largest step (up to batch_tets) whose scratch leaves the open sets at least as
   // much as it takes; never below 2^14 tets or batch_tets. Every rank plans the same
@@ -59,9 +60,10 @@ void Engine<L>::plan_memory() {
   const std::size_t fixed = points + scratch;
   std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
   if (rest < (std::size_t(16) << 20)) {
-    spdlog::warn("verify: --memory {} leaves less than 16 MiB for the open facets beside the points and one batch "
-                 "({}); going over it",
-                 human_bytes(double(opt_.memory_bytes)), human_bytes(double(fixed)));
+    spdlog::warn(
+        "verify: --memory {} leaves less than 16 MiB for the open facets beside the points and one batch "
+        "({}); going over it",
+        human_bytes(double(opt_.memory_bytes)), human_bytes(double(fixed)));
     rest = std::size_t(16) << 20;
   }
   // During the pass: the open sets, each with a merged copy of the same size (3/8 +
@@ -160,7 +162,8 @@ void Engine<L>::run() {
     facet_spill_ = std::make_unique<ExternalSorter<Facet, FacetLess<L>>>(o);
     o.name = "edges";
     edge_spill_ = std::make_unique<ExternalSorter<Edge, std::less<Edge>>>(o);
-    edge_spill_->set_reducer([](Edge* first, std::size_t n) { return std::size_t(std::unique(first, first + n) - first); });
+    edge_spill_->set_reducer(
+        [](Edge* first, std::size_t n) { return std::size_t(std::unique(first, first + n) - first); });
     o.name = "hull-edges";
     o.memory_bytes = std::max<std::size_t>(sorter_budget_ / 5, std::size_t(4) << 20);
     hull_sort_options_ = o;

@@ -53,7 +53,8 @@ class ExactSum {
   static_assert(std::numeric_limits<long double>::digits <= 64, "a term's significand must fit 64 bits");
   static_assert(std::numeric_limits<long double>::min_exponent - std::numeric_limits<long double>::digits >= kLow,
                 "the accumulator must reach the smallest subnormal");
-  static_assert(std::numeric_limits<long double>::max_exponent <= kHigh, "the accumulator must reach the largest value");
+  static_assert(std::numeric_limits<long double>::max_exponent <= kHigh,
+                "the accumulator must reach the largest value");
 
   ExactSum() : limb_(kLimbs, 0) {}
 
@@ -66,9 +67,9 @@ class ExactSum {
       return;
     }
     int e = 0;
-    const long double m = std::frexp(std::fabs(x), &e);  // |x| = m * 2^e, m in [0.5, 1)
+    const long double m = std::frexp(std::fabs(x), &e);          // |x| = m * 2^e, m in [0.5, 1)
     const std::uint64_t sig = std::uint64_t(std::ldexp(m, 64));  // exact: m has at most 64 bits
-    place(sig, e - 64 - kLow, x < 0);  // |x| = sig * 2^(e - 64)
+    place(sig, e - 64 - kLow, x < 0);                            // |x| = sig * 2^(e - 64)
   }
 
   void add(double x) {

@@ -1,5 +1,6 @@
-// A frame's tets: storage, orientation, volume, and their facets and edges (members of Engine, pipeline/verify/engine.hpp; compiled in engine.cpp).
-// Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
+// A frame's tets: storage, orientation, volume, and their facets and edges (members of Engine,
+// pipeline/verify/engine.hpp; compiled in engine.cpp). Included once, by engine.cpp, inside namespace
+// tetstream::pipeline::verify_engine.
 
 template <class L>
 template <class OnGood>
@@ -36,7 +37,8 @@ void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<
         flags[i] |= 2;
         if (log_storage)
           log_.add(Violation::kStorage, ordinal, [&] {
-            return tet_text(ordinal, g[0], g[1], g[2], g[3]) + ": labels must be distinct and below " + std::to_string(n_);
+            return tet_text(ordinal, g[0], g[1], g[2], g[3]) + ": labels must be distinct and below " +
+                   std::to_string(n_);
           });
         continue;
       }
@@ -48,11 +50,11 @@ void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<
   // The frame's declared label range is a promise the pass relies on (keys below the
   // smallest label to come are final; a distributed job's front is cut by it).
   if (below_min)
-    throw InputError(src_.name() + ": frame " + std::to_string(k) + ": a label below the frame's declared smallest label " +
-                     std::to_string(b.min_label));
+    throw InputError(src_.name() + ": frame " + std::to_string(k) +
+                     ": a label below the frame's declared smallest label " + std::to_string(b.min_label));
   if (above_max)
-    throw InputError(src_.name() + ": frame " + std::to_string(k) + ": a label above the frame's declared largest label " +
-                     std::to_string(b.max_label));
+    throw InputError(src_.name() + ": frame " + std::to_string(k) +
+                     ": a label above the frame's declared largest label " + std::to_string(b.max_label));
 }
 
 template <class L>
@@ -111,8 +113,8 @@ void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64
 // then each thread merges one key range of all slices and the open set, folds it and
 // runs the insphere tests of the pairs it formed.
 template <class L>
-void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::size_t count,
-                             std::uint64_t first_ordinal, bool sorted_by_min, std::uint64_t threshold) {
+void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
+                             bool sorted_by_min, std::uint64_t threshold) {
   const int threads = count >= 8192 ? std::max(1, omp_get_max_threads()) : 1;
   if (parts_.size() < std::size_t(threads)) parts_.resize(std::size_t(threads));
 #pragma omp parallel for num_threads(threads) schedule(static, 1) if (threads > 1)
@@ -138,8 +140,8 @@ void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::siz
       if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
       return a.v[2] < b.v[2];
     };
-    const std::size_t n = merge_ranges(
-        in, merged_, less, key_less, chunk_sizes_, [&](std::size_t r, Facet* first, std::size_t m) {
+    const std::size_t n =
+        merge_ranges(in, merged_, less, key_less, chunk_sizes_, [&](std::size_t r, Facet* first, std::size_t m) {
           auto& cc = chunk_checks_[r];
           cc.clear();
           const std::size_t w = fold_equal_keys(first, m, cc);
@@ -157,9 +159,9 @@ void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::siz
     in.emplace_back(live_e_.records());
     for (int p = 0; p < threads; ++p) in.emplace_back(parts_[std::size_t(p)].e);
     const std::less<Edge> less;
-    const std::size_t n = merge_ranges(in, merged_e_, less, less, chunk_sizes_, [](std::size_t, Edge* first, std::size_t m) {
-      return std::size_t(std::unique(first, first + m) - first);
-    });
+    const std::size_t n = merge_ranges(
+        in, merged_e_, less, less, chunk_sizes_,
+        [](std::size_t, Edge* first, std::size_t m) { return std::size_t(std::unique(first, first + m) - first); });
     merged_e_.resize(n);
     live_e_.replace(merged_e_);
     merge_edges(threshold);
@@ -227,7 +229,6 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
   part.e.resize(ea.size() + eb.size());
   part.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), part.e.begin()), part.e.end());
 }
-
 
 // A = the three facets through s[0], B = the fourth. Facet opposite s_i, written
 // (others sorted, s_i), has the orientation of (s0..s3) times (-1)^(3-i), and

@@ -1,5 +1,6 @@
-// The boundary surface (closed, locally convex), Euler, volume, and the report (members of Engine, pipeline/verify/engine.hpp; compiled in engine.cpp).
-// Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
+// The boundary surface (closed, locally convex), Euler, volume, and the report (members of Engine,
+// pipeline/verify/engine.hpp; compiled in engine.cpp). Included once, by engine.cpp, inside namespace
+// tetstream::pipeline::verify_engine.
 
 template <class L>
 void Engine<L>::finish_hull() {

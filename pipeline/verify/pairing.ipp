@@ -1,5 +1,6 @@
-// Facet pairing and local Delaunay; the open facets and edges, retired or spilled (members of Engine, pipeline/verify/engine.hpp; compiled in engine.cpp).
-// Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
+// Facet pairing and local Delaunay; the open facets and edges, retired or spilled (members of Engine,
+// pipeline/verify/engine.hpp; compiled in engine.cpp). Included once, by engine.cpp, inside namespace
+// tetstream::pipeline::verify_engine.
 
 template <class L>
 std::size_t Engine<L>::fold_equal_keys(Facet* first, std::size_t n, std::vector<PairCheck>& checks) {
@@ -135,10 +136,10 @@ void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
 template <class L>
 void Engine<L>::retire_facets(std::uint64_t threshold) {
   const std::span<Facet> open = live_.records();
-  const auto cut = std::partition_point(open.begin(), open.end(),
-                                        [&](const Facet& f) { return std::uint64_t(f.v[0]) < threshold; });
-  const auto spill_from = std::partition_point(open.begin(), cut,
-                                               [&](const Facet& f) { return std::uint64_t(f.v[0]) < facet_spill_min_; });
+  const auto cut =
+      std::partition_point(open.begin(), open.end(), [&](const Facet& f) { return std::uint64_t(f.v[0]) < threshold; });
+  const auto spill_from =
+      std::partition_point(open.begin(), cut, [&](const Facet& f) { return std::uint64_t(f.v[0]) < facet_spill_min_; });
   for (auto it = open.begin(); it != spill_from; ++it) final_facet(*it);
   if (spill_from != cut) facet_spill_->push_sorted_run(std::span<Facet>(&*spill_from, std::size_t(cut - spill_from)));
   live_.retire_front(std::size_t(cut - open.begin()));
@@ -185,8 +186,8 @@ template <class L>
 void Engine<L>::merge_edges(std::uint64_t threshold) {
   const std::span<Edge> open = live_e_.records();
   const auto cut = std::partition_point(open.begin(), open.end(), [&](const Edge& e) { return edge_u(e) < threshold; });
-  const auto spill_from = std::partition_point(open.begin(), cut,
-                                               [&](const Edge& e) { return edge_u(e) < edge_spill_min_; });
+  const auto spill_from =
+      std::partition_point(open.begin(), cut, [&](const Edge& e) { return edge_u(e) < edge_spill_min_; });
   edges_ += std::uint64_t(spill_from - open.begin());
   if (spill_from != cut) edge_spill_->push_sorted_run(std::span<Edge>(&*spill_from, std::size_t(cut - spill_from)));
   live_e_.retire_front(std::size_t(cut - open.begin()));

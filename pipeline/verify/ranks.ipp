@@ -98,7 +98,8 @@ void Engine<L>::replay_front(std::vector<Facet>& front, const std::vector<std::s
   std::vector<Item> items(front.size());
   for (std::size_t i = 0; i < front.size(); ++i) {
     const std::uint64_t ordinal = front[i].x & kPayload;
-    const std::size_t k = std::size_t(std::upper_bound(first_tets.begin(), first_tets.end(), ordinal) - first_tets.begin()) - 1;
+    const std::size_t k =
+        std::size_t(std::upper_bound(first_tets.begin(), first_tets.end(), ordinal) - first_tets.begin()) - 1;
     items[i] = Item{position[k], (ordinal - first_tets[k]) / step_tets_, front[i]};
   }
   front = {};
@@ -174,7 +175,8 @@ void Engine<L>::hand_over_bits(Bitmap& bits) {
   // From every earlier rank (and from no other), each sent the same words: ours.
   const auto [a, b] = words_of(std::size_t(comm_.rank()));
   std::vector<std::uint64_t>& mine = bits.words();
-  for (std::size_t at = 0; at < got.size(); ++at) mine[std::size_t(a + at % std::max<std::uint64_t>(1, b - a))] |= got[at];
+  for (std::size_t at = 0; at < got.size(); ++at)
+    mine[std::size_t(a + at % std::max<std::uint64_t>(1, b - a))] |= got[at];
 }
 
 // This rank's totals as bytes, for rank 0: counters, violations, volumes.
@@ -186,10 +188,10 @@ std::string Engine<L>::partial_totals() {
     put(s.size());
     out += s;
   };
-  for (std::uint64_t v : {good_tets_, interior_, boundary_, bad_facets_, edges_, hull_edges_, facets_checked_,
-                          tets_checked_, orient_tests_.load(), insphere_tests_.load(), hull_tests_.load(), vertices_,
-                          hull_vertices_, rep_.peak_open_facets, rep_.peak_open_edges, rep_.spilled_records,
-                          rep_.spill_bytes, rep_.memory_planned})
+  for (std::uint64_t v :
+       {good_tets_, interior_, boundary_, bad_facets_, edges_, hull_edges_, facets_checked_, tets_checked_,
+        orient_tests_.load(), insphere_tests_.load(), hull_tests_.load(), vertices_, hull_vertices_,
+        rep_.peak_open_facets, rep_.peak_open_edges, rep_.spilled_records, rep_.spill_bytes, rep_.memory_planned})
     put(v);
   put_text(tet_volume6_.bytes());
   put_text(hull_volume6_.bytes());

@@ -11,19 +11,32 @@ namespace tetstream::pipeline {
 
 const char* violation_name(Violation v) {
   switch (v) {
-    case Violation::kStorage: return "storage";
-    case Violation::kOrientation: return "orientation";
-    case Violation::kDuplicateTet: return "duplicate_tet";
-    case Violation::kFacetOverused: return "facet_overused";
-    case Violation::kFacetSameSide: return "facet_same_side";
-    case Violation::kDelaunay: return "delaunay";
-    case Violation::kHullOpen: return "hull_open";
-    case Violation::kHullConvex: return "hull_convex";
-    case Violation::kHullTopology: return "hull_topology";
-    case Violation::kMissingPoint: return "missing_point";
-    case Violation::kEuler: return "euler";
-    case Violation::kVolume: return "volume";
-    case Violation::kCount: break;
+    case Violation::kStorage:
+      return "storage";
+    case Violation::kOrientation:
+      return "orientation";
+    case Violation::kDuplicateTet:
+      return "duplicate_tet";
+    case Violation::kFacetOverused:
+      return "facet_overused";
+    case Violation::kFacetSameSide:
+      return "facet_same_side";
+    case Violation::kDelaunay:
+      return "delaunay";
+    case Violation::kHullOpen:
+      return "hull_open";
+    case Violation::kHullConvex:
+      return "hull_convex";
+    case Violation::kHullTopology:
+      return "hull_topology";
+    case Violation::kMissingPoint:
+      return "missing_point";
+    case Violation::kEuler:
+      return "euler";
+    case Violation::kVolume:
+      return "volume";
+    case Violation::kCount:
+      break;
   }
   return "?";
 }
@@ -48,8 +61,8 @@ std::string VerifyReport::summary() const {
   s << ": " << points << " points, " << tets << " tets";
   if (ok() && !sampled) s << " are the Delaunay triangulation of the points";
   s << "\n";
-  s << "  vertices " << vertices << ", facets " << facets << " (" << interior_facets << " interior, "
-    << boundary_facets << (sampled ? " unpaired in the sample" : " on the hull") << ")";
+  s << "  vertices " << vertices << ", facets " << facets << " (" << interior_facets << " interior, " << boundary_facets
+    << (sampled ? " unpaired in the sample" : " on the hull") << ")";
   if (!sampled) {
     s << ", edges " << edges << ", V-E+F-T " << euler << "\n";
     s << "  hull: " << hull_vertices << " vertices, " << hull_edges << " edges, V-E+F " << hull_euler
@@ -64,6 +77,5 @@ std::string VerifyReport::summary() const {
   for (const Listed& l : listed) s << "\n  " << violation_name(l.kind) << ": " << l.text;
   return s.str();
 }
-
 
 }  // namespace tetstream::pipeline

@@ -4,7 +4,6 @@
 #include "core/error.hpp"
 #include "io/tet_reader.hpp"
 
-
 #include <algorithm>
 #include <cstdint>
 #include <filesystem>
@@ -85,6 +84,5 @@ std::string ContainerSource::directory() const {
   const std::filesystem::path p = std::filesystem::path(reader_.path()).parent_path();
   return p.empty() ? std::string(".") : p.string();
 }
-
 
 }  // namespace tetstream::pipeline

@@ -29,7 +29,8 @@ VerifySplit split_frames(const std::vector<std::uint64_t>& min_labels, const std
     // The first position whose tets before it reach r/K of the total (the target, in
     // 128 bits: total * r may not fit 64), moved past frames of the same smallest
     // label (a label's frames stay on one rank, so the label ranges do not overlap).
-    const unsigned __int128 target = (static_cast<unsigned __int128>(total) * unsigned(r) + unsigned(ranks) - 1) / unsigned(ranks);
+    const unsigned __int128 target =
+        (static_cast<unsigned __int128>(total) * unsigned(r) + unsigned(ranks) - 1) / unsigned(ranks);
     std::size_t j = s.first[std::size_t(r) - 1];
     while (j < frames && prefix[j] < target) ++j;
     while (j > 0 && j < frames && min_labels[j] == min_labels[j - 1]) ++j;

@@ -71,9 +71,9 @@ const char* violation_name(Violation v);  // "orientation", "duplicate_tet", ...
 
 struct VerifyOptions {
   std::uint64_t memory_bytes = std::uint64_t(1) << 30;
-  std::string tmpdir;          // for spills; empty: $TMPDIR, else the output's directory, else "."
-  double sample = 1.0;         // (0, 1]: below 1, the quick look of docs/verify.md
-  std::uint64_t seed = 1;      // of the sample
+  std::string tmpdir;              // for spills; empty: $TMPDIR, else the output's directory, else "."
+  double sample = 1.0;             // (0, 1]: below 1, the quick look of docs/verify.md
+  std::uint64_t seed = 1;          // of the sample
   double volume_tolerance = 1e-9;  // relative
   std::size_t max_listed = 10;     // violations described, per kind (all are counted)
   // Tets per processing step, at most (a frame is split into steps; a small --memory
@@ -82,24 +82,24 @@ struct VerifyOptions {
   // a small share at 10^9 (docs/verify.md, "Speed").
   std::size_t batch_tets = std::size_t(1) << 18;
   bool progress = true;
-  bool wide_labels = false;  // the 64-bit label path even when labels fit 32 bits (tests)
+  bool wide_labels = false;    // the 64-bit label path even when labels fit 32 bits (tests)
   std::size_t open_bytes = 0;  // cap on the open facets (edges: a third); 0: from memory_bytes (tests force spills)
 
   void validate() const;  // throws UsageError
 };
 
 struct VerifyReport {
-  bool sampled = false;          // sample < 1: only the checks of the quick look ran
+  bool sampled = false;  // sample < 1: only the checks of the quick look ran
   double sample = 1.0;
-  std::uint64_t points = 0;      // N
-  std::uint64_t tets = 0;        // T, as stored
-  std::uint64_t vertices = 0;    // distinct labels used
-  std::uint64_t facets = 0;      // distinct triangles (interior + boundary + bad)
+  std::uint64_t points = 0;    // N
+  std::uint64_t tets = 0;      // T, as stored
+  std::uint64_t vertices = 0;  // distinct labels used
+  std::uint64_t facets = 0;    // distinct triangles (interior + boundary + bad)
   std::uint64_t interior_facets = 0, boundary_facets = 0;
-  std::uint64_t edges = 0;       // distinct
+  std::uint64_t edges = 0;  // distinct
   std::uint64_t hull_vertices = 0, hull_edges = 0;
-  std::int64_t euler = 0;        // V - E + F - T
-  std::int64_t hull_euler = 0;   // of the boundary surface
+  std::int64_t euler = 0;       // V - E + F - T
+  std::int64_t hull_euler = 0;  // of the boundary surface
   double tet_volume = 0, hull_volume = 0, volume_rel_error = 0;
 
   // Work done.
@@ -134,7 +134,7 @@ class VerifySource {
   struct Batch {
     std::uint64_t first_tet = 0;  // ordinal of its first tet
     std::uint64_t tet_count = 0;
-    std::uint64_t min_label = 0;  // a lower bound of its labels (0 when unknown)
+    std::uint64_t min_label = 0;      // a lower bound of its labels (0 when unknown)
     std::uint64_t max_label = ~0ull;  // an upper bound of its labels (~0 when unknown)
   };
   virtual ~VerifySource() = default;
@@ -151,7 +151,7 @@ class VerifySource {
   // once for different k.
   virtual void read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const = 0;
   virtual void read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const = 0;
-  virtual std::string name() const = 0;  // for messages
+  virtual std::string name() const = 0;                 // for messages
   virtual std::string directory() const { return {}; }  // default tmpdir
 };
 

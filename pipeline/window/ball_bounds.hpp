@@ -25,8 +25,10 @@ inline bool box_meets_ball(const double* lo, const double* hi, const double* c, 
   double d2 = 0;
   for (int k = 0; k < 3; ++k) {
     double d = 0;
-    if (c[k] < lo[k]) d = lo[k] - c[k];
-    else if (c[k] > hi[k]) d = c[k] - hi[k];
+    if (c[k] < lo[k])
+      d = lo[k] - c[k];
+    else if (c[k] > hi[k])
+      d = c[k] - hi[k];
     d2 += d * d;
   }
   return may_reach(d2, conservative_square(r));

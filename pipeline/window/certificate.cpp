@@ -56,8 +56,10 @@ void clipped_extent(const ConflictBall& b, const double* bbox_min, const double*
   for (int k = 0; k < 3; ++k) {
     if (k == axis) continue;
     double d = 0;
-    if (b.center[k] < bbox_min[k]) d = bbox_min[k] - b.center[k];
-    else if (b.center[k] > bbox_max[k]) d = b.center[k] - bbox_max[k];
+    if (b.center[k] < bbox_min[k])
+      d = bbox_min[k] - b.center[k];
+    else if (b.center[k] > bbox_max[k])
+      d = b.center[k] - bbox_max[k];
     d *= 1 - 1e-12;  // shrink the distance: a larger extent is always safe
     d2 += d * d;
   }
@@ -80,7 +82,8 @@ void clipped_extent(const ConflictBall& b, const double* bbox_min, const double*
 Certificate::Certificate(const SortedView& view) : view_(view) {
   // The index's boxes are floats rounded outward from the bounding box.
   for (int k = 0; k < 3; ++k)
-    extent_[k] = ((view.bbox_max[k] - view.bbox_min[k]) + (std::fabs(view.bbox_max[k]) + std::fabs(view.bbox_min[k])) * 0x1p-22) *
+    extent_[k] = ((view.bbox_max[k] - view.bbox_min[k]) +
+                  (std::fabs(view.bbox_max[k]) + std::fabs(view.bbox_min[k])) * 0x1p-22) *
                  (1 + 0x1p-50);
 }
 
@@ -190,9 +193,9 @@ std::uint64_t Certificate::query(const core::Delaunay& dt, TetId t, const RangeT
     for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
     if (!may_reach(d2, r2)) return std::numeric_limits<double>::quiet_NaN();
     ++stats.query_points;
-    const bool conflicts = core::insphere_sos(dt.point(v[0]), dt.point(v[1]), dt.point(v[2]), dt.point(v[3]), p,
-                                              dt.label(v[0]), dt.label(v[1]), dt.label(v[2]), dt.label(v[3]),
-                                              label) > 0;
+    const bool conflicts =
+        core::insphere_sos(dt.point(v[0]), dt.point(v[1]), dt.point(v[2]), dt.point(v[3]), p, dt.label(v[0]),
+                           dt.label(v[1]), dt.label(v[2]), dt.label(v[3]), label) > 0;
     // The score ranks points within this one query, where r2 is fixed: d2 alone (never
     // NaN, also when the squares overflow).
     return conflicts ? d2 : std::numeric_limits<double>::quiet_NaN();
@@ -220,8 +223,8 @@ bool Certificate::hull_facet_range_test(const core::Delaunay& dt, TetId t) const
   const std::uint64_t w0 = plan_->window_begin, w1 = plan_->window_end;
   const bool outside_clear = (w0 == 0 || !reaches(view_.axis, view_.key(w0 - 1), -1, 0)) &&
                              (w1 == view_.count || !reaches(-1, 0, view_.axis, view_.key(w1)));
-  const bool strip_clear = zone_.axis < 0 || (!reaches(zone_.axis, zone_.window_lo, -1, 0) &&
-                                              !reaches(-1, 0, zone_.axis, zone_.window_hi));
+  const bool strip_clear =
+      zone_.axis < 0 || (!reaches(zone_.axis, zone_.window_lo, -1, 0) && !reaches(-1, 0, zone_.axis, zone_.window_hi));
   return outside_clear && strip_clear;
 }
 

@@ -109,8 +109,8 @@ class Certificate {
   // the index boxes may_meet lets through; conflict(label, p) is the point's score
   // when it conflicts (lower: a better repair), NaN otherwise.
   template <class MayMeet, class Conflict>
-  std::uint64_t best_missing_conflict(MayMeet&& may_meet, Conflict&& conflict, double lo, double hi,
-                                      bool outside_clear, bool strip_clear, SegmentStats& stats);
+  std::uint64_t best_missing_conflict(MayMeet&& may_meet, Conflict&& conflict, double lo, double hi, bool outside_clear,
+                                      bool strip_clear, SegmentStats& stats);
   bool held(std::uint64_t label) const;
 
   const SortedView& view_;

@@ -77,8 +77,7 @@ void PointIndex::build_block(const R* points, std::uint64_t b, std::uint64_t cou
     const std::uint32_t id = std::uint32_t(nodes.size());
     const bool leaf = end - begin <= kLeafPoints;
     Node node{};
-    for (int k = 0; k < 3; ++k)
-      node.box.lo[k] = float_below(lo[k], scale), node.box.hi[k] = float_above(hi[k], scale);
+    for (int k = 0; k < 3; ++k) node.box.lo[k] = float_below(lo[k], scale), node.box.hi[k] = float_above(hi[k], scale);
     node.begin = begin, node.end = end, node.leaf = leaf ? 1u : 0u;
     nodes.push_back(node);
     if (!leaf) {
@@ -93,7 +92,7 @@ void PointIndex::build_block(const R* points, std::uint64_t b, std::uint64_t cou
       self(self, mid, end);
     } else {
       std::sort(o + begin, o + end);  // a leaf reads its points in file order
-      double box_lo[3], box_hi[3];  // as the queries decode it, so that they find the same cells
+      double box_lo[3], box_hi[3];    // as the queries decode it, so that they find the same cells
       decode<true>(node.box, scale, box_lo, box_hi);
       const CellGrid grid(box_lo, box_hi, kSlices * kSlices);
       std::uint16_t* f = fine;
@@ -196,7 +195,8 @@ void PointIndex::write_part(int fd, const std::string& path, std::uint64_t total
   auto put = [&](const void* data, std::size_t bytes, std::uint64_t offset) {
     if (!io::pwrite_exactly(fd, data, bytes, offset)) throw IoError(path + ": write failed: " + std::strerror(errno));
   };
-  put(own_entries_.data(), own_entries_.size() * sizeof(std::uint32_t), layout.entries + first_label * sizeof(std::uint32_t));
+  put(own_entries_.data(), own_entries_.size() * sizeof(std::uint32_t),
+      layout.entries + first_label * sizeof(std::uint32_t));
   put(own_fine_.data(), own_fine_.size() * sizeof(std::uint16_t), layout.fine + first_label * sizeof(std::uint16_t));
   put(own_nodes_.data(), own_nodes_.size() * sizeof(Node), layout.nodes + first_node * sizeof(Node));
   put(own_blocks_.data(), own_blocks_.size() * sizeof(Block), layout.blocks + first_block_ * sizeof(Block));
@@ -257,7 +257,8 @@ std::vector<std::uint64_t> PointIndex::compact_sample(std::uint64_t b, std::uint
   for (bool second = last; !nodes_[i].leaf && nodes_[i].end - nodes_[i].begin > max_points; second = !second)
     i = second ? nodes_[i + 1].next : i + 1;
   const std::uint64_t base = b * block_points_;
-  for (std::uint32_t j = nodes_[i].begin; j < nodes_[i].end; ++j) labels.push_back(base + (entries_[std::size_t(base + j)] & kOffsetMask));
+  for (std::uint32_t j = nodes_[i].begin; j < nodes_[i].end; ++j)
+    labels.push_back(base + (entries_[std::size_t(base + j)] & kOffsetMask));
   return labels;
 }
 

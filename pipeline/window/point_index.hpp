@@ -124,8 +124,8 @@ class PointIndex {
   // outside the ball are skipped. Stops early, between leaves, once stop() returns
   // true.
   template <class Visit, class Stop>
-  void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last,
-                          Visit&& visit, Stop&& stop, const ExcludedSlab& exclude = {}) const {
+  void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last, Visit&& visit,
+                          Stop&& stop, const ExcludedSlab& exclude = {}) const {
     for_each_candidate_where([&](const double* lo, const double* hi) { return box_meets_ball(lo, hi, center, radius); },
                              first, last, visit, stop, exclude);
   }
@@ -135,8 +135,8 @@ class PointIndex {
   // `keys`, when given, bounds the keys of [first, last) (otherwise they are read
   // from the points at both ends).
   template <class MayMeet, class Visit, class Stop>
-  void for_each_candidate_where(MayMeet&& may_meet, std::uint64_t first, std::uint64_t last, Visit&& visit,
-                                Stop&& stop, const ExcludedSlab& exclude = {}, const KeyRange* keys = nullptr) const {
+  void for_each_candidate_where(MayMeet&& may_meet, std::uint64_t first, std::uint64_t last, Visit&& visit, Stop&& stop,
+                                const ExcludedSlab& exclude = {}, const KeyRange* keys = nullptr) const {
     if (first >= last) return;
     // The labels [first, last) have axis coordinates in [axis_lo, axis_hi] (the file
     // is sorted): a node entirely outside that interval holds none of them.
@@ -280,7 +280,8 @@ class PointIndex {
   static std::uint32_t fine_cell(std::uint32_t coarse, std::uint16_t fine) {
     std::uint32_t c = 0;
     for (int k = 0; k < 3; ++k) {
-      const std::uint32_t high = coarse >> (kSliceBits * k) & (kSlices - 1), low = fine >> (kSliceBits * k) & (kSlices - 1);
+      const std::uint32_t high = coarse >> (kSliceBits * k) & (kSlices - 1),
+                          low = fine >> (kSliceBits * k) & (kSlices - 1);
       c |= (high << kSliceBits | low) << (2 * kSliceBits * k);
     }
     return c;
@@ -315,15 +316,15 @@ class PointIndex {
         cell_hi[k] = first_hi[k] + slice * step[k] + pad[k];
       }
     }
-    int bits;           // of a slice number
+    int bits;            // of a slice number
     std::uint32_t mask;  // slices - 1
     double lo[3], step[3], first_hi[3], pad[3];
   };
   // Builds block b (its entries, fine cells and nodes) over typed records; `entries`
   // and `fine` point at the block's first point's.
   template <class R>
-  void build_block(const R* points, std::uint64_t b, std::uint64_t count, std::uint32_t* entries,
-                   std::uint16_t* fine, std::vector<Node>& nodes, double& block_scale_out, bool release_file_pages);
+  void build_block(const R* points, std::uint64_t b, std::uint64_t count, std::uint32_t* entries, std::uint16_t* fine,
+                   std::vector<Node>& nodes, double& block_scale_out, bool release_file_pages);
   PointRecords points_;
   int axis_ = 0;
   std::uint32_t block_points_ = kMinBlockPoints;

@@ -81,7 +81,8 @@ void cut_strips(const std::vector<double>& coords, SegmentPlan& plan, int axis, 
 
 void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones) {
   const std::uint64_t segment_points = plan.label_end - plan.label_begin;
-  zones = int(std::clamp<std::uint64_t>(std::uint64_t(std::max(zones, 1)), 1, std::max<std::uint64_t>(segment_points / 256, 1)));
+  zones = int(std::clamp<std::uint64_t>(std::uint64_t(std::max(zones, 1)), 1,
+                                        std::max<std::uint64_t>(segment_points / 256, 1)));
   plan.zones.assign(1, Zone{});
   if (zones == 1) return;
   // Quantiles of a sample (at most ~64k points, every stride-th label): the zones
@@ -90,7 +91,8 @@ void split_into_zones(const SortedView& view, SegmentPlan& plan, int zones) {
   const std::uint64_t stride = std::max<std::uint64_t>(1, segment_points / 65536);
   std::vector<double> coords;
   coords.reserve(std::size_t(segment_points / stride + 1));
-  for (std::uint64_t l = plan.label_begin; l < plan.label_end; l += stride) coords.push_back(view.points.coord(l, axis));
+  for (std::uint64_t l = plan.label_begin; l < plan.label_end; l += stride)
+    coords.push_back(view.points.coord(l, axis));
   std::sort(coords.begin(), coords.end());
   cut_strips(coords, plan, axis, zones);
 }

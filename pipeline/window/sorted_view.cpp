@@ -25,9 +25,9 @@ std::pair<std::uint64_t, std::uint64_t> sample_bracket(const SortedView& view, A
   if (view.key_samples.empty()) return {0, view.count};
   // Sample s is label s * kKeyStride: the answer lies after the last sample that is
   // not `after`, and at or before the first that is.
-  const auto s = std::size_t(std::partition_point(view.key_samples.begin(), view.key_samples.end(),
-                                                  [&](double k) { return !after(k); }) -
-                             view.key_samples.begin());
+  const auto s = std::size_t(
+      std::partition_point(view.key_samples.begin(), view.key_samples.end(), [&](double k) { return !after(k); }) -
+      view.key_samples.begin());
   return {s == 0 ? 0 : (s - 1) * SortedView::kKeyStride + 1, std::min(view.count, s * SortedView::kKeyStride)};
 }
 
@@ -38,8 +38,10 @@ std::uint64_t partition_point(const SortedView& view, After after) {
   auto [lo, hi] = sample_bracket(view, after);
   while (lo < hi) {
     const std::uint64_t mid = lo + (hi - lo) / 2;
-    if (after(view.key(mid))) hi = mid;
-    else lo = mid + 1;
+    if (after(view.key(mid)))
+      hi = mid;
+    else
+      lo = mid + 1;
   }
   return lo;
 }

@@ -57,8 +57,7 @@ std::optional<ZonePlan> try_plan(const PlanInputs& in, const PlanOptions& o, int
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k);
     const double zone = segment_points / k;
-    const double memory =
-        t * window * kWindowBytesPerPoint + (double(k) + t - 1) * zone * kOutputBytesPerPoint;
+    const double memory = t * window * kWindowBytesPerPoint + (double(k) + t - 1) * zone * kOutputBytesPerPoint;
     return std::pair{window / zone - 1, memory};
   };
   auto largest_segment = [&](int k) {  // S with memory(S) = available (linear in S)
@@ -66,8 +65,10 @@ std::optional<ZonePlan> try_plan(const PlanInputs& in, const PlanOptions& o, int
     return (available - fixed) / (evaluate(k, 1).second - fixed);
   };
   int first_k = 1, last_k = 256;
-  if (o.zones > 0) first_k = last_k = o.zones;
-  else if (o.segment_points > 0) last_k = 1;  // --zone-points alone: whole segments
+  if (o.zones > 0)
+    first_k = last_k = o.zones;
+  else if (o.segment_points > 0)
+    last_k = 1;  // --zone-points alone: whole segments
   double best = std::numeric_limits<double>::infinity();
   for (int k = first_k; k <= last_k; ++k) {
     const double s = o.segment_points > 0 ? double(o.segment_points) : std::min(n, largest_segment(k));
@@ -167,13 +168,15 @@ SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64
       windows.push_back(estimate_window(view, p, st));
       cut.largest_window = std::max(cut.largest_window, windows.back());
     }
-    largest_zone = std::max<std::uint64_t>(largest_zone, (p.label_end - p.label_begin + p.zones.size() - 1) / p.zones.size());
+    largest_zone =
+        std::max<std::uint64_t>(largest_zone, (p.label_end - p.label_begin + p.zones.size() - 1) / p.zones.size());
     zones = std::max<std::uint64_t>(zones, p.zones.size());
     // The samples touch about every page of the segment's window: hand them back
     // now, or the whole mapped file would be resident before the first zone starts
     // (a mapped file's only: MADV_DONTNEED would zero points held in memory).
     if (view.query_regions)
-      release_mapped_pages(view.points.record(p.window_begin), (p.window_end - p.window_begin) * view.points.record_bytes());
+      release_mapped_pages(view.points.record(p.window_begin),
+                           (p.window_end - p.window_begin) * view.points.record_bytes());
   }
   // The zones run in order, `threads` at a time: the windows in flight are about
   // `threads` consecutive ones, and the largest such run is what the kernels hold.
@@ -183,8 +186,8 @@ SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64
     sum += windows[i] - (i >= run ? windows[i - run] : 0);
     if (i + 1 >= run) in_flight = std::max(in_flight, sum);
   }
-  cut.window_bytes = double(in_flight) * kWindowBytesPerPoint +
-                     (double(zones) + t - 1) * double(largest_zone) * kOutputBytesPerPoint;
+  cut.window_bytes =
+      double(in_flight) * kWindowBytesPerPoint + (double(zones) + t - 1) * double(largest_zone) * kOutputBytesPerPoint;
   return cut;
 }
 
@@ -269,6 +272,5 @@ void refuse_budget_before_sort(const SortProgress& p, const PlanOptions& o, int 
     throw BudgetTooSmall(std::string(e.what()) + " (refused before the sort)");
   }
 }
-
 
 }  // namespace tetstream::pipeline

@@ -33,10 +33,10 @@ struct ZonePlan {
   std::uint64_t segment_points = 0;
   int zones = 1;
   double buffer_width = 0;
-  double window_bytes = 0;  // the model's memory for this plan (at most the windows' share)
-  double available = 0;     // the windows' share of the ledger the plan was made for
+  double window_bytes = 0;     // the model's memory for this plan (at most the windows' share)
+  double available = 0;        // the windows' share of the ledger the plan was made for
   double buffer_spacings = 0;  // buffer_width in spacings (--buffer)
-  bool fixed = false;       // the segment size or the zones came from the options
+  bool fixed = false;          // the segment size or the zones came from the options
 };
 
 // What the plan reads of the job's options (pipeline/run/run.hpp, RunOptions; the job
@@ -73,11 +73,10 @@ ZonePlan plan_for_budget(const PlanInputs& in, const PlanOptions& o, int threads
 // expects. So each zone's
 // window is counted from a sample of its segment's window labels, and while the
 // largest run of `threads` consecutive windows (the zones run in order, `threads` at
-// once) and a segment's output take more than the plan's share: first each segment's buffers become as many spacings as the
-// plan's but of its own points' (median) spacing when that is smaller (a slab
-// through a dense cluster); then the segments shrink, as long as that helps (a plan
-// fixed by --segment-points or --zones is kept). `window_bytes` is the measured need
-// of the plan returned.
+// once) and a segment's output take more than the plan's share: first each segment's buffers become as many spacings as
+// the plan's but of its own points' (median) spacing when that is smaller (a slab through a dense cluster); then the
+// segments shrink, as long as that helps (a plan fixed by --segment-points or --zones is kept). `window_bytes` is the
+// measured need of the plan returned.
 struct SegmentCut {
   std::vector<SegmentPlan> plans;
   double window_bytes = 0;

@@ -56,7 +56,9 @@ class ZoneWorker {
   struct QueuedTet {
     RangeTest range;
     TetId tet;
-    bool operator<(const QueuedTet& o) const { return range.lo < o.range.lo || (range.lo == o.range.lo && tet < o.tet); }
+    bool operator<(const QueuedTet& o) const {
+      return range.lo < o.range.lo || (range.lo == o.range.lo && tet < o.tet);
+    }
     bool operator==(const QueuedTet& o) const { return tet == o.tet; }
   };
   bool query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs);
@@ -89,7 +91,7 @@ class ZoneWorker {
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
   std::vector<std::size_t> hull_extra_;  // load_window's scratch
-  std::vector<std::uint64_t> held_;  // labels outside the window range held anyway (hull, repairs), sorted
+  std::vector<std::uint64_t> held_;      // labels outside the window range held anyway (hull, repairs), sorted
   std::vector<QueuedTet> queued_;
   std::vector<std::uint32_t> zone_of_;  // by local vertex: zone index or kNoZone
   // Per zone vertex (by zone index): kPending until it is final and its tets
@@ -279,8 +281,10 @@ std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
   pending_.clear();
   for (std::size_t z = 0; z < zone_state_.size(); ++z) {
     std::uint8_t& state = zone_state_[z];
-    if (state == kPending) state = kDone;
-    else if (state == kBlocked) state = kPending, pending_.push_back(zone_vertex_[z]);
+    if (state == kPending)
+      state = kDone;
+    else if (state == kBlocked)
+      state = kPending, pending_.push_back(zone_vertex_[z]);
   }
   return pending_.size();
 }
@@ -391,14 +395,16 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   zone_of_.assign(labels_.size(), kNoZone);
   for (VertexId v = 0; v < labels_.size(); ++v) {
     const std::uint64_t l = labels_[v];
-    const bool in_strip =
-        zone_.axis < 0 || (xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] >= zone_.lo &&
-                            xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] < zone_.hi);
+    const bool in_strip = zone_.axis < 0 || (xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] >= zone_.lo &&
+                                             xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] < zone_.hi);
     const bool in_range = l >= plan_->label_begin && l < plan_->label_end;
     if (!in_range || !in_strip) {
-      if (std::binary_search(held_.begin(), held_.end(), l)) ++stats_.hull_points;
-      else if (!in_strip) ++stats_.zone_buffer_points;
-      else ++stats_.segment_buffer_points;
+      if (std::binary_search(held_.begin(), held_.end(), l))
+        ++stats_.hull_points;
+      else if (!in_strip)
+        ++stats_.zone_buffer_points;
+      else
+        ++stats_.segment_buffer_points;
       continue;
     }
     const std::uint64_t z = l - plan_->label_begin;
@@ -412,11 +418,11 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   const double inf = std::numeric_limits<double>::infinity();
   const double strip_lo = zone_.axis >= 0 ? zone_.lo : -inf, strip_hi = zone_.axis >= 0 ? zone_.hi : inf;
   auto log_round = [&](std::size_t inserted, double seconds) {
-    spdlog::debug("zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
-                  "({} found a conflict, {:.3f} s), {} repair points inserted ({:.3f} s)",
-                  plan_->label_begin, plan_->label_end, strip_lo, strip_hi, stats_.rounds, round_.checked,
-                  round_.seconds_range, round_.queued, round_.queries, round_.conflicts, round_.seconds_queries,
-                  inserted, seconds);
+    spdlog::debug(
+        "zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
+        "({} found a conflict, {:.3f} s), {} repair points inserted ({:.3f} s)",
+        plan_->label_begin, plan_->label_end, strip_lo, strip_hi, stats_.rounds, round_.checked, round_.seconds_range,
+        round_.queued, round_.queries, round_.conflicts, round_.seconds_queries, inserted, seconds);
   };
   for (;;) {
     ++stats_.rounds;

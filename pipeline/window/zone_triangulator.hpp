@@ -29,13 +29,13 @@ struct SegmentStats {
   // segment into zones adds (everything outside the strip: the price of parallel
   // zones), and the hull's vertices from elsewhere.
   std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_points = 0;
-  std::uint64_t repair_points = 0;  // inserted by the emptiness queries
-  std::uint64_t range_failures = 0; // star tets the range test could not clear
-  std::uint64_t queries = 0;        // emptiness queries run
-  std::uint64_t query_points = 0;   // points the queries examined
-  std::uint64_t rounds = 0;         // check/repair rounds
-  std::uint64_t tets = 0;           // tets emitted
-  std::uint64_t kernel_bytes = 0;   // the kernel's arrays at the end
+  std::uint64_t repair_points = 0;              // inserted by the emptiness queries
+  std::uint64_t range_failures = 0;             // star tets the range test could not clear
+  std::uint64_t queries = 0;                    // emptiness queries run
+  std::uint64_t query_points = 0;               // points the queries examined
+  std::uint64_t rounds = 0;                     // check/repair rounds
+  std::uint64_t tets = 0;                       // tets emitted
+  std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
 
   // Sums another worker's counters into these (rounds: the larger).
@@ -118,8 +118,10 @@ void merge_by_min_label(const std::vector<ZoneTets>& parts, Sink&& sink) {
     std::uint64_t best_label = kDone, limit = kDone;
     for (std::size_t p = 0; p < parts.size(); ++p) {
       const std::uint64_t l = next_label(p);
-      if (l < best_label) limit = best_label, best_label = l, best = p;
-      else limit = std::min(limit, l);
+      if (l < best_label)
+        limit = best_label, best_label = l, best = p;
+      else
+        limit = std::min(limit, l);
     }
     if (best_label == kDone) return;
     // That part's run of groups below every other part's next label.

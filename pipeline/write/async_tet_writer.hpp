@@ -133,11 +133,11 @@ class AsyncTetWriter {
 
   // Shared with the background thread, under mutex_.
   mutable std::mutex mutex_;
-  std::condition_variable written_cv_;        // signalled after every batch and on failure
-  std::uint64_t written_ = 0;                 // items (batches, checkpoints) done
+  std::condition_variable written_cv_;             // signalled after every batch and on failure
+  std::uint64_t written_ = 0;                      // items (batches, checkpoints) done
   std::vector<std::vector<std::uint64_t>> spare_;  // emptied buffers, for take_buffer()
-  std::exception_ptr failure_;                // the background thread's first exception
-  bool failure_reported_ = false;             // rethrown once already
+  std::exception_ptr failure_;                     // the background thread's first exception
+  bool failure_reported_ = false;                  // rethrown once already
   double busy_seconds_ = 0;
 
   // Producer-side only.

@@ -256,7 +256,8 @@ py::dict triangulation_arrays(const core::Delaunay& dt, const std::vector<std::u
 #pragma omp parallel for schedule(static) num_threads(threads)
       for (std::size_t b = 0; b < blocks; ++b) {
         std::uint32_t next = std::uint32_t(first[b]);
-        for (std::size_t t = b * kBlock, e = std::min(slots, t + kBlock); t < e; ++t) ix[t] = finite(t) ? next++ : kNone;
+        for (std::size_t t = b * kBlock, e = std::min(slots, t + kBlock); t < e; ++t)
+          ix[t] = finite(t) ? next++ : kNone;
       }
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : h)
       for (std::size_t t = 0; t < slots; ++t) {
@@ -360,8 +361,7 @@ bool build_in_pieces(core::Delaunay& dt, const double* xyz, std::size_t n, std::
 
 // points: a C-contiguous (N, 3) float64 array (the Python side converts others).
 py::dict delaunay(py::array_t<double, py::array::c_style> points, const std::string& index_dtype, int threads) {
-  if (points.ndim() != 2 || points.shape(1) != 3)
-    throw UsageError("points must be an (N, 3) array");
+  if (points.ndim() != 2 || points.shape(1) != 3) throw UsageError("points must be an (N, 3) array");
   const std::size_t n = std::size_t(points.shape(0));
   if (n > kMaxInCorePoints)
     throw UsageError(std::to_string(n) + " points are more than the in-memory kernel holds (" +
@@ -385,7 +385,8 @@ py::dict delaunay(py::array_t<double, py::array::c_style> points, const std::str
   std::thread worker(std::move(task));
   std::optional<py::error_already_set> pending;
   try {
-    pending = wait_for_work(done, [&stop] { stop.store(true); }, py::none());
+    pending = wait_for_work(
+        done, [&stop] { stop.store(true); }, py::none());
   } catch (...) {
     stop.store(true);
     py::gil_scoped_release release;
@@ -426,33 +427,51 @@ void apply_run_options(pipeline::RunOptions& o, const py::dict& options) {
   for (const auto& [key, value] : options) {
     const std::string k = key.cast<std::string>();
     if (value.is_none()) continue;
-    if (k == "tmpdir") o.tmpdir = get_string(value);
-    else if (k == "buffer") o.buffer_spacings = value.cast<double>();
-    else if (k == "segment_points" || k == "zone_points") o.segment_points = value.cast<std::uint64_t>();
+    if (k == "tmpdir")
+      o.tmpdir = get_string(value);
+    else if (k == "buffer")
+      o.buffer_spacings = value.cast<double>();
+    else if (k == "segment_points" || k == "zone_points")
+      o.segment_points = value.cast<std::uint64_t>();
     else if (k == "zones") {
       const int z = value.cast<int>();
       if (z < 0 || z > 4096) throw UsageError("zones must be in [0, 4096]");
       o.zones = z;
-    } else if (k == "sort_run_points") o.sort_run_points = value.cast<std::uint64_t>();
+    } else if (k == "sort_run_points")
+      o.sort_run_points = value.cast<std::uint64_t>();
     else if (k == "checkpoint") {
       // True/False, or the directory in which to make the checkpoint.
-      if (py::isinstance<py::bool_>(value)) o.checkpoint = value.cast<bool>();
-      else o.checkpoint = true, o.checkpoint_dir = get_string(value);
-    } else if (k == "force") o.force = value.cast<bool>();
-    else if (k == "format") io::parse_format_name(get_string(value), o.read.format, o.read.type);
+      if (py::isinstance<py::bool_>(value))
+        o.checkpoint = value.cast<bool>();
+      else
+        o.checkpoint = true, o.checkpoint_dir = get_string(value);
+    } else if (k == "force")
+      o.force = value.cast<bool>();
+    else if (k == "format")
+      io::parse_format_name(get_string(value), o.read.format, o.read.type);
     else if (k == "type") {
       const std::string t = get_string(value);
-      if (t == "f32" || t == "float32") o.read.type = io::ScalarType::kFloat32;
-      else if (t == "f64" || t == "float64") o.read.type = io::ScalarType::kFloat64;
-      else throw UsageError("type: expected f32 or f64, got '" + t + "'");
-    } else if (k == "stride") o.read.stride = value.cast<std::uint64_t>();
-    else if (k == "offset") o.read.offset = value.cast<std::uint64_t>();
-    else if (k == "byte_order") o.read.byte_order = io::parse_byte_order(get_string(value));
-    else if (k == "columns") o.read.columns = value.cast<std::vector<std::uint64_t>>();
-    else if (k == "properties") o.read.properties = value.cast<std::vector<std::string>>();
+      if (t == "f32" || t == "float32")
+        o.read.type = io::ScalarType::kFloat32;
+      else if (t == "f64" || t == "float64")
+        o.read.type = io::ScalarType::kFloat64;
+      else
+        throw UsageError("type: expected f32 or f64, got '" + t + "'");
+    } else if (k == "stride")
+      o.read.stride = value.cast<std::uint64_t>();
+    else if (k == "offset")
+      o.read.offset = value.cast<std::uint64_t>();
+    else if (k == "byte_order")
+      o.read.byte_order = io::parse_byte_order(get_string(value));
+    else if (k == "columns")
+      o.read.columns = value.cast<std::vector<std::uint64_t>>();
+    else if (k == "properties")
+      o.read.properties = value.cast<std::vector<std::string>>();
     else if (k == "datasets" || k == "dataset") {
-      if (py::isinstance<py::str>(value)) o.read.datasets = {get_string(value)};
-      else o.read.datasets = value.cast<std::vector<std::string>>();
+      if (py::isinstance<py::str>(value))
+        o.read.datasets = {get_string(value)};
+      else
+        o.read.datasets = value.cast<std::vector<std::string>>();
     } else {
       throw py::type_error("run() got an unexpected keyword argument '" + k + "'");
     }
@@ -478,7 +497,8 @@ R run_interruptible(std::function<R()> work, const py::object& emit) {
   std::thread worker(std::move(task));
   std::optional<py::error_already_set> pending;
   try {
-    pending = wait_for_work(done, [] { pipeline::request_interrupt(SIGINT); }, emit);
+    pending = wait_for_work(
+        done, [] { pipeline::request_interrupt(SIGINT); }, emit);
   } catch (...) {  // an exception from `emit`: the job still has to stop before we leave
     pipeline::request_interrupt(SIGINT);
     py::gil_scoped_release release;
@@ -522,12 +542,14 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
   if (io::is_std_stream(o.input) || io::is_std_stream(o.output))
     throw UsageError("standard input/output ('-') is for the command line; give file names");
   io::forget_noted_files();  // this job's inputs are noted as it opens them
-  return run_interruptible<std::string>([o] {
-    configure_logging(o.progress);
-    if (o.threads > 0) omp_set_num_threads(o.threads);
-    const pipeline::RunSummary s = pipeline::run_job(o);
-    return pipeline::run_summary_json(o, s).dump();
-  }, emit);
+  return run_interruptible<std::string>(
+      [o] {
+        configure_logging(o.progress);
+        if (o.threads > 0) omp_set_num_threads(o.threads);
+        const pipeline::RunSummary s = pipeline::run_job(o);
+        return pipeline::run_summary_json(o, s).dump();
+      },
+      emit);
 }
 
 // An array written to PATH for run(array): through io::OutputFile, the one way
@@ -543,7 +565,8 @@ void spill_array(const std::string& path, const py::array& array) {
   // process's spill, or a file of the user's): refused, and left as it is.
   const io::OutputClaim claim(path);
   if (!claim.created())
-    throw UsageError(path + ".partial exists: another job is writing this input, or one was killed (remove it if "
+    throw UsageError(path +
+                     ".partial exists: another job is writing this input, or one was killed (remove it if "
                      "no job runs)");
   io::OutputFile f(path, std::size_t(8) << 20, &claim);
   f.write(data, bytes);
@@ -574,11 +597,13 @@ std::string verify(const std::string& path, const py::object& memory, double sam
   o.max_listed = max_listed;
   o.progress = progress;
   o.validate();
-  return run_interruptible<std::string>([o, path, threads] {
-    configure_logging(o.progress);
-    if (threads > 0) omp_set_num_threads(threads);
-    return pipeline::verify_report_json(pipeline::verify_file(path, o), path).dump();
-  }, emit);
+  return run_interruptible<std::string>(
+      [o, path, threads] {
+        configure_logging(o.progress);
+        if (threads > 0) omp_set_num_threads(threads);
+        return pipeline::verify_report_json(pipeline::verify_file(path, o), path).dump();
+      },
+      emit);
 }
 
 // ---- fields: pipeline::compute_fields over a container, or its sums in memory ----
@@ -586,7 +611,8 @@ std::string verify(const std::string& path, const py::object& memory, double sam
 py::dict field(const std::string& input, const std::string& prefix, bool density, bool voronoi, bool neighbours,
                std::array<std::uint64_t, 3> grid, const std::optional<std::array<double, 6>>& box,
                const std::string& hull, const std::string& dtype, bool neighbour_int64, const std::string& mass,
-               const py::object& memory, const std::string& tmpdir, bool progress, int threads, const py::object& emit) {
+               const py::object& memory, const std::string& tmpdir, bool progress, int threads,
+               const py::object& emit) {
   if (threads < 0 || threads > 1024) throw UsageError("threads must be in [1, 1024] (or None: all cores)");
   pipeline::FieldOptions o;
   o.input = input;
@@ -598,7 +624,8 @@ py::dict field(const std::string& input, const std::string& prefix, bool density
   if (box) o.box = *box, o.has_box = true;
   if (hull != "nan" && hull != "open") throw UsageError("hull must be 'nan' or 'open', not '" + hull + "'");
   o.hull = hull == "open" ? pipeline::HullMode::kOpen : pipeline::HullMode::kNan;
-  if (dtype != "float64" && dtype != "float32") throw UsageError("dtype must be float64 or float32, not '" + dtype + "'");
+  if (dtype != "float64" && dtype != "float32")
+    throw UsageError("dtype must be float64 or float32, not '" + dtype + "'");
   o.dtype = dtype == "float32" ? pipeline::FieldType::kFloat32 : pipeline::FieldType::kFloat64;
   o.neighbour_int64 = neighbour_int64;
   o.mass = mass;
@@ -606,11 +633,13 @@ py::dict field(const std::string& input, const std::string& prefix, bool density
   o.tmpdir = tmpdir;
   o.progress = progress;
   o.validate();
-  const pipeline::FieldSummary sm = run_interruptible<pipeline::FieldSummary>([o, threads] {
-    configure_logging(o.progress);
-    if (threads > 0) omp_set_num_threads(threads);
-    return pipeline::compute_fields(o);
-  }, emit);
+  const pipeline::FieldSummary sm = run_interruptible<pipeline::FieldSummary>(
+      [o, threads] {
+        configure_logging(o.progress);
+        if (threads > 0) omp_set_num_threads(threads);
+        return pipeline::compute_fields(o);
+      },
+      emit);
   py::dict files;
   for (const auto& f : sm.files) files[py::str(f.what)] = f.path;
   py::dict d;
@@ -713,7 +742,8 @@ py::array_t<double> read_points(const std::string& path) {
     auto reader = io::open_points(path, io::PointReadOptions{});
     constexpr std::size_t kChunk = std::size_t(1) << 16;
     std::vector<double> chunk(3 * kChunk);
-    while (const std::size_t k = reader->read(chunk.data(), kChunk)) xyz.insert(xyz.end(), chunk.begin(), chunk.begin() + 3 * k);
+    while (const std::size_t k = reader->read(chunk.data(), kChunk))
+      xyz.insert(xyz.end(), chunk.begin(), chunk.begin() + 3 * k);
   }
   const py::ssize_t n = py::ssize_t(xyz.size() / 3);
   return vector_to_array(std::move(xyz), {n, 3});
@@ -838,8 +868,9 @@ class Reader {
       py::gil_scoped_release release;
       const auto& frames = rd.frames();
       // The first frame whose tets reach past `start`.
-      auto it = std::upper_bound(frames.begin(), frames.end(), start,
-                                 [](std::uint64_t s, const io::FrameEntry& f) { return s < f.first_tet + f.tet_count; });
+      auto it = std::upper_bound(frames.begin(), frames.end(), start, [](std::uint64_t s, const io::FrameEntry& f) {
+        return s < f.first_tet + f.tet_count;
+      });
       std::vector<std::uint64_t> labels;
       std::uint64_t filled = 0;
       for (; it != frames.end() && filled < n; ++it) {
@@ -851,8 +882,9 @@ class Reader {
         std::memcpy(out.get() + 4 * filled, part.data(), part.size_bytes());
         filled += to - from;
       }
-      if (filled != n) throw InputError(rd.path() + ": the frame index does not cover tets " + std::to_string(start) +
-                                        ".." + std::to_string(stop));
+      if (filled != n)
+        throw InputError(rd.path() + ": the frame index does not cover tets " + std::to_string(start) + ".." +
+                         std::to_string(stop));
     }
     return to_array(std::move(out), {py::ssize_t(n), 4});
   }
@@ -902,10 +934,18 @@ void register_exceptions(py::module_& m) {
       PyErr_SetString(io_error.ptr(), e.what());
     } catch (const Error& e) {  // any other kind, by its exit code
       switch (e.code()) {
-        case ExitCode::kInterrupted: PyErr_SetString(PyExc_KeyboardInterrupt, e.what()); break;
-        case ExitCode::kIoFailure: PyErr_SetString(io_error.ptr(), e.what()); break;
-        case ExitCode::kUsage: PyErr_SetString(usage_error.ptr(), e.what()); break;
-        default: PyErr_SetString(input_error.ptr(), e.what()); break;
+        case ExitCode::kInterrupted:
+          PyErr_SetString(PyExc_KeyboardInterrupt, e.what());
+          break;
+        case ExitCode::kIoFailure:
+          PyErr_SetString(io_error.ptr(), e.what());
+          break;
+        case ExitCode::kUsage:
+          PyErr_SetString(usage_error.ptr(), e.what());
+          break;
+        default:
+          PyErr_SetString(input_error.ptr(), e.what());
+          break;
       }
     }
   });

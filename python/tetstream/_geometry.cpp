@@ -48,8 +48,8 @@ const T* checked_rows(const py::array& a, std::size_t cols, const char* name, st
 
 template <class I, class R>
 void find_simplex_into(const double* points, std::size_t npoints, const py::array& simplices,
-                       const py::array& neighbors, const py::array& v2s, const double* xi, std::size_t nq,
-                       R* out, int threads) {
+                       const py::array& neighbors, const py::array& v2s, const double* xi, std::size_t nq, R* out,
+                       int threads) {
   core::locate_detail::Table<I> s, nb;
   s.data = checked_rows<I>(simplices, 4, "simplices", s.rows);
   nb.data = checked_rows<I>(neighbors, 4, "neighbors", nb.rows);
@@ -169,7 +169,8 @@ py::tuple vertex_neighbors_i(const py::array& simplices, std::size_t npoints, in
   for (std::size_t i = 0; i < 4 * m; ++i)
     if (s[i] < 0 || std::size_t(s[i]) >= npoints) throw UsageError("simplices: an index out of range");
   // Each tet gives each of its vertices 3 neighbours: 12 m bounds the entries.
-  if (12 * m < std::size_t(std::numeric_limits<std::int32_t>::max()) && npoints < std::size_t(std::numeric_limits<std::int32_t>::max()))
+  if (12 * m < std::size_t(std::numeric_limits<std::int32_t>::max()) &&
+      npoints < std::size_t(std::numeric_limits<std::int32_t>::max()))
     return vertex_neighbors_t<I, std::int32_t>(s, m, npoints, threads);
   return vertex_neighbors_t<I, std::int64_t>(s, m, npoints, threads);
 }

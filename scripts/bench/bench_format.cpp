@@ -46,7 +46,8 @@ Stream load(const std::string& name, const std::string& path) {
   bool ok = std::fread(head, sizeof head, 1, f) == 1;
   s.points.resize(head[0]);
   s.tets.resize(head[1]);
-  ok = ok && std::fread(s.points.data(), 24, head[0], f) == head[0] && std::fread(s.tets.data(), 16, head[1], f) == head[1];
+  ok = ok && std::fread(s.points.data(), 24, head[0], f) == head[0] &&
+       std::fread(s.tets.data(), 16, head[1], f) == head[1];
   std::fclose(f);
   if (!ok) {
     std::fprintf(stderr, "%s: short file\n", path.c_str());
@@ -188,7 +189,8 @@ void container(const Stream& s, const std::string& path, std::size_t frame_tets,
     return std::array<std::uint32_t, 5>{v[0], v[1], v[2], v[3], parity};
   };
   std::vector<std::array<std::uint32_t, 5>> a, b;
-  for (std::size_t i = 0; i < s.tets.size(); ++i) a.push_back(key(s.tets[i].data())), b.push_back(key(all.data() + 4 * i));
+  for (std::size_t i = 0; i < s.tets.size(); ++i)
+    a.push_back(key(s.tets[i].data())), b.push_back(key(all.data() + 4 * i));
   std::sort(a.begin(), a.end());
   std::sort(b.begin(), b.end());
   if (a != b) {
@@ -208,19 +210,26 @@ int main(int argc, char** argv) {
   std::vector<std::pair<std::string, std::string>> inputs;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--repeat" && i + 1 < argc) repeat = std::atoi(argv[++i]);
-    else if (a == "--frame-tets" && i + 1 < argc) frame_tets = std::strtoull(argv[++i], nullptr, 10);
-    else if (a == "--cgal-seconds" && i + 1 < argc) cgal_seconds = std::atof(argv[++i]);
-    else if (a == "--workdir" && i + 1 < argc) workdir = argv[++i];
-    else if (a.find('=') != std::string::npos) inputs.emplace_back(a.substr(0, a.find('=')), a.substr(a.find('=') + 1));
+    if (a == "--repeat" && i + 1 < argc)
+      repeat = std::atoi(argv[++i]);
+    else if (a == "--frame-tets" && i + 1 < argc)
+      frame_tets = std::strtoull(argv[++i], nullptr, 10);
+    else if (a == "--cgal-seconds" && i + 1 < argc)
+      cgal_seconds = std::atof(argv[++i]);
+    else if (a == "--workdir" && i + 1 < argc)
+      workdir = argv[++i];
+    else if (a.find('=') != std::string::npos)
+      inputs.emplace_back(a.substr(0, a.find('=')), a.substr(a.find('=') + 1));
     else {
-      std::fprintf(stderr, "usage: %s [--repeat R] [--frame-tets F] [--cgal-seconds S] [--workdir DIR] NAME=FILE...\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [--repeat R] [--frame-tets F] [--cgal-seconds S] [--workdir DIR] NAME=FILE...\n",
+                   argv[0]);
       return 2;
     }
   }
-  std::printf("frames of at most %zu tets; throughput = MB/s of decoded 32-bit labels (16 B/tet) per core, "
-              "best of %d; zstd %s\n\n",
-              frame_tets, repeat, ZSTD_versionString());
+  std::printf(
+      "frames of at most %zu tets; throughput = MB/s of decoded 32-bit labels (16 B/tet) per core, "
+      "best of %d; zstd %s\n\n",
+      frame_tets, repeat, ZSTD_versionString());
   std::printf("| label order | codec | bytes/tet | encode MB/s | decode MB/s | encode ns/tet | encode CPU / CGAL |\n");
   std::printf("|---|---|---|---|---|---|---|\n");
   std::vector<std::string> container_lines;
@@ -239,9 +248,10 @@ int main(int argc, char** argv) {
     double write_s, read_s, bpt;
     container(s, workdir + "/bench_" + name + ".tets", frame_tets, write_s, read_s, bpt);
     char line[256];
-    std::snprintf(line, sizeof line,
-                  "%s: container of %zu points (float64) and %zu tets: %.3f bytes/tet, write %.2f s, read %.2f s (wall)",
-                  name.c_str(), s.points.size(), s.tets.size(), bpt, write_s, read_s);
+    std::snprintf(
+        line, sizeof line,
+        "%s: container of %zu points (float64) and %zu tets: %.3f bytes/tet, write %.2f s, read %.2f s (wall)",
+        name.c_str(), s.points.size(), s.tets.size(), bpt, write_s, read_s);
     container_lines.push_back(line);
   }
   std::printf("\n");

@@ -95,7 +95,10 @@ int main(int argc, char** argv) {
 
   std::vector<std::uint32_t> order(n);
   for (std::uint32_t i = 0; i < n; ++i) order[i] = i;
-  if (!write_relabelled(prefix + ".x.bin", pts, tets, order)) { std::perror(prefix.c_str()); return 3; }
+  if (!write_relabelled(prefix + ".x.bin", pts, tets, order)) {
+    std::perror(prefix.c_str());
+    return 3;
+  }
 
   const int slabs = 10;
   const int cells = std::max(1, int(std::lround(std::cbrt(double(n) / 8.0))));
@@ -104,7 +107,11 @@ int main(int argc, char** argv) {
     auto c = [&](double v) { return std::min(cells - 1, int(v * cells)); };
     return std::array<int, 4>{int(std::uint64_t(i) * slabs / n), c(p[1]), c(p[2]), c(p[0])};
   };
-  std::stable_sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return cell_key(a) < cell_key(b); });
-  if (!write_relabelled(prefix + ".cells.bin", pts, tets, order)) { std::perror(prefix.c_str()); return 3; }
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::uint32_t a, std::uint32_t b) { return cell_key(a) < cell_key(b); });
+  if (!write_relabelled(prefix + ".cells.bin", pts, tets, order)) {
+    std::perror(prefix.c_str());
+    return 3;
+  }
   return 0;
 }

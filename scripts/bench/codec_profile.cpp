@@ -21,7 +21,9 @@ using namespace tetstream::io;
 int main(int argc, char** argv) {
   TetReader r(argv[1]);
   std::uint64_t stride = argc > 2 ? std::stoull(argv[2]) : 1;
-  int fd = open(argv[1], O_RDONLY); struct stat st; fstat(fd, &st);
+  int fd = open(argv[1], O_RDONLY);
+  struct stat st;
+  fstat(fd, &st);
   auto* base = static_cast<const std::uint8_t*>(mmap(nullptr, st.st_size, PROT_READ, MAP_SHARED, fd, 0));
   double bytes[6] = {}, tets = 0, groups = 0, upper = 0, known = 0, far16 = 0, newbits = 0, nnew = 0;
   std::vector<std::uint64_t> spans;
@@ -32,7 +34,10 @@ int main(int argc, char** argv) {
     const FrameEntry& e = r.frames()[k];
     FrameHeader h;
     std::span<const std::uint8_t> p(base + e.offset + kSectionHeaderSize, e.length);
-    if (!parse_frame_header(p, h).empty()) { std::puts("bad header"); return 1; }
+    if (!parse_frame_header(p, h).empty()) {
+      std::puts("bad header");
+      return 1;
+    }
     for (int s = 0; s < 6; ++s) bytes[s] += h.stream_size[s];
     r.read_frame(k, L);
     ++frames_seen;
@@ -44,34 +49,48 @@ int main(int argc, char** argv) {
       std::uint64_t m = L[4 * i];
       std::vector<std::uint64_t> U;
       std::size_t j = i;
-      for (; j < T && L[4 * j] == m; ++j) for (int c = 1; c < 4; ++c) U.push_back(L[4 * j + c]);
-      std::sort(U.begin(), U.end()); U.erase(std::unique(U.begin(), U.end()), U.end());
-      groups += 1; upper += U.size();
+      for (; j < T && L[4 * j] == m; ++j)
+        for (int c = 1; c < 4; ++c) U.push_back(L[4 * j + c]);
+      std::sort(U.begin(), U.end());
+      U.erase(std::unique(U.begin(), U.end()), U.end());
+      groups += 1;
+      upper += U.size();
       std::uint64_t prev = m;
       for (auto u : U) {
         bool kn = edges.count((m - e.base_label) << 32 | (u - e.base_label));
-        if (kn) known += 1; else { nnew += 1; newbits += std::log2(double(u - prev)); prev = u; }
+        if (kn)
+          known += 1;
+        else {
+          nnew += 1;
+          newbits += std::log2(double(u - prev));
+          prev = u;
+        }
         if (u - m > 65535) far16 += 1;
         spans.push_back(u - m);
       }
       for (std::size_t t = i; t < j; ++t) {
-        std::uint64_t v[3] = {L[4*t+1], L[4*t+2], L[4*t+3]};
+        std::uint64_t v[3] = {L[4 * t + 1], L[4 * t + 2], L[4 * t + 3]};
         std::sort(v, v + 3);
-        for (int a = 0; a < 3; ++a) for (int b = a + 1; b < 3; ++b) edges.insert((v[a]-e.base_label) << 32 | (v[b]-e.base_label));
+        for (int a = 0; a < 3; ++a)
+          for (int b = a + 1; b < 3; ++b) edges.insert((v[a] - e.base_label) << 32 | (v[b] - e.base_label));
       }
       i = j;
     }
   }
   std::sort(spans.begin(), spans.end());
-  double tot = 0; for (double b : bytes) tot += b;
+  double tot = 0;
+  for (double b : bytes) tot += b;
   std::printf("%s: N=%llu frames %llu of %llu, tets %.0f, frame tets ~%.0f, labels a frame ~%.0f\n", argv[1],
-    (unsigned long long)r.point_count(), (unsigned long long)frames_seen, (unsigned long long)r.frame_count(), tets,
-    tets / frames_seen, groups / frames_seen);
-  std::printf("stream bytes/tet:"); for (int s = 0; s < 6; ++s) std::printf(" %s %.3f", names[s], bytes[s] / tets);
+              (unsigned long long)r.point_count(), (unsigned long long)frames_seen, (unsigned long long)r.frame_count(),
+              tets, tets / frames_seen, groups / frames_seen);
+  std::printf("stream bytes/tet:");
+  for (int s = 0; s < 6; ++s) std::printf(" %s %.3f", names[s], bytes[s] / tets);
   std::printf("  total %.3f (+header)\n", tot / tets);
-  std::printf("upper labels/group %.2f; known from earlier groups %.1f%%; offset > 65535 %.1f%%\n",
-    upper / groups, 100 * known / upper, 100 * far16 / upper);
-  std::printf("new labels/tet %.3f, mean log2(gap) %.2f bits; label reach u-m: median %llu p90 %llu p99 %llu; N^(2/3) = %.0f\n",
-    nnew / tets, newbits / nnew, (unsigned long long)spans[spans.size()/2], (unsigned long long)spans[spans.size()*9/10],
-    (unsigned long long)spans[spans.size()*99/100], std::pow(double(r.point_count()), 2.0/3));
+  std::printf("upper labels/group %.2f; known from earlier groups %.1f%%; offset > 65535 %.1f%%\n", upper / groups,
+              100 * known / upper, 100 * far16 / upper);
+  std::printf(
+      "new labels/tet %.3f, mean log2(gap) %.2f bits; label reach u-m: median %llu p90 %llu p99 %llu; N^(2/3) = %.0f\n",
+      nnew / tets, newbits / nnew, (unsigned long long)spans[spans.size() / 2],
+      (unsigned long long)spans[spans.size() * 9 / 10], (unsigned long long)spans[spans.size() * 99 / 100],
+      std::pow(double(r.point_count()), 2.0 / 3));
 }

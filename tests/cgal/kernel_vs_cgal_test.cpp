@@ -39,7 +39,8 @@ std::vector<Quad> cgal_tets(const tp::Points& p, const std::vector<std::uint64_t
   const std::size_t n = tp::count(p);
   std::vector<std::pair<K::Point_3, std::uint32_t>> in;
   in.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) in.emplace_back(K::Point_3(p[3 * i], p[3 * i + 1], p[3 * i + 2]), std::uint32_t(i));
+  for (std::size_t i = 0; i < n; ++i)
+    in.emplace_back(K::Point_3(p[3 * i], p[3 * i + 1], p[3 * i + 2]), std::uint32_t(i));
   Cgal dt(in.begin(), in.end());  // range insertion: spatially sorted
   std::vector<Quad> out;
   out.reserve(dt.number_of_finite_cells());
@@ -58,7 +59,9 @@ std::vector<Quad> cgal_tets(const tp::Points& p, const std::vector<std::uint64_t
 std::vector<Quad> our_tets(const Delaunay& dt) {
   std::vector<Quad> out;
   out.reserve(dt.num_finite_tets());
-  dt.for_each_finite_tet([&](const VertexId* v) { out.push_back({dt.label(v[0]), dt.label(v[1]), dt.label(v[2]), dt.label(v[3])}); });
+  dt.for_each_finite_tet([&](const VertexId* v) {
+    out.push_back({dt.label(v[0]), dt.label(v[1]), dt.label(v[2]), dt.label(v[3])});
+  });
   sort_quads(out);
   return out;
 }
@@ -68,8 +71,8 @@ std::string diff(const std::vector<Quad>& ours, const std::vector<Quad>& cgal) {
   std::vector<Quad> only_ours, only_cgal;
   std::set_difference(ours.begin(), ours.end(), cgal.begin(), cgal.end(), std::back_inserter(only_ours));
   std::set_difference(cgal.begin(), cgal.end(), ours.begin(), ours.end(), std::back_inserter(only_cgal));
-  std::string s = "ours " + std::to_string(ours.size()) + " tets, CGAL " + std::to_string(cgal.size()) + "; only ours " +
-                  std::to_string(only_ours.size()) + ", only CGAL " + std::to_string(only_cgal.size());
+  std::string s = "ours " + std::to_string(ours.size()) + " tets, CGAL " + std::to_string(cgal.size()) +
+                  "; only ours " + std::to_string(only_ours.size()) + ", only CGAL " + std::to_string(only_cgal.size());
   auto show = [&](const char* what, const std::vector<Quad>& v) {
     for (std::size_t i = 0; i < std::min<std::size_t>(v.size(), 5); ++i)
       s += std::string("\n  ") + what + " (" + std::to_string(v[i][0]) + " " + std::to_string(v[i][1]) + " " +
@@ -84,20 +87,28 @@ enum class Dist { kUniform, kBall, kShell, kClusters };
 
 const char* name(Dist d) {
   switch (d) {
-    case Dist::kUniform: return "uniform";
-    case Dist::kBall: return "ball";
-    case Dist::kShell: return "shell";
-    case Dist::kClusters: return "clusters";
+    case Dist::kUniform:
+      return "uniform";
+    case Dist::kBall:
+      return "ball";
+    case Dist::kShell:
+      return "shell";
+    case Dist::kClusters:
+      return "clusters";
   }
   return "?";
 }
 
 tp::Points generate(Dist d, std::size_t n, std::uint64_t seed) {
   switch (d) {
-    case Dist::kUniform: return tp::uniform_cube(n, seed);
-    case Dist::kBall: return tp::uniform_ball(n, seed);
-    case Dist::kShell: return tp::ellipsoid_shell(n, seed);
-    case Dist::kClusters: return tp::clusters(n, seed);
+    case Dist::kUniform:
+      return tp::uniform_cube(n, seed);
+    case Dist::kBall:
+      return tp::uniform_ball(n, seed);
+    case Dist::kShell:
+      return tp::ellipsoid_shell(n, seed);
+    case Dist::kClusters:
+      return tp::clusters(n, seed);
   }
   return {};
 }
@@ -121,7 +132,8 @@ TEST_P(VsCgal, SameTets) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Kernel, VsCgal,
-                         ::testing::Combine(::testing::Values(Dist::kUniform, Dist::kBall, Dist::kShell, Dist::kClusters),
+                         ::testing::Combine(::testing::Values(Dist::kUniform, Dist::kBall, Dist::kShell,
+                                                              Dist::kClusters),
                                             ::testing::Values(10, 100, 10000, 100000, 1000000)),
                          [](const auto& info) {
                            return std::string(name(std::get<0>(info.param))) + "_" +

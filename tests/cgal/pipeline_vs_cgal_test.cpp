@@ -67,7 +67,8 @@ TEST_P(PipelineVsCgal, SameTets) {
   std::vector<std::uint64_t> ids(n);
   reader.read_points(0, n, sorted.data(), ids.data());
   std::vector<std::pair<K::Point_3, std::uint64_t>> pts;
-  for (std::size_t i = 0; i < n; ++i) pts.emplace_back(K::Point_3(sorted[3 * i], sorted[3 * i + 1], sorted[3 * i + 2]), i);
+  for (std::size_t i = 0; i < n; ++i)
+    pts.emplace_back(K::Point_3(sorted[3 * i], sorted[3 * i + 1], sorted[3 * i + 2]), i);
   const CgalDT dt(pts.begin(), pts.end());
   std::vector<Quad> ref;
   for (auto cell = dt.finite_cells_begin(); cell != dt.finite_cells_end(); ++cell) {

@@ -56,10 +56,14 @@ int main(int argc, char** argv) {
     for (std::size_t k = 0; k < frames.size(); ++k) {
       r.read_frame(k, labels);
       if (k == target_frame) {
-        if (kind == "flip") std::swap(labels[0], labels[1]);
-        else if (kind == "drop") labels.erase(labels.begin(), labels.begin() + 4);
-        else if (kind == "dup") labels.insert(labels.begin() + 4, labels.begin(), labels.begin() + 4);
-        else throw std::runtime_error("unknown edit " + kind);
+        if (kind == "flip")
+          std::swap(labels[0], labels[1]);
+        else if (kind == "drop")
+          labels.erase(labels.begin(), labels.begin() + 4);
+        else if (kind == "dup")
+          labels.insert(labels.begin() + 4, labels.begin(), labels.begin() + 4);
+        else
+          throw std::runtime_error("unknown edit " + kind);
       }
       w.add_tets(std::span<const std::uint64_t>(labels));
     }

@@ -98,18 +98,20 @@ inline std::string npy_bytes(int major, const std::string& descr, const std::str
   std::string s = "\x93NUMPY";
   s += char(major);
   s += '\0';
-  if (major == 1) s += le_bytes<std::uint16_t>(std::uint16_t(dict.size()));
-  else s += le_bytes<std::uint32_t>(std::uint32_t(dict.size()));
+  if (major == 1)
+    s += le_bytes<std::uint16_t>(std::uint16_t(dict.size()));
+  else
+    s += le_bytes<std::uint32_t>(std::uint32_t(dict.size()));
   return s + dict + data;
 }
 
-#define EXPECT_INPUT_ERROR(path, opt, where, what)                            \
-  do {                                                                      \
-    const std::string msg_ = read_error(path, opt);                         \
-    EXPECT_NE(msg_, "") << "no error for " << path;                         \
-    EXPECT_NE(msg_.find(path), std::string::npos) << msg_;                  \
-    EXPECT_NE(msg_.find(where), std::string::npos) << msg_;                 \
-    EXPECT_NE(msg_.find(what), std::string::npos) << msg_;                  \
+#define EXPECT_INPUT_ERROR(path, opt, where, what)          \
+  do {                                                      \
+    const std::string msg_ = read_error(path, opt);         \
+    EXPECT_NE(msg_, "") << "no error for " << path;         \
+    EXPECT_NE(msg_.find(path), std::string::npos) << msg_;  \
+    EXPECT_NE(msg_.find(where), std::string::npos) << msg_; \
+    EXPECT_NE(msg_.find(what), std::string::npos) << msg_;  \
   } while (0)
 
 }  // namespace tetstream::io

@@ -28,7 +28,8 @@ inline std::vector<Quad> container_quads(const std::string& path) {
   std::vector<std::uint64_t> labels;
   for (std::uint64_t k = 0; k < reader.frame_count(); ++k) {
     reader.read_frame(k, labels);
-    for (std::size_t i = 0; i < labels.size(); i += 4) add_quad(out, labels[i], labels[i + 1], labels[i + 2], labels[i + 3]);
+    for (std::size_t i = 0; i < labels.size(); i += 4)
+      add_quad(out, labels[i], labels[i + 1], labels[i + 2], labels[i + 3]);
   }
   std::sort(out.begin(), out.end());
   return out;

@@ -18,7 +18,11 @@ namespace tetstream::test {
 class ThreadRanks {
  public:
   explicit ThreadRanks(int k)
-      : k_(k), barrier_(k), slots_(std::size_t(k)), matrix_(std::size_t(k)), send_(std::size_t(k)),
+      : k_(k),
+        barrier_(k),
+        slots_(std::size_t(k)),
+        matrix_(std::size_t(k)),
+        send_(std::size_t(k)),
         counts_(std::size_t(k)) {}
 
   class Rank final : public pipeline::Communicator {

@@ -63,13 +63,20 @@ Args parse(int argc, char** argv) {
       if (i + 1 >= argc) usage(("missing value for " + k).c_str());
       return argv[++i];
     };
-    if (k == "--tool") a.tool = value();
-    else if (k == "--dist") a.dist = value();
-    else if (k == "--n") a.n = std::size_t(std::stod(value()));
-    else if (k == "--seed") a.seed = std::stoull(value());
-    else if (k == "--threads") a.threads = std::stoi(value());
-    else if (k == "--check") a.check = true;
-    else usage(("unknown option " + k).c_str());
+    if (k == "--tool")
+      a.tool = value();
+    else if (k == "--dist")
+      a.dist = value();
+    else if (k == "--n")
+      a.n = std::size_t(std::stod(value()));
+    else if (k == "--seed")
+      a.seed = std::stoull(value());
+    else if (k == "--threads")
+      a.threads = std::stoi(value());
+    else if (k == "--check")
+      a.check = true;
+    else
+      usage(("unknown option " + k).c_str());
   }
   if (a.tool != "ours" && a.tool != "cgal" && a.tool != "hxt") usage("unknown tool");
   return a;
@@ -141,13 +148,14 @@ Result run_ours(tp::Points& xyz, std::size_t n, bool check) {
   const tc::DelaunayStats& s = dt.stats();
   r.extra = "kernel_bytes=" + std::to_string(dt.memory_bytes()) + " o3d_calls=" + std::to_string(ps.orient3d_calls) +
             " o3d_exact=" + std::to_string(ps.orient3d_exact) + " ins_calls=" + std::to_string(ps.insphere_calls) +
-            " ins_exact=" + std::to_string(ps.insphere_exact) + " ins_perturbed=" +
-            std::to_string(ps.insphere_perturbed) + " walk_steps=" + std::to_string(s.walk_steps) +
+            " ins_exact=" + std::to_string(ps.insphere_exact) +
+            " ins_perturbed=" + std::to_string(ps.insphere_perturbed) + " walk_steps=" + std::to_string(s.walk_steps) +
             " cavity_tets=" + std::to_string(s.cavity_tets) + " duplicates=" + std::to_string(s.duplicates);
   if (check) {
     const auto t1 = std::chrono::steady_clock::now();
     const tc::CheckReport rep = tc::check_delaunay(dt);
-    r.extra += " check=" + std::string(rep.ok ? "ok" : "FAILED") + " check_seconds=" + std::to_string(seconds_since(t1));
+    r.extra +=
+        " check=" + std::string(rep.ok ? "ok" : "FAILED") + " check_seconds=" + std::to_string(seconds_since(t1));
     if (!rep.ok) std::fprintf(stderr, "%s\n", rep.summary().c_str());
   }
   return r;
@@ -160,7 +168,8 @@ Result run_cgal(tp::Points& xyz, std::size_t n) {
   using Cgal = CGAL::Delaunay_triangulation_3<K, Tds>;
   std::vector<std::pair<K::Point_3, std::uint32_t>> in;
   in.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) in.emplace_back(K::Point_3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]), std::uint32_t(i));
+  for (std::size_t i = 0; i < n; ++i)
+    in.emplace_back(K::Point_3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]), std::uint32_t(i));
   tp::Points().swap(xyz);  // CGAL holds its own copy
   Result r;
   const Timer timer;
@@ -199,15 +208,20 @@ int main(int argc, char** argv) {
   const std::size_t n = tp::count(xyz);
   const std::uint64_t base_rss = current_rss_bytes();
   Result r;
-  if (a.tool == "ours") r = run_ours(xyz, n, a.check);
-  else if (a.tool == "cgal") r = run_cgal(xyz, n);
-  else r = run_hxt(xyz, a.threads);
+  if (a.tool == "ours")
+    r = run_ours(xyz, n, a.check);
+  else if (a.tool == "cgal")
+    r = run_cgal(xyz, n);
+  else
+    r = run_hxt(xyz, a.threads);
   const std::uint64_t peak = peak_rss_bytes();
-  std::printf("tool=%s dist=%s n=%zu threads=%d seconds=%.4f cpu_seconds=%.4f tets=%llu tets_per_s=%.0f peak_rss=%llu start_rss=%llu "
-              "points_rss=%llu bytes_per_point=%.1f %s\n",
-              a.tool.c_str(), a.dist.c_str(), n, a.threads, r.seconds, r.cpu_seconds, (unsigned long long)r.tets,
-              double(r.tets) / r.seconds, (unsigned long long)peak, (unsigned long long)start_rss,
-              (unsigned long long)base_rss, double(peak - start_rss) / double(n), r.extra.c_str());
+  std::printf(
+      "tool=%s dist=%s n=%zu threads=%d seconds=%.4f cpu_seconds=%.4f tets=%llu tets_per_s=%.0f peak_rss=%llu "
+      "start_rss=%llu "
+      "points_rss=%llu bytes_per_point=%.1f %s\n",
+      a.tool.c_str(), a.dist.c_str(), n, a.threads, r.seconds, r.cpu_seconds, (unsigned long long)r.tets,
+      double(r.tets) / r.seconds, (unsigned long long)peak, (unsigned long long)start_rss, (unsigned long long)base_rss,
+      double(peak - start_rss) / double(n), r.extra.c_str());
   std::fflush(stdout);
   std::_Exit(0);  // skip destructors: freeing 10^7-point structures costs seconds
 }

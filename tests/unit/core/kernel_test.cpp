@@ -242,10 +242,10 @@ TEST(Kernel, OneTetrahedron) {
 }
 
 TEST(Kernel, FivePoints) {
-  expect_valid_build({0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.3, 0.3, 0.3});     // one inside
-  expect_valid_build({0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1});           // bipyramid-ish
-  expect_valid_build({0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0.5, 0.5, 1});       // 4 coplanar + apex
-  expect_valid_build({0, 0, 0, 2, 0, 0, 0, 2, 0, 0, 0, 2, 2, 2, 2});           // 5 cospherical
+  expect_valid_build({0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.3, 0.3, 0.3});  // one inside
+  expect_valid_build({0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1});        // bipyramid-ish
+  expect_valid_build({0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0.5, 0.5, 1});    // 4 coplanar + apex
+  expect_valid_build({0, 0, 0, 2, 0, 0, 0, 2, 0, 0, 0, 2, 2, 2, 2});        // 5 cospherical
 }
 
 TEST(Kernel, FourCoplanarPlusOne) {
@@ -409,12 +409,12 @@ TEST(Kernel, StrictlyInsideIsTheOpenHullMinusTheTetsBoundaries) {
     const double q[3] = {x, y, z};
     return dt.strictly_inside(q, hint);
   };
-  EXPECT_FALSE(inside(2, 0.5, 0.5));     // outside
+  EXPECT_FALSE(inside(2, 0.5, 0.5));  // outside
   EXPECT_FALSE(inside(-1e-300, 0.5, 0.5));
-  EXPECT_FALSE(inside(0, 0.3, 0.6));     // on a face of the hull
-  EXPECT_FALSE(inside(0.5, 0, 0));       // on an edge of the hull
-  EXPECT_FALSE(inside(1, 1, 1));         // a vertex
-  EXPECT_FALSE(inside(0.5, 0.5, 0.5));   // the inner vertex
+  EXPECT_FALSE(inside(0, 0.3, 0.6));    // on a face of the hull
+  EXPECT_FALSE(inside(0.5, 0, 0));      // on an edge of the hull
+  EXPECT_FALSE(inside(1, 1, 1));        // a vertex
+  EXPECT_FALSE(inside(0.5, 0.5, 0.5));  // the inner vertex
   // Random points of the open cube miss the tets' internal faces.
   tp::Rng rng(5);
   int yes = 0;
@@ -545,7 +545,8 @@ TEST(KernelFuzz, CoarseLatticeSets) {
       std::set<std::array<double, 3>> seen;
       tp::Points q;
       for (std::size_t i = 0; i < n; ++i)
-        if (seen.insert({p[3 * i], p[3 * i + 1], p[3 * i + 2]}).second) tp::push(q, p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+        if (seen.insert({p[3 * i], p[3 * i + 1], p[3 * i + 2]}).second)
+          tp::push(q, p[3 * i], p[3 * i + 1], p[3 * i + 2]);
       if (has_four_independent(q)) expect_order_invariant(q, seed);
       // Grown from a prefix: the same tets as built at once.
       const std::size_t first = tp::count(q) / 2;

@@ -39,7 +39,7 @@ std::uint64_t test_seed(std::uint64_t fallback) {
   return fallback;
 }
 
-#define SEEDED(var, value)                      \
+#define SEEDED(var, value)                    \
   const std::uint64_t var = test_seed(value); \
   SCOPED_TRACE("seed " + std::to_string(var) + " (TETSTREAM_TEST_SEED)")
 
@@ -166,9 +166,7 @@ int ref_infinite(const double* a, const double* b, const double* c, const double
 
 P3 random_point(tp::Rng& rng) { return {rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)}; }
 
-P3 grid_point(tp::Rng& rng, int k) {
-  return {double(rng.below(k)), double(rng.below(k)), double(rng.below(k))};
-}
+P3 grid_point(tp::Rng& rng, int k) { return {double(rng.below(k)), double(rng.below(k)), double(rng.below(k))}; }
 
 // Moves x by `ulps` units in the last place (either direction).
 double nudge(double x, int ulps) {
@@ -247,19 +245,27 @@ std::array<std::uint64_t, 5> random_labels(tp::Rng& rng) {
 
 // Five points of one family; `kind` picks the family.
 enum class Family { kRandom, kGrid, kNearCoplanar, kCospherical, kNearCospherical, kScaled10, kOffset, kMixed };
-constexpr Family kFamilies[] = {Family::kRandom,          Family::kGrid,     Family::kNearCoplanar,
-                                Family::kCospherical,     Family::kNearCospherical, Family::kScaled10,
-                                Family::kOffset,          Family::kMixed};
+constexpr Family kFamilies[] = {
+    Family::kRandom,          Family::kGrid,     Family::kNearCoplanar, Family::kCospherical,
+    Family::kNearCospherical, Family::kScaled10, Family::kOffset,       Family::kMixed};
 const char* family_name(Family f) {
   switch (f) {
-    case Family::kRandom: return "random";
-    case Family::kGrid: return "grid";
-    case Family::kNearCoplanar: return "near-coplanar";
-    case Family::kCospherical: return "cospherical";
-    case Family::kNearCospherical: return "near-cospherical";
-    case Family::kScaled10: return "scaled 1e-100..1e100";
-    case Family::kOffset: return "large offset";
-    case Family::kMixed: return "mixed magnitudes";
+    case Family::kRandom:
+      return "random";
+    case Family::kGrid:
+      return "grid";
+    case Family::kNearCoplanar:
+      return "near-coplanar";
+    case Family::kCospherical:
+      return "cospherical";
+    case Family::kNearCospherical:
+      return "near-cospherical";
+    case Family::kScaled10:
+      return "scaled 1e-100..1e100";
+    case Family::kOffset:
+      return "large offset";
+    case Family::kMixed:
+      return "mixed magnitudes";
   }
   return "?";
 }
@@ -439,8 +445,8 @@ TEST(Predicates, ExactAtIntegerWidthBoundaries) {
   std::vector<P3> with_zero;
   for (const P3& q : sphere65())
     if (q[0] == 0 || q[1] == 0 || q[2] == 0) with_zero.push_back(q);
-  const int spans[] = {58, 59, 60, 61, 62, 63, 64, 65, 122, 123, 124, 125, 126, 127, 128, 129, 130,
-                       250, 251, 252, 253, 254, 255, 256, 257, 1000, 2000, 2090, 2097};
+  const int spans[] = {58,  59,  60,  61,  62,  63,  64,  65,  122, 123, 124,  125,  126,  127, 128,
+                       129, 130, 250, 251, 252, 253, 254, 255, 256, 257, 1000, 2000, 2090, 2097};
   for (int span : spans) {
     SCOPED_TRACE("span " + std::to_string(span));
     for (int it = 0; it < 60; ++it) {
@@ -493,7 +499,7 @@ TEST(Predicates, InsphereAgreesWithCircumcentre) {
         rhs[i] += r[i + 1][k] * r[i + 1][k] - r[0][k] * r[0][k];
       }
     }
-    const auto det = [](const cpp_rational (&x)[3][3]) {
+    const auto det = [](const cpp_rational(&x)[3][3]) {
       return x[0][0] * (x[1][1] * x[2][2] - x[1][2] * x[2][1]) - x[0][1] * (x[1][0] * x[2][2] - x[1][2] * x[2][0]) +
              x[0][2] * (x[1][0] * x[2][1] - x[1][1] * x[2][0]);
     };
@@ -527,8 +533,8 @@ TEST(Predicates, InsphereSosMatchesReferenceAndNeverZero) {
       if (o == 0) continue;
       if (o < 0) std::swap(p[0], p[1]);
       const auto l = random_labels(rng);
-      const int got = insphere_sos(p[0].data(), p[1].data(), p[2].data(), p[3].data(), p[4].data(), l[0], l[1],
-                                   l[2], l[3], l[4]);
+      const int got =
+          insphere_sos(p[0].data(), p[1].data(), p[2].data(), p[3].data(), p[4].data(), l[0], l[1], l[2], l[3], l[4]);
       ASSERT_NE(got, 0) << "iteration " << it;
       ASSERT_EQ(got, ref_insphere_sos(p[0].data(), p[1].data(), p[2].data(), p[3].data(), p[4].data(), l))
           << "iteration " << it;
@@ -559,11 +565,11 @@ TEST(Predicates, InsphereSosPermutations) {
     if (o == 0) continue;
     if (o < 0) std::swap(p[0], p[1]);
     const auto l = random_labels(rng);
-    const int base = insphere_sos(p[0].data(), p[1].data(), p[2].data(), p[3].data(), p[4].data(), l[0], l[1],
-                                  l[2], l[3], l[4]);
+    const int base =
+        insphere_sos(p[0].data(), p[1].data(), p[2].data(), p[3].data(), p[4].data(), l[0], l[1], l[2], l[3], l[4]);
     for (const auto& q : perms) {
-      const int got = insphere_sos(p[q[0]].data(), p[q[1]].data(), p[q[2]].data(), p[q[3]].data(), p[4].data(),
-                                   l[q[0]], l[q[1]], l[q[2]], l[q[3]], l[4]);
+      const int got = insphere_sos(p[q[0]].data(), p[q[1]].data(), p[q[2]].data(), p[q[3]].data(), p[4].data(), l[q[0]],
+                                   l[q[1]], l[q[2]], l[q[3]], l[4]);
       ASSERT_EQ(got, q[4] * base) << "iteration " << it;
     }
   }
@@ -609,8 +615,8 @@ TEST(Predicates, FiveCosphericalPointsTriangulateUnderPerturbation) {
       if (o < 0) std::swap(v[0], v[1]);
       const cpp_int vol = abs(det3(q[v[0]], q[v[1]], q[v[2]], q[v[3]]));
       all += vol;
-      const int s = insphere_sos(p[v[0]].data(), p[v[1]].data(), p[v[2]].data(), p[v[3]].data(), p[x].data(),
-                                 l[v[0]], l[v[1]], l[v[2]], l[v[3]], l[x]);
+      const int s = insphere_sos(p[v[0]].data(), p[v[1]].data(), p[v[2]].data(), p[v[3]].data(), p[x].data(), l[v[0]],
+                                 l[v[1]], l[v[2]], l[v[3]], l[x]);
       ASSERT_NE(s, 0);
       empty_of[x] = s < 0 ? 1 : -1;
       if (s < 0) {
@@ -688,8 +694,8 @@ TEST(Predicates, InfiniteConflictAgreesWithFiniteTets) {
       continue;
     }
     ++coplanar;
-    cocircular += insphere(a.data(), c.data(), b.data(), inner_point(a.data(), b.data(), c.data()).data(),
-                           e.data()) == 0;
+    cocircular +=
+        insphere(a.data(), c.data(), b.data(), inner_point(a.data(), b.data(), c.data()).data(), e.data()) == 0;
     // Finite tets behind (a,c,b,d) and in front (a,b,c,d) of the facet.
     for (int k = 0; k < 12; ++k) {
       P3 d = grid_point(rng, 200);
@@ -697,10 +703,10 @@ TEST(Predicates, InfiniteConflictAgreesWithFiniteTets) {
       d = tr(d);
       const int o = orient3d(a.data(), b.data(), c.data(), d.data());
       if (o == 0) continue;
-      const int fin = o < 0 ? insphere_sos(a.data(), c.data(), b.data(), d.data(), e.data(), l4[0], l4[2], l4[1],
-                                           rng.next(), l4[3])
-                            : insphere_sos(a.data(), b.data(), c.data(), d.data(), e.data(), l4[0], l4[1], l4[2],
-                                           rng.next(), l4[3]);
+      const int fin =
+          o < 0
+              ? insphere_sos(a.data(), c.data(), b.data(), d.data(), e.data(), l4[0], l4[2], l4[1], rng.next(), l4[3])
+              : insphere_sos(a.data(), b.data(), c.data(), d.data(), e.data(), l4[0], l4[1], l4[2], rng.next(), l4[3]);
       ASSERT_EQ(fin, got) << "iteration " << it << " d side " << o;
     }
   }
@@ -770,7 +776,8 @@ TEST(Predicates, CircumsphereBoundIsSound) {
     const cpp_rational den = 2 * (u[0] * cross(v, w, 0) + u[1] * cross(v, w, 1) + u[2] * cross(v, w, 2));
     cpp_rational r2 = 0;
     for (int k = 0; k < 3; ++k) {
-      const cpp_rational x = (dot(u, u) * cross(v, w, k) + dot(v, v) * cross(w, u, k) + dot(w, w) * cross(u, v, k)) / den;
+      const cpp_rational x =
+          (dot(u, u) * cross(v, w, k) + dot(v, v) * cross(w, u, k) + dot(w, w) * cross(u, v, k)) / den;
       r2 += x * x;
       const cpp_rational err = abs(r[0][k] + x - to_rational(cs.center[k]));
       ASSERT_LE(err, to_rational(cs.center_error)) << "iteration " << it << " axis " << k;
@@ -808,8 +815,8 @@ TEST(Predicates, StatsCountFilterFailures) {
   EXPECT_EQ(predicate_stats().orient3d_calls, 2u);
   EXPECT_EQ(predicate_stats().orient3d_exact, 0u);
   EXPECT_EQ(predicate_stats().insphere_exact, 0u);
-  const double g[3] = {1, 1, 0};                 // coplanar with a, b, c
-  EXPECT_EQ(orient3d(a, b, c, g), 0);            // zero axis (all z equal): settled at once
+  const double g[3] = {1, 1, 0};                            // coplanar with a, b, c
+  EXPECT_EQ(orient3d(a, b, c, g), 0);                       // zero axis (all z equal): settled at once
   const double h[3] = {2, 3, 1e-30}, k[3] = {1, 1, 1e-30};  // coplanar, not axis-aligned
   EXPECT_EQ(orient3d(a, h, k, std::array<double, 3>{3, 4, 2e-30}.data()), 0);
   EXPECT_EQ(insphere(a, b, c, d, e), 0);  // cospherical grid points: the lattice test

@@ -44,9 +44,9 @@ using Tet = std::array<std::uint64_t, 4>;
 // ---------------------------------------------------------------- synthetic meshes
 
 struct Mesh {
-  std::vector<double> xyz;          // sorted by (x, y, z): index = label
-  std::vector<std::uint64_t> ids;   // original index of each label
-  std::vector<Tet> tets;            // positively oriented
+  std::vector<double> xyz;         // sorted by (x, y, z): index = label
+  std::vector<std::uint64_t> ids;  // original index of each label
+  std::vector<Tet> tets;           // positively oriented
   std::array<double, 3> lo{}, hi{};
 };
 
@@ -126,7 +126,8 @@ std::vector<L> flatten(const std::vector<Tet>& tets) {
 template <class L>
 std::vector<Tet> unflatten(const std::vector<L>& labels) {
   std::vector<Tet> out(labels.size() / 4);
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = {labels[4 * i], labels[4 * i + 1], labels[4 * i + 2], labels[4 * i + 3]};
+  for (std::size_t i = 0; i < out.size(); ++i)
+    out[i] = {labels[4 * i], labels[4 * i + 1], labels[4 * i + 2], labels[4 * i + 3]};
   return out;
 }
 
@@ -539,7 +540,8 @@ struct WrittenWhole {
     ASSERT_GT(t, cut2);
     for (const auto& [first, last, name] : {std::tuple{cut1, cut2, "a.tets"}, std::tuple{cut2, t, "b.tets"}}) {
       auto f = TetWriter::fragment(tmp / name, h, o);
-      for (std::size_t i = first; i < last; i += 400) f->add_tets(all.subspan(4 * i, 4 * std::min<std::size_t>(400, last - i)));
+      for (std::size_t i = first; i < last; i += 400)
+        f->add_tets(all.subspan(4 * i, 4 * std::min<std::size_t>(400, last - i)));
       f->finish();
       EXPECT_FALSE(fs::exists(tmp / (std::string(name) + ".partial")));
     }
@@ -668,8 +670,8 @@ class Damaged : public ::testing::Test {
 };
 
 TEST_F(Damaged, TruncatedAnywhere) {
-  for (std::size_t cut : {std::size_t(0), std::size_t(10), std::size_t(100), good.size() / 2, good.size() - 49,
-                          good.size() - 1}) {
+  for (std::size_t cut :
+       {std::size_t(0), std::size_t(10), std::size_t(100), good.size() / 2, good.size() - 49, good.size() - 1}) {
     SCOPED_TRACE("cut at " + std::to_string(cut));
     spit(bad, {good.begin(), good.begin() + cut});
     expect_input_error([&] { TetReader r(bad); }, {bad + ": byte "});
@@ -700,7 +702,8 @@ TEST_F(Damaged, CorruptFrameWithValidCrcNamesTheStream) {
   spit(bad, b);
   TetReader r(bad);
   std::vector<std::uint64_t> labels;
-  expect_input_error([&] { r.read_frame(1, labels); }, {"frame 1", "stream HEAD", "byte " + std::to_string(payload + 48)});
+  expect_input_error([&] { r.read_frame(1, labels); },
+                     {"frame 1", "stream HEAD", "byte " + std::to_string(payload + 48)});
 }
 
 TEST_F(Damaged, WrongVersionAndMagic) {
@@ -743,7 +746,10 @@ TEST_F(Damaged, UnknownSectionsAreSkippedUnlessCritical) {
     TetReader r(path);
     std::vector<std::uint8_t> b(good.begin(), good.begin() + (good.size() - kFooterSize));
     Footer foot;
-    ASSERT_TRUE(parse_footer(std::span<const std::uint8_t, kFooterSize>(good.data() + good.size() - kFooterSize, kFooterSize), foot).empty());
+    ASSERT_TRUE(
+        parse_footer(std::span<const std::uint8_t, kFooterSize>(good.data() + good.size() - kFooterSize, kFooterSize),
+                     foot)
+            .empty());
     b.resize(foot.index_offset);
     const std::uint64_t extra_at = b.size();
     const std::vector<std::uint8_t> payload = {'h', 'u', 'l', 'l'};

@@ -30,12 +30,12 @@ std::vector<double> gen(Distribution d, std::uint64_t n, std::uint64_t seed = kS
   return xyz;
 }
 
-const Distribution kAll[] = {Distribution::kUniform,  Distribution::kBall,     Distribution::kEllipsoidShell,
-                             Distribution::kMixed,    Distribution::kClusters, Distribution::kGrid,
-                             Distribution::kSphere,   Distribution::kTerrain,  Distribution::kTwoPlates,
-                             Distribution::kHills,    Distribution::kRoofs,    Distribution::kCanopy,
-                             Distribution::kWater,    Distribution::kStrips,   Distribution::kScanLines,
-                             Distribution::kSurvey,   Distribution::kIndoor};
+const Distribution kAll[] = {Distribution::kUniform, Distribution::kBall,     Distribution::kEllipsoidShell,
+                             Distribution::kMixed,   Distribution::kClusters, Distribution::kGrid,
+                             Distribution::kSphere,  Distribution::kTerrain,  Distribution::kTwoPlates,
+                             Distribution::kHills,   Distribution::kRoofs,    Distribution::kCanopy,
+                             Distribution::kWater,   Distribution::kStrips,   Distribution::kScanLines,
+                             Distribution::kSurvey,  Distribution::kIndoor};
 
 // The airborne members of the zoo, whose tile's side follows n.
 bool is_tile(Distribution d) {
@@ -145,7 +145,8 @@ TEST(Generators, SphereIsCosphericalUpToRounding) {
 TEST(Generators, GridIsAnExactLattice) {
   GeneratorOptions o;
   o.dist = Distribution::kGrid, o.seed = kSeed;
-  for (auto [n, k] : {std::pair<std::uint64_t, std::uint64_t>{1, 1}, {1000, 10}, {1100, 10}, {1200, 11}, {1331, 11}, {30, 3}}) {
+  for (auto [n, k] :
+       {std::pair<std::uint64_t, std::uint64_t>{1, 1}, {1000, 10}, {1100, 10}, {1200, 11}, {1331, 11}, {30, 3}}) {
     o.n = n;
     EXPECT_EQ(PointGenerator(o).count(), k * k * k) << "n " << n;
   }
@@ -285,13 +286,20 @@ struct TilePoints {
 
 LidarTile::Preset preset_of(Distribution d) {
   switch (d) {
-    case Distribution::kHills: return LidarTile::Preset::kHills;
-    case Distribution::kRoofs: return LidarTile::Preset::kRoofs;
-    case Distribution::kCanopy: return LidarTile::Preset::kCanopy;
-    case Distribution::kWater: return LidarTile::Preset::kWater;
-    case Distribution::kStrips: return LidarTile::Preset::kStrips;
-    case Distribution::kScanLines: return LidarTile::Preset::kScanLines;
-    default: return LidarTile::Preset::kSurvey;
+    case Distribution::kHills:
+      return LidarTile::Preset::kHills;
+    case Distribution::kRoofs:
+      return LidarTile::Preset::kRoofs;
+    case Distribution::kCanopy:
+      return LidarTile::Preset::kCanopy;
+    case Distribution::kWater:
+      return LidarTile::Preset::kWater;
+    case Distribution::kStrips:
+      return LidarTile::Preset::kStrips;
+    case Distribution::kScanLines:
+      return LidarTile::Preset::kScanLines;
+    default:
+      return LidarTile::Preset::kSurvey;
   }
 }
 
@@ -363,9 +371,12 @@ TEST(GeneratorsZoo, RoofsWithoutWallReturns) {
   std::set<double> flat_heights;
   for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
     const double x = t.xyz[i], y = t.xyz[i + 1], z = t.xyz[i + 2];
-    if (on_roof(t.tile, x, y, z)) ++roofs;
-    else if (std::fabs(z - t.tile.ground(x, y)) <= 0.05) ++ground;
-    else ADD_FAILURE() << "a point neither on the ground nor on a roof (a wall?) at " << x << " " << y << " " << z;
+    if (on_roof(t.tile, x, y, z))
+      ++roofs;
+    else if (std::fabs(z - t.tile.ground(x, y)) <= 0.05)
+      ++ground;
+    else
+      ADD_FAILURE() << "a point neither on the ground nor on a roof (a wall?) at " << x << " " << y << " " << z;
   }
   EXPECT_GT(double(roofs) / 50000, 0.05);
   EXPECT_GT(double(ground) / 50000, 0.5);
@@ -435,8 +446,10 @@ TEST(GeneratorsZoo, OverlappingStripsDoubleTheDensity) {
   std::size_t single = 0, both = 0;
   for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
     const double x = t.xyz[i];
-    if (x > 1 && x < x1 - 1) ++single;
-    else if (x > x1 + 1 && x < w - 1) ++both;
+    if (x > 1 && x < x1 - 1)
+      ++single;
+    else if (x > x1 + 1 && x < w - 1)
+      ++both;
   }
   const double ratio = (double(both) / (w - x1 - 2)) / (double(single) / (x1 - 2));
   EXPECT_NEAR(ratio, 2.0, 0.15);
@@ -447,7 +460,8 @@ TEST(GeneratorsZoo, ScanLinesAreOneMetreApartAndDenseAlong) {
   const auto t = tile_points(Distribution::kScanLines, n);
   // Every y within 3 cm (2 cm wobble, 1 cm quantisation) of one phase modulo 1 m.
   std::map<int, std::size_t> phases;  // centimetre of the metre -> points
-  for (std::size_t i = 1; i < t.xyz.size(); i += 3) ++phases[int(std::lround((t.xyz[i] - std::floor(t.xyz[i])) * 100)) % 100];
+  for (std::size_t i = 1; i < t.xyz.size(); i += 3)
+    ++phases[int(std::lround((t.xyz[i] - std::floor(t.xyz[i])) * 100)) % 100];
   std::size_t best = 0;
   int phase = 0;
   for (int c = 0; c < 100; ++c) {
@@ -461,7 +475,8 @@ TEST(GeneratorsZoo, ScanLinesAreOneMetreApartAndDenseAlong) {
   EXPECT_EQ(best, n);
   // About 0.3 m between neighbours along a line.
   std::map<long, std::vector<double>> lines;
-  for (std::size_t i = 0; i < t.xyz.size(); i += 3) lines[std::lround(t.xyz[i + 1] - phase / 100.0)].push_back(t.xyz[i]);
+  for (std::size_t i = 0; i < t.xyz.size(); i += 3)
+    lines[std::lround(t.xyz[i + 1] - phase / 100.0)].push_back(t.xyz[i]);
   double gaps = 0, count = 0;
   for (auto& [k, xs] : lines) {
     std::sort(xs.begin(), xs.end());
@@ -478,8 +493,10 @@ TEST(GeneratorsZoo, SurveyHasEveryFeature) {
   for (std::size_t i = 0; i < t.xyz.size(); i += 3) {
     const double x = t.xyz[i], y = t.xyz[i + 1], z = t.xyz[i + 2];
     ASSERT_FALSE(deep_in_hole(t.tile, x, y));
-    if (on_roof(t.tile, x, y, z)) ++roofs;
-    else if (z - t.tile.ground(x, y) > 2) ++trees;
+    if (on_roof(t.tile, x, y, z))
+      ++roofs;
+    else if (z - t.tile.ground(x, y) > 2)
+      ++trees;
   }
   EXPECT_GT(roofs, 1000u);
   EXPECT_GT(trees, 2000u);

@@ -148,8 +148,9 @@ TEST(PointInput, SkipIsReadAndDrop) {
   expect_skip_is_read_and_drop(dir.file("s.bin"), o);
   write_bytes(dir.file("a.npy"), npy_bytes(1, "<f8", "(23, 3)", le_doubles(v)));
   expect_skip_is_read_and_drop(dir.file("a.npy"));
-  const std::string ply_head = "ply\nformat binary_little_endian 1.0\nelement vertex 23\n"
-                               "property double x\nproperty double y\nproperty double z\nend_header\n";
+  const std::string ply_head =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 23\n"
+      "property double x\nproperty double y\nproperty double z\nend_header\n";
   write_bytes(dir.file("a.ply"), ply_head + le_doubles(v));
   expect_skip_is_read_and_drop(dir.file("a.ply"));
   std::string text;

@@ -30,8 +30,18 @@ bool same_bits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == s
 
 // Awkward doubles: zeros of both signs, subnormals, extremes, values with 17 digits.
 std::vector<double> tricky_points() {
-  std::vector<double> v = {0.0, -0.0, 0.1, 1.0 / 3.0, -2.5, 5e-324, -2.2250738585072014e-308,
-                           1.7976931348623157e308, -1e-300, 123456789.123456789, 3.141592653589793, 1e22};
+  std::vector<double> v = {0.0,
+                           -0.0,
+                           0.1,
+                           1.0 / 3.0,
+                           -2.5,
+                           5e-324,
+                           -2.2250738585072014e-308,
+                           1.7976931348623157e308,
+                           -1e-300,
+                           123456789.123456789,
+                           3.141592653589793,
+                           1e22};
   std::mt19937_64 rng(42);
   while (v.size() < 3 * 1000) {
     const double x = std::bit_cast<double>(rng());
@@ -183,7 +193,8 @@ TEST(PointIo, PlyExtrasAreSkipped) {
   for (bool big : {false, true}) {
     auto put = [&](auto v) { return big ? be_bytes(v) : le_bytes(v); };
     std::string s = header(big ? "binary_big_endian" : "binary_little_endian");
-    s += put((std::uint8_t)3) + put((std::int32_t)0) + put((std::int32_t)1) + put((std::int32_t)2) + put((std::uint8_t)7);
+    s += put((std::uint8_t)3) + put((std::int32_t)0) + put((std::int32_t)1) + put((std::int32_t)2) +
+         put((std::uint8_t)7);
     s += put((std::uint8_t)4) + put((std::int32_t)0) + put((std::int32_t)1) + put((std::int32_t)2) +
          put((std::int32_t)3) + put((std::uint8_t)9);
     for (int i = 0; i < 3; ++i) {
@@ -240,7 +251,8 @@ TEST(PointIo, TextVariants) {
               "7 ; 8 ; 9\n"
               "1e2 .5 -0\n"
               "10 11 12");  // no final newline
-  EXPECT_EQ(read_all(dir.file("a.txt")), (std::vector<double>{1, 2, 3, 4.5, -0.5, 6, 7, 8, 9, 100, 0.5, -0.0, 10, 11, 12}));
+  EXPECT_EQ(read_all(dir.file("a.txt")),
+            (std::vector<double>{1, 2, 3, 4.5, -0.5, 6, 7, 8, 9, 100, 0.5, -0.0, 10, 11, 12}));
   // Location of points: the line they came from.
   auto r = open_points(dir.file("a.txt"));
   double buf[15];
@@ -329,8 +341,9 @@ TEST(PointIoBadInput, TruncatedFiles) {
   EXPECT_INPUT_ERROR(dir.file("t.f32"), PointReadOptions{}, "byte 36", "12-byte record");
 
   // PLY binary: the header promises 5 vertices, the file holds 2 and a half.
-  const std::string head = "ply\nformat binary_little_endian 1.0\nelement vertex 5\n"
-                           "property double x\nproperty double y\nproperty double z\nend_header\n";
+  const std::string head =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 5\n"
+      "property double x\nproperty double y\nproperty double z\nend_header\n";
   write_bytes(dir.file("t.ply"), head + std::string(24 * 2 + 12, '\0'));
   EXPECT_INPUT_ERROR(dir.file("t.ply"), PointReadOptions{}, "byte " + std::to_string(head.size() + 60),
                      "header promises 5 vertices");
@@ -359,7 +372,8 @@ TEST(PointIoBadInput, MalformedOrLyingHeaders) {
   // A lying count: the vertex count is far larger than the data.
   write_bytes(dir.file("lie.ply"),
               "ply\nformat binary_big_endian 1.0\nelement vertex 18446744073709551615\nproperty double x\n"
-              "property double y\nproperty double z\nend_header\n" + std::string(48, '\0'));
+              "property double y\nproperty double z\nend_header\n" +
+                  std::string(48, '\0'));
   EXPECT_INPUT_ERROR(dir.file("lie.ply"), PointReadOptions{}, "byte ", "truncated");
 }
 
@@ -392,6 +406,4 @@ TEST(PointIoBadInput, EmptyInputOrNoPoints) {
   EXPECT_INPUT_ERROR(dir.file("z.ply"), PointReadOptions{}, "line 3", "0 vertices");
 }
 
-TEST(PointIoBadInput, MissingFileIsAnIoError) {
-  EXPECT_THROW(open_points("/nonexistent/points.f64"), IoError);
-}
+TEST(PointIoBadInput, MissingFileIsAnIoError) { EXPECT_THROW(open_points("/nonexistent/points.f64"), IoError); }

@@ -166,7 +166,8 @@ TEST(PointLas, ExactnessOfTheConversionIsReported) {
   {
     auto r = open_points(dir.file("exact.las"));
     std::vector<double> buf(3 * 16);
-    while (r->read(buf.data(), 16)) {}
+    while (r->read(buf.data(), 16)) {
+    }
     EXPECT_EQ(detail(*r, "exact").substr(0, 3), "yes");
     EXPECT_EQ(detail(*r, "scale"), "0.25 0.25 0.25");
     EXPECT_EQ(detail(*r, "offset"), "1024 -3 0.5");
@@ -175,7 +176,8 @@ TEST(PointLas, ExactnessOfTheConversionIsReported) {
   write_bytes(dir.file("inexact.las"), las_bytes(f));
   auto r = open_points(dir.file("inexact.las"));
   std::vector<double> buf(3 * 16);
-  while (r->read(buf.data(), 16)) {}
+  while (r->read(buf.data(), 16)) {
+  }
   EXPECT_EQ(detail(*r, "exact").substr(0, 2), "no");
 }
 
@@ -188,7 +190,8 @@ TEST(PointLas, BadHeaders) {
     write_bytes(dir.file(name), b);
     return dir.file(name);
   };
-  EXPECT_INPUT_ERROR(with("trunc_header.las", bytes.substr(0, 200)), PointReadOptions{}, "byte 200", "truncated LAS header");
+  EXPECT_INPUT_ERROR(with("trunc_header.las", bytes.substr(0, 200)), PointReadOptions{}, "byte 200",
+                     "truncated LAS header");
   EXPECT_INPUT_ERROR(with("trunc14.las", bytes.substr(0, 300)), PointReadOptions{}, "byte 300", "of 375 bytes");
   EXPECT_INPUT_ERROR(with("trunc_points.las", bytes.substr(0, bytes.size() - 5)), PointReadOptions{}, "byte",
                      "truncated");
@@ -252,8 +255,8 @@ TEST(PointLas, DataAfterThePointsIsAllowed) {
 TEST(PointLas, ClassAndReturnFilters) {
   TempDir dir;
   // Six points: (return number, number of returns, class, intensity).
-  const std::vector<LasFile::Fields> fields = {
-      {1, 1, 2, 10}, {1, 3, 5, 11}, {3, 3, 2, 12}, {2, 3, 6, 13}, {1, 2, 6, 14}, {2, 2, 1, 15}};
+  const std::vector<LasFile::Fields> fields = {{1, 1, 2, 10}, {1, 3, 5, 11}, {3, 3, 2, 12},
+                                               {2, 3, 6, 13}, {1, 2, 6, 14}, {2, 2, 1, 15}};
   std::vector<std::array<std::int32_t, 3>> points;
   for (int i = 0; i < 6; ++i) points.push_back({i, 10 * i, 100 * i});
   auto pick = [&](const LasFile& f, std::vector<int> which) {
@@ -287,7 +290,8 @@ TEST(PointLas, ClassAndReturnFilters) {
     auto r = open_points(path, o);
     EXPECT_FALSE(r->count()) << what;
     std::vector<double> buf(3 * 8);
-    while (r->read(buf.data(), 2)) {}
+    while (r->read(buf.data(), 2)) {
+    }
     EXPECT_EQ(r->points_read(), 3u);
     EXPECT_EQ(detail(*r, "filter"), "las_returns=first: 3 of 6 points kept") << what;
     o.las_returns = R::kAll;

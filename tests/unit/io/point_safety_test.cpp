@@ -42,7 +42,8 @@ TEST(PointSafety, PlyElementsAfterVertexAreNotTrailingData) {
       "ply\nformat binary_little_endian 1.0\nelement vertex 2\n"
       "property double x\nproperty double y\nproperty double z\n"
       "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
-  std::string face = std::string(1, '\3') + le_bytes<std::int32_t>(0) + le_bytes<std::int32_t>(1) + le_bytes<std::int32_t>(0);
+  std::string face =
+      std::string(1, '\3') + le_bytes<std::int32_t>(0) + le_bytes<std::int32_t>(1) + le_bytes<std::int32_t>(0);
   write_bytes(dir.file("face.ply"), header + le_doubles({1, 2, 3, 4, 5, 6}) + face);
   EXPECT_EQ(read_all(dir.file("face.ply")), (std::vector<double>{1, 2, 3, 4, 5, 6}));
   // ... but bytes after the last element are.

@@ -39,7 +39,8 @@ TEST(RankLabelBounds, WholeBlocksBalancedAndCoveringEveryLabel) {
         EXPECT_EQ(b[std::size_t(r)] % block, 0u);
       }
       // A rank has blocks/ranks or one more.
-      const std::uint64_t mine = (std::min(b[std::size_t(r) + 1], blocks * block) - b[std::size_t(r)] + block - 1) / block;
+      const std::uint64_t mine =
+          (std::min(b[std::size_t(r) + 1], blocks * block) - b[std::size_t(r)] + block - 1) / block;
       EXPECT_GE(mine, blocks / std::uint64_t(ranks));
       EXPECT_LE(mine, blocks / std::uint64_t(ranks) + 1);
     }
@@ -100,11 +101,21 @@ TEST(RankLabelBounds, BalancedByTheBlocksCosts) {
 // names: each of a rank's names gives its rank; rank 0's, and names that are not work
 // files (a user's "rank-1.json.bak"), give none.
 TEST(WorkFileRank, EveryNameARankWritesAndNoOther) {
-  for (const auto& [name, rank] : std::vector<std::pair<std::string, int>>{
-           {"rank-1.json", 1}, {"rank-12.tets", 12}, {"rank-3.tets.partial", 3}, {"rank-2-pending-7.tets", 2},
-           {"rank-4.progress", 4}, {"rank-5-points-0.run", 5}, {"rank-5-points-0.run.hull", 5},
-           {"rank-1.json.tmp", 1}, {"state.json", -1}, {"pending-3.tets", -1}, {"index.shared", -1},
-           {"points-0.run", -1}, {"rank-1.json.bak", -1}, {"rank-x.json", -1}, {"myrank-1.json", -1}}) {
+  for (const auto& [name, rank] : std::vector<std::pair<std::string, int>>{{"rank-1.json", 1},
+                                                                           {"rank-12.tets", 12},
+                                                                           {"rank-3.tets.partial", 3},
+                                                                           {"rank-2-pending-7.tets", 2},
+                                                                           {"rank-4.progress", 4},
+                                                                           {"rank-5-points-0.run", 5},
+                                                                           {"rank-5-points-0.run.hull", 5},
+                                                                           {"rank-1.json.tmp", 1},
+                                                                           {"state.json", -1},
+                                                                           {"pending-3.tets", -1},
+                                                                           {"index.shared", -1},
+                                                                           {"points-0.run", -1},
+                                                                           {"rank-1.json.bak", -1},
+                                                                           {"rank-x.json", -1},
+                                                                           {"myrank-1.json", -1}}) {
     EXPECT_EQ(work_file_rank(name), rank) << name;
     if (rank >= 0) {
       EXPECT_TRUE(is_work_file_name(name)) << name;

@@ -269,7 +269,6 @@ class FieldTest : public testing_util::ScratchDirTest {
     std::printf("  %zu points, %zu on the hull, worst relative Voronoi difference %.3g\n", ref.n, hull, worst);
     return s;
   }
-
 };
 
 // Voronoi tolerances: 1e-12 where the cells are well shaped; clustered points make
@@ -318,7 +317,8 @@ TEST_F(FieldTest, NeighboursAloneHullFromRows) {
     EXPECT_EQ(alone.hull_points, hull);
     EXPECT_EQ(alone.tet_volume, all.tet_volume);  // the same sums, bit for bit
     for (const char* what : {"neighbours.offsets", "neighbours.indices"})
-      EXPECT_EQ(file_bytes(path(std::string("all.") + what + ".npy")), file_bytes(path(std::string("alone.") + what + ".npy")))
+      EXPECT_EQ(file_bytes(path(std::string("all.") + what + ".npy")),
+                file_bytes(path(std::string("alone.") + what + ".npy")))
           << what;
   }
 }
@@ -380,7 +380,8 @@ TEST_F(FieldTest, GridMatchesBruteForce) {
   std::vector<int> hits(grid.size(), 0);
   std::vector<bool> unsure(grid.size(), false);
   auto centre = [&](int k, std::size_t i) {
-    return h.bbox_min[std::size_t(k)] + (double(i) + 0.5) * (h.bbox_max[std::size_t(k)] - h.bbox_min[std::size_t(k)]) / 32.0;
+    return h.bbox_min[std::size_t(k)] +
+           (double(i) + 0.5) * (h.bbox_max[std::size_t(k)] - h.bbox_min[std::size_t(k)]) / 32.0;
   };
   // Each tet against the centres in its bounding box (widened by a cell: no exact
   // arithmetic decides anything here).
@@ -395,25 +396,27 @@ TEST_F(FieldTest, GridMatchesBruteForce) {
     std::size_t r0[3], r1[3];
     for (int k = 0; k < 3; ++k) {
       double a = 1e300, b = -1e300;
-      for (int v = 0; v < 4; ++v) a = std::min(a, ref.xyz[q[v]][std::size_t(k)]), b = std::max(b, ref.xyz[q[v]][std::size_t(k)]);
+      for (int v = 0; v < 4; ++v)
+        a = std::min(a, ref.xyz[q[v]][std::size_t(k)]), b = std::max(b, ref.xyz[q[v]][std::size_t(k)]);
       cells(k, a, b, r0[k], r1[k]);
     }
     for (std::size_t ix = r0[0]; ix <= r1[0]; ++ix)
       for (std::size_t iy = r0[1]; iy <= r1[1]; ++iy)
         for (std::size_t iz = r0[2]; iz <= r1[2]; ++iz) {
-      const std::size_t g = (ix * 32 + iy) * 32 + iz;
-      const Vec x{centre(0, ix), centre(1, iy), centre(2, iz)};
-      double lam[4], lo = 1;
-      for (int i = 0; i < 4; ++i) {
-        Vec p[4] = {ref.xyz[q[0]], ref.xyz[q[1]], ref.xyz[q[2]], ref.xyz[q[3]]};
-        p[i] = x;
-        lam[i] = dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0]))) / v6;
-        lo = std::min(lo, lam[i]);
-      }
-      if (lo < -1e-9) continue;
-      if (lo < 1e-9) unsure[g] = true;  // on a face: the exact test picks one of the tets
-      ++hits[g];
-      want[g] = lam[0] * by_label[q[0]] + lam[1] * by_label[q[1]] + lam[2] * by_label[q[2]] + lam[3] * by_label[q[3]];
+          const std::size_t g = (ix * 32 + iy) * 32 + iz;
+          const Vec x{centre(0, ix), centre(1, iy), centre(2, iz)};
+          double lam[4], lo = 1;
+          for (int i = 0; i < 4; ++i) {
+            Vec p[4] = {ref.xyz[q[0]], ref.xyz[q[1]], ref.xyz[q[2]], ref.xyz[q[3]]};
+            p[i] = x;
+            lam[i] = dot(sub(p[1], p[0]), cross(sub(p[2], p[0]), sub(p[3], p[0]))) / v6;
+            lo = std::min(lo, lam[i]);
+          }
+          if (lo < -1e-9) continue;
+          if (lo < 1e-9) unsure[g] = true;  // on a face: the exact test picks one of the tets
+          ++hits[g];
+          want[g] =
+              lam[0] * by_label[q[0]] + lam[1] * by_label[q[1]] + lam[2] * by_label[q[2]] + lam[3] * by_label[q[3]];
         }
   }
   std::size_t inside = 0, compared = 0;
@@ -467,7 +470,8 @@ TEST_F(FieldTest, PointsPlacedOrSortedSameBytes) {
   EXPECT_EQ(kept, n - (n - 1) / 9);
   std::vector<double> mass(n);
   for (std::size_t i = 0; i < n; ++i) mass[i] = 1.0 + double(i % 7) / 8;
-  std::ofstream(path("mass.f64"), std::ios::binary).write(reinterpret_cast<const char*>(mass.data()), std::streamsize(8 * n));
+  std::ofstream(path("mass.f64"), std::ios::binary)
+      .write(reinterpret_cast<const char*>(mass.data()), std::streamsize(8 * n));
   for (const std::uint64_t share : {std::uint64_t(0), std::uint64_t(1)}) {  // 0: from the budget (placed); 1: sorted
     pipeline::FieldOptions o;
     o.input = tets;
@@ -559,7 +563,8 @@ TEST_F(FieldTest, NeighbourRowsBucketsAndParts) {
       EXPECT_GT(rows.buckets(), 1u);
     }
     EXPECT_FALSE(rows.needs_int64());
-    rows.write(path(std::string(c.name) + ".off.npy"), path(std::string(c.name) + ".idx.npy"), std::string(c.name) == "wide");
+    rows.write(path(std::string(c.name) + ".off.npy"), path(std::string(c.name) + ".idx.npy"),
+               std::string(c.name) == "wide");
     EXPECT_EQ(rows.entries(), entries);
   }
   const auto off = load_npy<std::int32_t>(path("mem.off.npy"));
@@ -578,7 +583,8 @@ TEST_F(FieldTest, NeighbourRowsBucketsAndParts) {
   }
   for (const char* name : {"low", "buckets"})
     for (const char* what : {".off.npy", ".idx.npy"})
-      EXPECT_EQ(file_bytes(path(std::string("mem") + what)), file_bytes(path(std::string(name) + what))) << name << what;
+      EXPECT_EQ(file_bytes(path(std::string("mem") + what)), file_bytes(path(std::string(name) + what)))
+          << name << what;
 }
 
 // int32 holds the CSR pair while the largest index (original_end - 1) and the entry

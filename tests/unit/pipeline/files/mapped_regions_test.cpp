@@ -128,7 +128,8 @@ TEST_F(MappedRegionsTest, ScatteredReadsBypassTheMapping) {
     const std::size_t offset = r * MappedRegions::kRegionBytes + 4096 * (r % 7) + 5;
     char got[8];
     regions.read(mapping_.data() + offset, got, sizeof got);
-    for (std::size_t i = 0; i < sizeof got; ++i) EXPECT_EQ(got[i], char((r * 7 + (offset % MappedRegions::kRegionBytes) + i) & 0x7F));
+    for (std::size_t i = 0; i < sizeof got; ++i)
+      EXPECT_EQ(got[i], char((r * 7 + (offset % MappedRegions::kRegionBytes) + i) & 0x7F));
   }
   EXPECT_EQ(regions.held(), 0u);
   EXPECT_EQ(regions.releases(), 0u);

@@ -83,15 +83,14 @@ class ExponentRangeTest : public testing_util::ScratchDirTest {
     const pipeline::VerifyReport report = pipeline::verify(pipeline::ContainerSource(reader), v);
     EXPECT_TRUE(report.ok()) << report.summary();
   }
-
 };
 
 // Unit-scale sets scaled by 2^k: exact (a power of two) until the values reach the
 // subnormals, where they round (the input is then whatever doubles result).
 TEST_F(ExponentRangeTest, ScaledByPowersOfTwo) {
   const std::vector<double> base = generated(io::Distribution::kUniform, 1200, 11);
-  for (int k : {-1070, -1060, -1022, -1000, -700, -300, -150, -101, -60, 0, 60, 101, 128, 129, 130, 200, 280, 600,
-                1000, 1022}) {
+  for (int k : {-1070, -1060, -1022, -1000, -700, -300, -150, -101, -60,  0,
+                60,    101,   128,   129,   130,  200,  280,  600,  1000, 1022}) {
     std::vector<double> xyz(base);
     for (double& c : xyz) c = std::ldexp(c, k);
     expect_exact(xyz, "uniform scaled by 2^" + std::to_string(k));

@@ -74,7 +74,6 @@ class PipelineTest : public testing_util::ScratchDirTest {
     EXPECT_EQ(missing.size(), 0u) << "tets of the in-core triangulation missing from the output";
     EXPECT_EQ(extra.size(), 0u) << "tets in the output that the in-core triangulation lacks";
   }
-
 };
 
 io::GeneratorOptions dist(io::Distribution d, std::uint64_t n, std::uint64_t seed = 1) {
@@ -87,21 +86,29 @@ io::GeneratorOptions dist(io::Distribution d, std::uint64_t n, std::uint64_t see
 
 TEST_F(PipelineTest, UniformManySegments) { expect_same_as_incore(dist(io::Distribution::kUniform, 20000), 1500, 10); }
 TEST_F(PipelineTest, BallManySegments) { expect_same_as_incore(dist(io::Distribution::kBall, 20000, 2), 1500, 10); }
-TEST_F(PipelineTest, EllipsoidShell) { expect_same_as_incore(dist(io::Distribution::kEllipsoidShell, 20000, 3), 1500, 10); }
+TEST_F(PipelineTest, EllipsoidShell) {
+  expect_same_as_incore(dist(io::Distribution::kEllipsoidShell, 20000, 3), 1500, 10);
+}
 TEST_F(PipelineTest, Mixed) { expect_same_as_incore(dist(io::Distribution::kMixed, 20000, 4), 1500, 10); }
 TEST_F(PipelineTest, Clusters) { expect_same_as_incore(dist(io::Distribution::kClusters, 20000, 5), 1500, 10); }
-TEST_F(PipelineTest, GridIsDegenerateButExact) { expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 600, 10); }
+TEST_F(PipelineTest, GridIsDegenerateButExact) {
+  expect_same_as_incore(dist(io::Distribution::kGrid, 20 * 20 * 20), 600, 10);
+}
 // Surfaces: a LiDAR-like tile (flat roofs, walls, centimetre lattice, UTM offsets) and
 // two jittered plates: most tets are flat and their balls huge.
-TEST_F(PipelineTest, TerrainManySegments) { expect_same_as_incore(dist(io::Distribution::kTerrain, 20000, 7), 1500, 10); }
-TEST_F(PipelineTest, TwoPlatesManySegments) { expect_same_as_incore(dist(io::Distribution::kTwoPlates, 20000, 8), 1500, 10); }
+TEST_F(PipelineTest, TerrainManySegments) {
+  expect_same_as_incore(dist(io::Distribution::kTerrain, 20000, 7), 1500, 10);
+}
+TEST_F(PipelineTest, TwoPlatesManySegments) {
+  expect_same_as_incore(dist(io::Distribution::kTwoPlates, 20000, 8), 1500, 10);
+}
 TEST_F(PipelineTest, SphereCospherical) { expect_same_as_incore(dist(io::Distribution::kSphere, 2000, 6), 150, 10); }
 
 // The surface zoo (io/point_zoo.hpp): roofs without walls, crowns with several returns,
 // holes, overlapping strips on scan lines, steep hills, closed rooms: small sets, small
 // windows (many segments; then 3 zones a segment on 2 threads), the in-core kernel's tets.
-const io::Distribution kZoo[] = {io::Distribution::kHills,  io::Distribution::kRoofs,     io::Distribution::kCanopy,
-                                 io::Distribution::kWater,  io::Distribution::kStrips,    io::Distribution::kScanLines,
+const io::Distribution kZoo[] = {io::Distribution::kHills,  io::Distribution::kRoofs,  io::Distribution::kCanopy,
+                                 io::Distribution::kWater,  io::Distribution::kStrips, io::Distribution::kScanLines,
                                  io::Distribution::kSurvey, io::Distribution::kIndoor};
 
 TEST_F(PipelineTest, ZooManySegments) {
@@ -129,7 +136,8 @@ TEST_F(PipelineTest, ZonesInsideSegments) {
 // The planner's own choice: a budget small enough that the segments are cut into
 // zones (strips) chosen to waste the least on buffers, run on 2 threads.
 TEST_F(PipelineTest, BudgetPlansZones) {
-  for (const auto& g : {dist(io::Distribution::kUniform, 100000, 11), dist(io::Distribution::kEllipsoidShell, 100000, 12)}) {
+  for (const auto& g :
+       {dist(io::Distribution::kUniform, 100000, 11), dist(io::Distribution::kEllipsoidShell, 100000, 12)}) {
     SCOPED_TRACE(io::to_string(g.dist));
     const std::string input = write_points(g);
     pipeline::RunOptions o;

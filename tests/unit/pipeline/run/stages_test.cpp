@@ -111,7 +111,7 @@ class StagesTest : public testing_util::ScratchDirTest {
     options_.output = path("out.tets");
     options_.memory_bytes = 64 * kMiB;
     options_.sort_run_points = 700;  // several runs, merged
-    options_.segment_points = 1000;     // several segments
+    options_.segment_points = 1000;  // several segments
     options_.zones = 2;              // of two zones each (a zone takes at least 256 points)
     options_.progress = false;
   }
@@ -144,7 +144,8 @@ TEST_F(StagesTest, SortStageWritesEveryPointInOrder) {
   ASSERT_EQ(sorted.layout, (RecordLayout{false, false}));
   ASSERT_EQ(std::filesystem::file_size(sorted.path), kPoints * sizeof(Record));
   std::vector<Record> records(kPoints);
-  std::ifstream(sorted.path, std::ios::binary).read(reinterpret_cast<char*>(records.data()), std::streamsize(kPoints * sizeof(Record)));
+  std::ifstream(sorted.path, std::ios::binary)
+      .read(reinterpret_cast<char*>(records.data()), std::streamsize(kPoints * sizeof(Record)));
   std::vector<bool> seen(kPoints, false);
   for (std::size_t i = 0; i < records.size(); ++i) {
     if (i > 0) {
@@ -237,7 +238,8 @@ TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
     index.run();
     std::vector<std::array<std::uint64_t, 4>> tets = incore_tets(index.view());
     auto min_label = [](const std::array<std::uint64_t, 4>& t) { return *std::min_element(t.begin(), t.end()); };
-    std::stable_sort(tets.begin(), tets.end(), [&](const auto& a, const auto& b) { return min_label(a) < min_label(b); });
+    std::stable_sort(tets.begin(), tets.end(),
+                     [&](const auto& a, const auto& b) { return min_label(a) < min_label(b); });
     const std::uint64_t split = kPoints / 2;
     ZoneTets parts[2];
     for (ZoneTets& part : parts)

@@ -16,8 +16,8 @@ namespace {
 constexpr std::uint64_t kMiB = std::uint64_t(1) << 20;
 
 TEST(MemoryBudget, PhasesNeverExceedTheCeiling) {
-  for (std::uint64_t ceiling : {32 * kMiB, 48 * kMiB, 64 * kMiB, 96 * kMiB, 128 * kMiB, 1024 * kMiB, 16384 * kMiB,
-                                kMiB << 20}) {
+  for (std::uint64_t ceiling :
+       {32 * kMiB, 48 * kMiB, 64 * kMiB, 96 * kMiB, 128 * kMiB, 1024 * kMiB, 16384 * kMiB, kMiB << 20}) {
     for (std::uint64_t points : {std::uint64_t(4), std::uint64_t(1000), std::uint64_t(100000), std::uint64_t(10000000),
                                  std::uint64_t(1000000000), std::uint64_t(100000000000)}) {
       for (int threads : {1, 2, 16, 256}) {

@@ -101,7 +101,8 @@ TEST(ExchangeRecords, EveryRanksRecordsByRank) {
       // Rank r sends rank q the values 1000 r + 10 q + i, i < r + q.
       std::vector<std::vector<std::uint64_t>> to(static_cast<std::size_t>(k));
       for (int q = 0; q < k; ++q)
-        for (int i = 0; i < comm.rank() + q; ++i) to[std::size_t(q)].push_back(std::uint64_t(1000 * comm.rank() + 10 * q + i));
+        for (int i = 0; i < comm.rank() + q; ++i)
+          to[std::size_t(q)].push_back(std::uint64_t(1000 * comm.rank() + 10 * q + i));
       got[std::size_t(comm.rank())] = pipeline::exchange_records(comm, to);
     });
     for (int q = 0; q < k; ++q) {

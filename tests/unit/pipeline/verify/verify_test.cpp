@@ -35,17 +35,17 @@
 namespace tetstream {
 namespace {
 
-using pipeline::Violation;
 using pipeline::VerifyOptions;
 using pipeline::VerifyReport;
+using pipeline::Violation;
 namespace fs = std::filesystem;
 
 // ---------------------------------------------------------------------------------
 // Building outputs.
 
 struct Output {
-  std::vector<double> xyz;            // sorted, distinct: label = index
-  std::vector<std::uint64_t> tets;    // 4 labels per tet, positively oriented
+  std::vector<double> xyz;          // sorted, distinct: label = index
+  std::vector<std::uint64_t> tets;  // 4 labels per tet, positively oriented
   std::size_t count() const { return xyz.size() / 3; }
   const double* p(std::uint64_t l) const { return xyz.data() + 3 * l; }
 };
@@ -78,7 +78,8 @@ void sort_by_min(std::vector<std::uint64_t>& tets) {
 std::vector<std::uint64_t> triangulate_labels(const std::vector<double>& xyz, const std::vector<std::uint64_t>& keep) {
   std::vector<double> sub;
   sub.reserve(3 * keep.size());
-  for (std::uint64_t l : keep) sub.insert(sub.end(), xyz.begin() + std::ptrdiff_t(3 * l), xyz.begin() + std::ptrdiff_t(3 * l + 3));
+  for (std::uint64_t l : keep)
+    sub.insert(sub.end(), xyz.begin() + std::ptrdiff_t(3 * l), xyz.begin() + std::ptrdiff_t(3 * l + 3));
   core::Delaunay dt;
   EXPECT_EQ(dt.build(sub.data(), keep.data(), keep.size()), core::BuildStatus::kOk);
   std::vector<std::uint64_t> tets;
@@ -363,8 +364,8 @@ TEST(Verify, Float32ContainersAreCheckedOnTheirFloats) {
   const Output j = triangulate(g);
   const VerifyReport jd = verify_output(j, "jitter64.tets");
   EXPECT_TRUE(jd.ok()) << jd.summary();
-  const VerifyReport jf = pipeline::verify_file(write_container(j, "jitter32.tets", 500, io::CoordType::kFloat32),
-                                                quiet_options());
+  const VerifyReport jf =
+      pipeline::verify_file(write_container(j, "jitter32.tets", 500, io::CoordType::kFloat32), quiet_options());
   EXPECT_FALSE(jf.ok());
   EXPECT_GT(count(jf, Violation::kDelaunay) + count(jf, Violation::kOrientation), 0u) << jf.summary();
 }
@@ -535,8 +536,8 @@ TEST(Verify, MissingPoint) {
 TEST(Verify, StorageAndOverusedFacets) {
   const Output& o = uniform_output();
   std::vector<std::uint64_t> tets = o.tets;
-  tets[4 * 10 + 1] = tets[4 * 10];          // repeated label
-  tets[4 * 20 + 3] = o.count() + 5;         // label out of range
+  tets[4 * 10 + 1] = tets[4 * 10];   // repeated label
+  tets[4 * 20 + 3] = o.count() + 5;  // label out of range
   // A tet through an existing interior facet, with a far apex: that facet is now in
   // three tets.
   const Facets f(o.tets);
@@ -639,7 +640,8 @@ TEST(Verify, RewrittenButChecksummedTetsAreCaught) {
     switch (g() % 5) {
       case 0: {  // a vertex replaced by another point
         std::uint64_t v;
-        do v = g() % o.count(); while (v == o.tets[4 * t + k]);
+        do v = g() % o.count();
+        while (v == o.tets[4 * t + k]);
         o.tets[4 * t + k] = v;
         edit = "replaced a vertex";
         break;
@@ -701,8 +703,8 @@ TEST(Verify, StepsDoNotChangeTheReport) {
   static const Output o = triangulate(test::uniform_cube(20000, 5));
   std::vector<std::uint64_t> tets = o.tets;
   for (std::size_t t : {17u, 9000u, 64000u}) std::swap(tets[4 * t], tets[4 * t + 1]);  // flipped
-  tets.insert(tets.end(), tets.begin() + 4 * 5000, tets.begin() + 4 * 5001);        // repeated
-  erase_tet(tets, 30000);                                                           // a hole
+  tets.insert(tets.end(), tets.begin() + 4 * 5000, tets.begin() + 4 * 5001);           // repeated
+  erase_tet(tets, 30000);                                                              // a hole
   const std::size_t n_tets = tets.size() / 4;
   pipeline::MemorySource src(o.xyz, tets, n_tets);  // one frame of all the tets
   const VerifyReport whole = pipeline::verify(src, quiet_options());
@@ -733,15 +735,24 @@ TEST(Verify, RanksGiveOneProcesssReport) {
     const std::size_t tets = o.tets.size() / 4;
     const std::size_t t = seed % 2 ? g() % tets : tets / 2 - 40 + g() % 80, k = g() % 4;
     switch (seed == 0 ? 9 : g() % 5) {
-      case 0: o.tets[4 * t + k] = (o.tets[4 * t + k] + 1 + g() % (o.count() - 1)) % o.count(); break;
-      case 1: std::swap(o.tets[4 * t + k], o.tets[4 * t + (k + 1) % 4]); break;
-      case 2: erase_tet(o.tets, t); break;
+      case 0:
+        o.tets[4 * t + k] = (o.tets[4 * t + k] + 1 + g() % (o.count() - 1)) % o.count();
+        break;
+      case 1:
+        std::swap(o.tets[4 * t + k], o.tets[4 * t + (k + 1) % 4]);
+        break;
+      case 2:
+        erase_tet(o.tets, t);
+        break;
       case 3:
         o.tets.insert(o.tets.end(), o.tets.begin() + std::ptrdiff_t(4 * t), o.tets.begin() + std::ptrdiff_t(4 * t + 4));
         sort_by_min(o.tets);
         break;
-      case 4: o.tets[4 * t + k] = o.tets[4 * ((t + 1 + g() % (tets - 1)) % tets) + g() % 4]; break;
-      default: break;  // seed 0: the correct output
+      case 4:
+        o.tets[4 * t + k] = o.tets[4 * ((t + 1 + g() % (tets - 1)) % tets) + g() % 4];
+        break;
+      default:
+        break;  // seed 0: the correct output
     }
     if (seed % 4 == 2) {
       // Frames stored in reverse (a writer's order need not be the visiting order):
@@ -750,7 +761,8 @@ TEST(Verify, RanksGiveOneProcesssReport) {
       const std::size_t whole = o.tets.size() / 800 * 800;
       std::vector<std::uint64_t> reversed;
       for (std::size_t begin = whole; begin > 0; begin -= 800)
-        reversed.insert(reversed.end(), o.tets.begin() + std::ptrdiff_t(begin - 800), o.tets.begin() + std::ptrdiff_t(begin));
+        reversed.insert(reversed.end(), o.tets.begin() + std::ptrdiff_t(begin - 800),
+                        o.tets.begin() + std::ptrdiff_t(begin));
       reversed.insert(reversed.end(), o.tets.begin() + std::ptrdiff_t(whole), o.tets.end());
       o.tets = std::move(reversed);
     }

@@ -56,9 +56,10 @@ struct Job {
       return std::lexicographical_compare(a.xyz, a.xyz + 3, b.xyz, b.xyz + 3);
     });
     // Labels are positions in the duplicate-free sorted order.
-    points.erase(std::unique(points.begin(), points.end(),
-                             [](const SortedPoint& a, const SortedPoint& b) { return std::equal(a.xyz, a.xyz + 3, b.xyz); }),
-                 points.end());
+    points.erase(
+        std::unique(points.begin(), points.end(),
+                    [](const SortedPoint& a, const SortedPoint& b) { return std::equal(a.xyz, a.xyz + 3, b.xyz); }),
+        points.end());
     for (std::size_t i = 0; i < points.size(); ++i) points[i].original = i;
     view.points = records_of(points.data());
     view.count = points.size();
@@ -66,14 +67,16 @@ struct Job {
     for (int k = 0; k < 3; ++k) view.bbox_min[k] = view.bbox_max[k] = points[0].xyz[k];
     for (const SortedPoint& p : points)
       for (int k = 0; k < 3; ++k)
-        view.bbox_min[k] = std::min(view.bbox_min[k], p.xyz[k]), view.bbox_max[k] = std::max(view.bbox_max[k], p.xyz[k]);
+        view.bbox_min[k] = std::min(view.bbox_min[k], p.xyz[k]),
+        view.bbox_max[k] = std::max(view.bbox_max[k], p.xyz[k]);
     index.build(view.points, view.count, 0, PointIndex::kMinBlockPoints);
     view.index = &index;
     view.sample_keys();
     std::vector<double> xyz;
     for (const SortedPoint& p : points) xyz.insert(xyz.end(), p.xyz, p.xyz + 3);
     for (std::uint32_t i : hull_vertex_candidates(xyz.data(), points.size())) hull.push_back(points[i]);
-    std::sort(hull.begin(), hull.end(), [](const SortedPoint& a, const SortedPoint& b) { return a.original < b.original; });
+    std::sort(hull.begin(), hull.end(),
+              [](const SortedPoint& a, const SortedPoint& b) { return a.original < b.original; });
     view.hull_points = hull;
     hull_index.build(records_of(view.hull_points.data()), view.hull_points.size(), 0, PointIndex::kMinBlockPoints);
     view.hull_index = &hull_index;
@@ -248,7 +251,8 @@ TEST(Certificate, AClearedStarIsTheFinalStar) {
     // The triangulation of all the points, and each label's vertex in it.
     std::vector<double> all_xyz;
     std::vector<std::uint64_t> all_labels;
-    for (const SortedPoint& p : job.points) all_xyz.insert(all_xyz.end(), p.xyz, p.xyz + 3), all_labels.push_back(p.original);
+    for (const SortedPoint& p : job.points)
+      all_xyz.insert(all_xyz.end(), p.xyz, p.xyz + 3), all_labels.push_back(p.original);
     core::Delaunay all;
     ASSERT_EQ(all.build(all_xyz.data(), all_labels.data(), all_labels.size()), core::BuildStatus::kOk);
     std::size_t final_vertices = 0, pending = 0;
@@ -259,7 +263,8 @@ TEST(Certificate, AClearedStarIsTheFinalStar) {
       bool certified = true;
       for (TetId t : star) {
         if (w.dt.is_infinite(t)) {
-          certified &= cert.hull_facet_range_test(w.dt, t) || cert.hull_facet_query(w.dt, t, stats) == Certificate::kNone;
+          certified &=
+              cert.hull_facet_range_test(w.dt, t) || cert.hull_facet_query(w.dt, t, stats) == Certificate::kNone;
         } else {
           const RangeTest r = cert.range_test(w.dt, t);
           certified &= r.clears() || cert.query(w.dt, t, r, stats) == Certificate::kNone;

@@ -33,7 +33,8 @@ std::vector<SortedPoint> sorted_points(std::size_t n, int axis, bool coarse, uns
     p[i].xyz[(axis + 1) % 3] *= 3;  // not a cube: the widest side varies by node
     p[i].original = i;
   }
-  std::sort(p.begin(), p.end(), [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); });
+  std::sort(p.begin(), p.end(),
+            [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); });
   return p;
 }
 
@@ -106,8 +107,8 @@ TEST_F(SharedIndex, PartsInOneFileAnswerAsTheWholeIndex) {
   whole.build(records_of(p.data()), p.size(), axis, block);
   const std::uint64_t blocks = PointIndex::blocks_for(p.size(), block);
   ASSERT_EQ(blocks, 12u);
-  for (const std::vector<std::uint64_t>& cuts : std::vector<std::vector<std::uint64_t>>{
-           {0, 12}, {0, 5, 12}, {0, 1, 7, 7, 12}, {0, 4, 8, 11, 12}}) {
+  for (const std::vector<std::uint64_t>& cuts :
+       std::vector<std::vector<std::uint64_t>>{{0, 12}, {0, 5, 12}, {0, 1, 7, 7, 12}, {0, 4, 8, 11, 12}}) {
     std::vector<PointIndex> parts(cuts.size() - 1);
     std::vector<std::uint64_t> first_node(parts.size() + 1, 0);
     for (std::size_t r = 0; r < parts.size(); ++r) {
@@ -136,8 +137,10 @@ TEST_F(SharedIndex, PartsInOneFileAnswerAsTheWholeIndex) {
       std::uint64_t first = label(rng), last = label(rng);
       if (first > last) std::swap(first, last);
       std::vector<std::uint64_t> a, b;
-      whole.for_each_candidate(c, r, first, last, [&](std::uint64_t l) { a.push_back(l); }, [] { return false; });
-      shared.for_each_candidate(c, r, first, last, [&](std::uint64_t l) { b.push_back(l); }, [] { return false; });
+      whole.for_each_candidate(
+          c, r, first, last, [&](std::uint64_t l) { a.push_back(l); }, [] { return false; });
+      shared.for_each_candidate(
+          c, r, first, last, [&](std::uint64_t l) { b.push_back(l); }, [] { return false; });
       ASSERT_EQ(a, b) << "query " << q << ", " << parts.size() << " parts";
     }
     EXPECT_EQ(whole.leaf_spacing_quantile(0.5), shared.leaf_spacing_quantile(0.5));
@@ -158,7 +161,8 @@ TEST(RankCost, FlatTetsMakeAPointDearer) {
     p[i].original = i;
   }
   std::sort(p.begin(), p.end(), [](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, 0); });
-  const std::size_t plane = std::size_t(std::count_if(p.begin(), p.end(), [](const SortedPoint& q) { return q.xyz[0] < 0; }));
+  const std::size_t plane =
+      std::size_t(std::count_if(p.begin(), p.end(), [](const SortedPoint& q) { return q.xyz[0] < 0; }));
   PointIndex index;
   const PointRecords records = records_of(p.data());
   index.build(records, p.size(), 0, 4096);
@@ -191,7 +195,8 @@ TEST(PointIndex, BlockPointsFollowTheSlabDensity) {
 
 TEST(SortedView, SampledSearchMatchesBinarySearch) {
   for (const bool coarse : {false, true}) {
-    for (const std::size_t n : {std::size_t(1), std::size_t(127), std::size_t(128), std::size_t(129), std::size_t(5000)}) {
+    for (const std::size_t n :
+         {std::size_t(1), std::size_t(127), std::size_t(128), std::size_t(129), std::size_t(5000)}) {
       const std::vector<SortedPoint> p = sorted_points(n, 0, coarse, unsigned(n));
       SortedView view;
       view.points = records_of(p.data());

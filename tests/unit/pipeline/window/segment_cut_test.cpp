@@ -24,7 +24,8 @@ struct SortedUniform {
     std::mt19937_64 rng(23);
     std::uniform_real_distribution<double> unit(0, 1);
     for (std::uint64_t i = 0; i < n; ++i) points.push_back(SortedPoint{{4 * unit(rng), unit(rng), unit(rng)}, i});
-    std::sort(points.begin(), points.end(), [](const SortedPoint& a, const SortedPoint& b) { return a.xyz[0] < b.xyz[0]; });
+    std::sort(points.begin(), points.end(),
+              [](const SortedPoint& a, const SortedPoint& b) { return a.xyz[0] < b.xyz[0]; });
     view.points = records_of(points.data());
     view.count = n;
     view.axis = 0;

@@ -26,7 +26,8 @@ struct ClusteredSegment {
       const double y = i % every == 0 ? 0.5 + width * (unit(rng) - 0.5) : unit(rng);
       points.push_back(SortedPoint{{4 * unit(rng), y, 0.1 * unit(rng)}, i});
     }
-    std::sort(points.begin(), points.end(), [](const SortedPoint& a, const SortedPoint& b) { return a.xyz[0] < b.xyz[0]; });
+    std::sort(points.begin(), points.end(),
+              [](const SortedPoint& a, const SortedPoint& b) { return a.xyz[0] < b.xyz[0]; });
     view.points = records_of(points.data());
     view.count = n;
     view.axis = 0;

@@ -432,7 +432,8 @@ TEST_F(AsyncTetWriterTest, AFailingCheckpointIsReportedOnce) {
   AsyncTetWriter out(*w, 2, 2);
   Outcome outcome;
   record(outcome, [&] { out.add_tets(std::span<const std::uint64_t>(job.batches[0])); });
-  record(outcome, [&] { out.add_checkpoint([](std::uint64_t) { throw IoError("state.json: No space left on device"); }); });
+  record(outcome,
+         [&] { out.add_checkpoint([](std::uint64_t) { throw IoError("state.json: No space left on device"); }); });
   record(outcome, [&] { out.drain(); });
   record(outcome, [&] { out.add_tets(std::span<const std::uint64_t>(job.batches[1])); });
   record(outcome, [&] { out.finish(); });
@@ -591,7 +592,8 @@ TEST_F(AsyncTetWriterTest, DiskFullWithKeepPartialCanBeResumed) {
   auto w = io::TetWriter::resume(path, job.header, committed, o);
   {
     AsyncTetWriter out(*w, 2);
-    for (std::size_t i = before; i < job.batches.size(); ++i) out.add_tets(std::span<const std::uint64_t>(job.batches[i]));
+    for (std::size_t i = before; i < job.batches.size(); ++i)
+      out.add_tets(std::span<const std::uint64_t>(job.batches[i]));
     out.finish();
   }
   EXPECT_EQ(slurp(path), slurp(whole));
