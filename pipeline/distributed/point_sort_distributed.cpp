@@ -101,12 +101,7 @@ std::uint64_t exchange_and_merge(Communicator& comm, const std::string& input, c
   const bool root = comm.rank() == 0;
   const int axis = result.axis;
   std::optional<MemoryBudget> own_budget;
-  MemoryBudget* budget = options.budget;
-  if (!budget)
-    budget =
-        &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
-  budget->set_points(result.input_count);
-  const SortShares shares = budget->plan_sort();
+  const SortShares shares = sort_shares(options, result.input_count, own_budget);
   const std::size_t run_points = options.run_points ? options.run_points : shares.run_points;
   // A round: each rank reads `chunk` records and sends them on; a rank receives at
   // most `ranks` chunks. The send buffer and the read chunk come out of the run

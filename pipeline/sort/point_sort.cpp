@@ -120,15 +120,8 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
                          const PointSortOptions& options, const std::string& dir, SortProgress& done,
                          SortedPoints& result) {
   auto t0 = Clock::now();
-  // The sort's shares of the ledger (run buffer, hull pieces, merge), sized for this
-  // input's count: a small input takes little of a large budget.
   std::optional<MemoryBudget> own_budget;
-  MemoryBudget* budget = options.budget;
-  if (!budget)
-    budget =
-        &own_budget.emplace(options.memory_bytes, result.input_count, detail::max_threads(), detail::max_threads());
-  budget->set_points(result.input_count);
-  const SortShares shares = budget->plan_sort();
+  const SortShares shares = sort_shares(options, result.input_count, own_budget);
   ExternalSortOptions sorter_options;
   sorter_options.memory_bytes = shares.merge_bytes;
   sorter_options.dir = dir;

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstring>
 #include <exception>
+#include <optional>
 #include <span>
 #include <unordered_set>
 #include <vector>
@@ -140,6 +141,17 @@ void merge_runs_into(typename RecordSort<R>::Sorter& sorter, const std::unordere
   hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
   result.hull_labels = std::move(hull_labels);
   out.finish(result, sync);
+}
+
+// The sort's shares of the ledger (run buffer, hull pieces, merge), sized for this
+// input's count (a small input takes little of a large budget): from the job's ledger
+// when the options carry one, else from one of the sort's own, made in `own`.
+inline SortShares sort_shares(const PointSortOptions& options, std::uint64_t input_count,
+                              std::optional<MemoryBudget>& own) {
+  MemoryBudget* budget = options.budget;
+  if (!budget) budget = &own.emplace(options.memory_bytes, input_count, detail::max_threads(), detail::max_threads());
+  budget->set_points(input_count);
+  return budget->plan_sort();
 }
 
 }  // namespace tetstream::pipeline::sort_detail
