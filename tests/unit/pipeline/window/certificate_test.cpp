@@ -160,19 +160,27 @@ std::vector<Case> cases() {
   return out;
 }
 
-// The window: the middle third of the labels.
-Window middle_window(const Job& job, bool strip) {
-  return Window(job, job.view.count / 3, 2 * job.view.count / 3, strip);
-}
+// A case's job, its window (the middle third of the labels) and the certificate of
+// that window's zone.
+struct ZoneCase {
+  Job job;
+  Window w;
+  Certificate cert;
+  SegmentStats stats;
+  explicit ZoneCase(const Case& c)
+      : job(c.shape, c.n, c.seed), w(job, job.view.count / 3, 2 * job.view.count / 3, c.strip), cert(job.view) {
+    cert.start_zone(w.plan, w.zone, w.held);
+  }
+};
 
 TEST(Certificate, RangeTestIsConservativeAndQueryIsExact) {
   for (const Case& c : cases()) {
     SCOPED_TRACE(c.name());
-    Job job(c.shape, c.n, c.seed);
-    Window w = middle_window(job, c.strip);
-    Certificate cert(job.view);
-    cert.start_zone(w.plan, w.zone, w.held);
-    SegmentStats stats;
+    ZoneCase setup(c);
+    const Job& job = setup.job;
+    Window& w = setup.w;
+    Certificate& cert = setup.cert;
+    SegmentStats& stats = setup.stats;
     std::size_t cleared = 0, queried = 0, conflicting = 0;
     for (TetId t = 0; t < w.dt.num_tet_slots(); ++t) {
       if (!w.dt.is_alive(t) || w.dt.is_infinite(t)) continue;
@@ -202,11 +210,11 @@ TEST(Certificate, RangeTestIsConservativeAndQueryIsExact) {
 TEST(Certificate, HullFacetQueryAgreesWithBruteForce) {
   for (const Case& c : cases()) {
     SCOPED_TRACE(c.name());
-    Job job(c.shape, c.n, c.seed);
-    Window w = middle_window(job, c.strip);
-    Certificate cert(job.view);
-    cert.start_zone(w.plan, w.zone, w.held);
-    SegmentStats stats;
+    ZoneCase setup(c);
+    const Job& job = setup.job;
+    Window& w = setup.w;
+    Certificate& cert = setup.cert;
+    SegmentStats& stats = setup.stats;
     std::size_t facets = 0, global = 0;
     for (TetId t = 0; t < w.dt.num_tet_slots(); ++t) {
       if (!w.dt.is_alive(t) || !w.dt.is_infinite(t)) continue;
@@ -243,11 +251,11 @@ std::set<std::vector<std::uint64_t>> star_labels(const core::Delaunay& dt, Verte
 TEST(Certificate, AClearedStarIsTheFinalStar) {
   for (const Case& c : cases()) {
     SCOPED_TRACE(c.name());
-    Job job(c.shape, c.n, c.seed);
-    Window w = middle_window(job, c.strip);
-    Certificate cert(job.view);
-    cert.start_zone(w.plan, w.zone, w.held);
-    SegmentStats stats;
+    ZoneCase setup(c);
+    const Job& job = setup.job;
+    Window& w = setup.w;
+    Certificate& cert = setup.cert;
+    SegmentStats& stats = setup.stats;
     // The triangulation of all the points, and each label's vertex in it.
     std::vector<double> all_xyz;
     std::vector<std::uint64_t> all_labels;
