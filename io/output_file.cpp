@@ -2,6 +2,7 @@
 
 #include "core/error.hpp"
 
+#include <atomic>
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
@@ -33,12 +34,17 @@ std::set<FileId>& noted() {
   static std::set<FileId> s;
   return s;
 }
+std::atomic<bool>& noting() {
+  static std::atomic<bool> on{false};
+  return on;
+}
 void note(const struct stat& st) {
-  if (!S_ISREG(st.st_mode)) return;
+  if (!noting().load(std::memory_order_relaxed) || !S_ISREG(st.st_mode)) return;
   std::lock_guard lock(noted_mutex());
   noted().insert({std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)});
 }
 bool is_noted(const struct stat& st) {
+  if (!noting().load(std::memory_order_relaxed)) return false;
   std::lock_guard lock(noted_mutex());
   return noted().count({std::uint64_t(st.st_dev), std::uint64_t(st.st_ino)}) != 0;
 }
@@ -53,6 +59,8 @@ void note_input_fd(int fd) {
   struct stat st {};
   if (fd >= 0 && ::fstat(fd, &st) == 0) note(st);
 }
+
+void note_files(bool on) { noting().store(on, std::memory_order_relaxed); }
 
 void forget_noted_files() {
   std::lock_guard lock(noted_mutex());

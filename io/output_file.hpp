@@ -37,6 +37,12 @@ void note_input_fd(int fd);
 // Forgets them: a process that runs several commands (the Python package) starts each
 // with none, so that an inode the filesystem reuses is never taken for an input.
 void forget_noted_files();
+// Whether files are noted at all. A command is one process's work in the tool (the
+// binary's main turns this on, and so does the Python package, which forgets the notes
+// at each command); a program linking the libraries runs many operations over the same
+// files in one process and has no such unit, so nothing is noted by default there (the
+// other checks of an output, links, non-regular files, the input itself, still hold).
+void note_files(bool on);
 // Whether `path` names a file this process has read or written (by device and inode).
 bool is_noted_input(const std::string& path);
 // Refuses (UsageError) standard output redirected into a file this process reads

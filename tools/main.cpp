@@ -131,6 +131,9 @@ void configure_logging(const GlobalOptions& g) {
 }  // namespace tetstream::cli
 
 int main(int argc, char** argv) {
+  // One command a process: every file it reads or finishes is noted, and no output of
+  // it may be one of them (io/output_file.hpp).
+  tetstream::io::note_files(true);
   using namespace tetstream;
   using namespace tetstream::cli;
 

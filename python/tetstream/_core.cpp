@@ -954,6 +954,9 @@ void register_exceptions(py::module_& m) {
 }  // namespace
 
 PYBIND11_MODULE(_core, m) {
+  // Each command of the package is one command of the tool: its files are noted, and
+  // forgotten when the next one starts (io/output_file.hpp).
+  io::note_files(true);
   m.doc() = "tetstream's compiled core; use the package `tetstream` (its functions carry the documentation).";
   register_exceptions(m);
   m.def("delaunay", &delaunay, py::arg("points"), py::arg("index_dtype") = "int64", py::arg("threads") = 0,

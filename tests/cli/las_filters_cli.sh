@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# LiDAR at read time and data on meshes (issue #41): --las-classes and --las-returns keep
+# LiDAR at read time and data on meshes: --las-classes and --las-returns keep
 # the points asked for in every command that reads points (info counts them, run
 # triangulates them), are part of the job (a resume with another filter is refused) and
 # are refused on other formats; convert --point-data NAME=FILE.npy writes a user's
@@ -9,6 +9,9 @@
 # Usage: bash las_filters_cli.sh /path/to/tetstream
 set -uo pipefail
 T=$(realpath "${1:?usage: las_filters_cli.sh /path/to/tetstream}")
+# The checks read the meshes back with numpy and meshio: Debian's python3 has them
+# (scripts/setup.sh), whatever python3 comes first on PATH.
+python3() { "${TETSTREAM_PYTHON:-/usr/bin/python3}" "$@"; }
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 cd "$dir"

@@ -32,9 +32,10 @@ namespace {
 
 class WriterSafety : public ScratchDirTest {
  protected:
-  WriterSafety() : ScratchDirTest("writer-safety") {}
+  WriterSafety() : ScratchDirTest("writer-safety") { io::note_files(true); }
   void TearDown() override {
     io::forget_noted_files();
+    io::note_files(false);
     ScratchDirTest::TearDown();
   }
   void put(const std::string& name, const std::string& text) {
