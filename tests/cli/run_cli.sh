@@ -91,12 +91,15 @@ set +e
 set -e
 [ "$rc1 $rc2 $rc3" = "2 2 2" ] || fail "usage errors exit $rc1 $rc2 $rc3"
 
-# I/O failures: exit 3.
+# An I/O failure exits 3; a work directory that does not exist is the user's to make
+# (a usage error, exit 2, that says so).
 set +e
 "$T" -q run does-not-exist.f64 -o bad.tets --tmpdir tmp >/dev/null 2>&1; rc1=$?
-"$T" -q run points.f64 -o bad.tets --tmpdir /nonexistent/dir >/dev/null 2>&1; rc2=$?
+"$T" -q run points.f64 -o bad.tets --tmpdir /nonexistent/dir >/dev/null 2>missing-dir.txt; rc2=$?
 set -e
-[ "$rc1 $rc2" = "3 3" ] || fail "I/O errors exit $rc1 $rc2"
+[ "$rc1 $rc2" = "3 2" ] || fail "I/O errors exit $rc1 $rc2"
+grep -q "must exist" missing-dir.txt || fail "a missing --tmpdir is not named: $(cat missing-dir.txt)"
+rm -f missing-dir.txt
 no_leftovers
 # A failing stage (an injected disk-full error in the sort, in a segment's worker, in
 # the writer) cancels the job cleanly at any thread count: exit 3, the error reported
