@@ -886,8 +886,10 @@ def field(source: Union[PathLike, Triangulation], density: bool = True, voronoi_
             if isinstance(mass, (str, bytes, os.PathLike)):
                 mass_path = os.fsdecode(mass)
             else:
-                mass_path = os.path.join(work, "mass.npy")
-                np.save(mass_path, np.ascontiguousarray(np.asarray(mass, dtype=np.float64)))
+                # Raw float64 (the mass file may be raw or .npy), written the one way the
+                # package writes a file: claimed, to a partial name, renamed when complete.
+                mass_path = os.path.join(work, "mass.f64")
+                _core.spill(mass_path, np.ascontiguousarray(np.asarray(mass, dtype="<f8")))
         summary = _core.field(path, os.path.join(work, "f"), bool(density), bool(voronoi_volume), bool(neighbours),
                               shape, box, hull, out_dtype.name, index_dtype == "int64", mass_path, memory,
                               os.fspath(tmpdir) if tmpdir else "", _progress_flag(progress), _threads(threads),
