@@ -41,7 +41,17 @@ void run_run(RunArgs& args, Context& ctx) {
   // under that name, as any output), then converts it and removes it.
   const std::optional<io::MeshFormat> mesh = mesh_output(o.output);
   const std::string mesh_path = o.output;
-  if (mesh) o.output += ".tets";
+  if (mesh) {
+    o.output += ".tets";
+    // That container is the job's own, removed after the conversion: a file already
+    // there is somebody else's, never replaced or removed.
+    std::error_code ec;
+    if (std::filesystem::symlink_status(o.output, ec).type() != std::filesystem::file_type::not_found)
+      throw UsageError(o.output + " exists: run -o " + mesh_path +
+                       " writes its container there and removes it after the conversion (move it away, or "
+                       "write -o " +
+                       o.output + " and convert it)");
+  }
   o.memory_bytes = pipeline::parse_memory_size(args.memory);
   o.threads = ctx.global.threads;
   o.progress = !ctx.global.quiet;

@@ -504,6 +504,11 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
     mesh = None
     if os.path.splitext(output)[1].lower() in _MESH_EXTENSIONS:
         mesh, output = output, output + ".tets"
+        # That container is the job's own, removed after the conversion: a file already
+        # there is somebody else's, never replaced or removed.
+        if os.path.lexists(output):
+            raise UsageError(f"{output} exists: run() to {mesh} writes its container there and removes it "
+                             f"after the conversion (move it away, or write {output} and convert it)")
     spill: Optional[str] = None
     remove_spill_always = False
     wrote_spill = False

@@ -22,6 +22,14 @@ j=$("$T" -q --json run p.f64 -o out.vtu --no-checkpoint) || fail "run -o out.vtu
 head -c 200 out.vtu | grep -q '<VTKFile type="UnstructuredGrid"' || fail "out.vtu is not a VTU: $(head -c 40 out.vtu | od -c | head -2)"
 [ "$(echo "$j" | json "d['tets'], d['mesh']")" = "$tets out.vtu" ] || fail "--json of run -o out.vtu: $j"
 [ "$(ls)" = "$(printf 'out.vtu\np.f64\np.tets')" ] || fail "run -o out.vtu left files: $(ls)"
+# Its container's name is the job's own: a file of the user's already there is refused,
+# neither replaced nor removed.
+echo "the user's" >mine.vtu.tets
+"$T" -q run p.f64 -o mine.vtu --no-checkpoint 2>refused.txt && fail "run -o mine.vtu replaced mine.vtu.tets"
+[ "$(cat mine.vtu.tets)" = "the user's" ] || fail "mine.vtu.tets was overwritten"
+grep -q "mine.vtu.tets exists" refused.txt || fail "the refusal does not name the file: $(cat refused.txt)"
+[ ! -e mine.vtu ] || fail "a refused run wrote mine.vtu"
+rm -f mine.vtu.tets refused.txt
 if /usr/bin/python3 -c "import meshio" 2>/dev/null; then
   /usr/bin/python3 -c "import meshio, sys; m = meshio.read('out.vtu'); assert len(m.cells_dict['tetra']) == $tets, m" ||
     fail "meshio cannot read out.vtu"
