@@ -4,7 +4,6 @@
 #include "core/huge_pages.hpp"
 #include "core/spatial_sort.hpp"
 #include "pipeline/window/certificate.hpp"
-#include "pipeline/window/tet_set.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -62,14 +61,15 @@ class ZoneWorker {
     bool operator==(const QueuedTet& o) const { return tet == o.tet; }
   };
   bool query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs);
+  // Runs the queued tets' queries (along the sort axis) and empties the queue: at the
+  // end of a round's range tests, and whenever the queue reaches queue_cap_.
+  void run_queued_queries(std::vector<std::uint64_t>& repairs);
+  // Calls visit(state) for the zone state of each of tet t's vertices in this zone.
+  template <class Visit>
+  void zone_states(TetId t, Visit&& visit);
+  // Marks the pending zone vertices of tet t blocked: not final after this round.
+  void block_pending(TetId t);
   bool check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs);
-  // The tet's key in proved_empty_: its sorted vertex ids, 128 bits.
-  std::pair<std::uint64_t, std::uint64_t> tet_key(TetId t) const {
-    std::array<VertexId, 4> v;
-    for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(t, i);
-    std::sort(v.begin(), v.end());
-    return {std::uint64_t(v[1]) << 32 | v[0], std::uint64_t(v[3]) << 32 | v[2]};
-  }
   // Zone index of local vertex v (its label minus label_begin), or -1 outside the zone
   // (outside the segment's labels, or in another worker's strip). One 4-byte load:
   // zone_of_ is filled once in run(), so the rounds' hot loops read no labels or
@@ -100,7 +100,19 @@ class ZoneWorker {
   std::vector<VertexId> zone_vertex_;  // by zone index: the local vertex (kNoVertex: another strip's)
   std::vector<VertexId> pending_;      // the zone vertices still pending after a round
   std::vector<TetId> star_;            // scratch for a pending vertex's star
-  TetSet proved_empty_;                // the tets the queries proved empty
+  // By tet slot: 1 when a query proved the tet empty. A tet proved empty stays in its
+  // slot for the rest of the zone: no missing point is in its ball (or beyond its
+  // hull facet), and the repairs insert only missing points, so it is never in a
+  // repair's cavity and its slot is never freed and reused. One byte a slot, where a
+  // table keyed by the vertices took 32-64 bytes an entry and, on a surface (about 4
+  // entries a window point on `gen --dist hills`), took a zone past its share of the
+  // budget.
+  std::vector<std::uint8_t> proved_empty_;
+  // The most entries queued_ holds, from the window's size (run()): on a surface nearly
+  // every tet fails the range test (10-25 a point on `gen --dist hills`), and an
+  // unbounded queue of 72-byte entries was, with the table above, what took hills
+  // windows past their share.
+  std::size_t queue_cap_ = 0;
   SegmentStats stats_;
   // One round's work, for the debug log (`--log-level debug`, scripts/plot-rounds).
   // queries: those run in the round (the queued tets not proved before, and the hull
@@ -173,18 +185,17 @@ bool ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   if (q.range.clears()) return true;
   ++stats_.range_failures;
   queued_.push_back(q);
+  if (queued_.size() >= queue_cap_) run_queued_queries(repairs);
   return true;
 }
 
 bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs) {
-  // A tet proved empty stays empty for the rest of the zone: later repairs insert
-  // only points that were missing, and none of those is in its ball. (In the first
-  // round the table is empty and each queued tet unique: no lookup.)
-  const auto [key_a, key_b] = tet_key(q.tet);
-  if (stats_.rounds > 1 && proved_empty_.contains(key_a, key_b)) return true;
+  // A tet proved empty stays empty, and in its slot, for the rest of the zone: later
+  // repairs insert only points that were missing, and none of those is in its ball.
+  if (proved_empty_[q.tet]) return true;
   const std::uint64_t deepest = certificate_.query(dt_, q.tet, q.range, stats_);
   if (deepest == Certificate::kNone) {
-    proved_empty_.insert(key_a, key_b);
+    proved_empty_[q.tet] = 1;
     return true;
   }
   repairs.push_back(deepest);
@@ -198,15 +209,31 @@ bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repai
 bool ZoneWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs) {
   if (certificate_.hull_facet_range_test(dt_, t)) return true;
   ++stats_.range_failures;
-  const auto [key_a, key_b] = tet_key(t);
-  if (proved_empty_.contains(key_a, key_b)) return true;
+  if (proved_empty_[t]) return true;
   const std::uint64_t nearest = certificate_.hull_facet_query(dt_, t, stats_);
   if (nearest == Certificate::kNone) {
-    proved_empty_.insert(key_a, key_b);
+    proved_empty_[t] = 1;
     return true;
   }
   repairs.push_back(nearest);
   return false;
+}
+
+// The states of tet t's vertices in this zone (other vertices have none).
+template <class Visit>
+void ZoneWorker::zone_states(TetId t, Visit&& visit) {
+  for (int i = 0; i < 4; ++i) {
+    const VertexId v = dt_.vertex(t, i);
+    if (v == core::kInfiniteVertex) continue;
+    const std::int64_t z = zone_index(v);
+    if (z >= 0) visit(zone_state_[std::size_t(z)]);
+  }
+}
+
+void ZoneWorker::block_pending(TetId t) {
+  zone_states(t, [](std::uint8_t& state) {
+    if (state != kDone) state = kBlocked;
+  });
 }
 
 // A zone vertex is final when no tet incident to it is unsafe. The first round, with
@@ -218,21 +245,7 @@ bool ZoneWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs) 
 std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
   round_ = RoundWork{};
   const std::uint64_t queries_before = stats_.queries;
-  auto t0 = Clock::now();
-  // The states of tet t's vertices in this zone (other vertices have none).
-  auto zone_states = [&](TetId t, auto&& visit) {
-    for (int i = 0; i < 4; ++i) {
-      const VertexId v = dt_.vertex(t, i);
-      if (v == core::kInfiniteVertex) continue;
-      const std::int64_t z = zone_index(v);
-      if (z >= 0) visit(zone_state_[std::size_t(z)]);
-    }
-  };
-  auto block_pending = [&](TetId t) {
-    zone_states(t, [](std::uint8_t& state) {
-      if (state != kDone) state = kBlocked;
-    });
-  };
+  const auto t0 = Clock::now();
   if (stats_.rounds == 1) {
     const std::size_t slots = dt_.num_tet_slots();
     for (std::size_t t = 0; t < slots; ++t) {
@@ -252,12 +265,26 @@ std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
         if (!check_tet(t, repairs)) block_pending(t);
     }
   }
-  round_.seconds_range = since(t0);
-  t0 = Clock::now();
+  run_queued_queries(repairs);
+  round_.seconds_range = since(t0) - round_.seconds_queries;
+  round_.queries = stats_.queries - queries_before;
+  pending_.clear();
+  for (std::size_t z = 0; z < zone_state_.size(); ++z) {
+    std::uint8_t& state = zone_state_[z];
+    if (state == kPending)
+      state = kDone;
+    else if (state == kBlocked)
+      state = kPending, pending_.push_back(zone_vertex_[z]);
+  }
+  return pending_.size();
+}
+
+void ZoneWorker::run_queued_queries(std::vector<std::uint64_t>& repairs) {
+  const auto t0 = Clock::now();
   // The queries, along the sort axis (a tet of several pending stars once).
   std::sort(queued_.begin(), queued_.end());
   queued_.erase(std::unique(queued_.begin(), queued_.end()), queued_.end());
-  round_.queued = queued_.size();
+  round_.queued += queued_.size();
   // In the first two rounds, a tet whose zone vertices a conflict has already blocked
   // in this round waits: its vertices stay pending, so the next round checks it again
   // if the repairs leave it (near the window's ragged edge they often do not). No
@@ -275,18 +302,8 @@ std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
     if (stats_.rounds <= kDeferRounds && blocks_nothing_new(q.tet)) continue;
     if (!query_tet(q, repairs)) block_pending(q.tet), ++round_.conflicts;
   }
-  round_.seconds_queries = since(t0);
-  round_.queries = stats_.queries - queries_before;
   queued_.clear();
-  pending_.clear();
-  for (std::size_t z = 0; z < zone_state_.size(); ++z) {
-    std::uint8_t& state = zone_state_[z];
-    if (state == kPending)
-      state = kDone;
-    else if (state == kBlocked)
-      state = kPending, pending_.push_back(zone_vertex_[z]);
-  }
-  return pending_.size();
+  round_.seconds_queries += since(t0);
 }
 
 // Minimum vertex filter, once every zone vertex is final: each finite tet whose
@@ -373,7 +390,6 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   certificate_.start_zone(plan, zone, held_);
   stats_ = SegmentStats{};
   pending_.clear();
-  proved_empty_.clear();
   auto t0 = Clock::now();
   // A window is triangulated on its own points; its hull facets are checked like its
   // other tets. A window too flat for a triangulation (a slab of a planar region)
@@ -385,6 +401,10 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
       throw InputError("the input has fewer than 4 affinely independent distinct points");
   }
   stats_.seconds_build = since(t0);
+  // A window point's share of the zone plan's bytes (kWindowBytesPerPoint) holds an
+  // eighth of a queue entry (9 bytes) and the memo's byte for each of its ~7 tet slots.
+  queue_cap_ = std::max<std::size_t>(4096, labels_.size() / 8);
+  proved_empty_.assign(dt_.num_tet_slots(), 0);
 
   t0 = Clock::now();
   // The zone vertices: the window's points with a label in the segment's zone and,
@@ -446,6 +466,7 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
     zone_of_.resize(labels_.size(), kNoZone);  // repair points are never zone points
     dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
+    proved_empty_.resize(dt_.num_tet_slots(), 0);  // new slots; a reused one was never proved
     stats_.repair_points += repairs.size();
     log_round(repairs.size(), since(t_insert));
   }
