@@ -38,6 +38,7 @@ constexpr Counter kCounters[] = {
     {"query_points", &SegmentStats::query_points, &RunSummary::query_points},
     {"rounds", &SegmentStats::rounds, &RunSummary::rounds_max},
     {"tets", &SegmentStats::tets, &RunSummary::tets},
+    {"tets_by_query", &SegmentStats::tets_by_query, &RunSummary::tets_by_query},
 };
 
 // The points section from the sorted file's records, in label order, in the header's

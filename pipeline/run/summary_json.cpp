@@ -28,6 +28,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
                         {"repairs", s.repair_points}}},
                       {"zone_buffer_share", s.zone_buffer_share()},
                       {"tets", s.tets},
+                      {"certified", {{"by_range_test", s.tets - s.tets_by_query}, {"by_query", s.tets_by_query}}},
                       {"output_bytes", s.output_bytes},
                       {"disk_planned_bytes", s.disk_planned_bytes},
                       {"disk_peak_bytes", s.disk_peak_bytes},

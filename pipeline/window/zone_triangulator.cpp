@@ -337,7 +337,7 @@ void ZoneWorker::emit(ZoneTets& out) {
     }
     const std::uint32_t z = zone_of_[m];
     owner[t] = z;
-    if (z != kNoZone) ++bucket_start[(z >> shift) + 1];
+    if (z != kNoZone) ++bucket_start[(z >> shift) + 1], stats_.tets_by_query += proved_empty_[t];
   }
   for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
   const std::size_t total = bucket_start[buckets];
@@ -403,7 +403,7 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   stats_.seconds_build = since(t0);
   // A window point's share of the zone plan's bytes (kWindowBytesPerPoint) holds an
   // eighth of a queue entry (9 bytes) and the memo's byte for each of its ~7 tet slots.
-  queue_cap_ = std::max<std::size_t>(4096, labels_.size() / 8);
+  queue_cap_ = std::max<std::size_t>(256, labels_.size() / 8);
   proved_empty_.assign(dt_.num_tet_slots(), 0);
 
   t0 = Clock::now();
