@@ -137,6 +137,15 @@ void IndexStage::find_hull() {
     }
     release_mapped_pages(mapping_.data(), mapping_.size());
   }
+  {
+    std::vector<double> xyz(3 * view.hull_points.size());
+    std::vector<std::uint64_t> labels(view.hull_points.size());
+    for (std::size_t i = 0; i < view.hull_points.size(); ++i) {
+      std::copy_n(view.hull_points[i].xyz, 3, &xyz[3 * i]);
+      labels[i] = view.hull_points[i].original;
+    }
+    view.hull_facets = hull_facet_labels(xyz.data(), labels.data(), labels.size());
+  }
   if (!view.hull_points.empty())
     hull_index_.build(records_of(view.hull_points.data()), view.hull_points.size(), view.axis,
                       block_points(view.hull_points.size()), false);

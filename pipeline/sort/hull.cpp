@@ -184,4 +184,23 @@ std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t
   return kernel_hull_vertices(dt, survivors);
 }
 
+std::vector<LabelTriple> hull_facet_labels(const double* xyz, const std::uint64_t* labels, std::size_t n) {
+  std::vector<LabelTriple> facets;
+  core::Delaunay dt;
+  if (n < 4 || dt.build(xyz, labels, n) != core::BuildStatus::kOk) return facets;
+  // The infinite tets are the hull facets, one each.
+  for (std::size_t t = 0; t < dt.num_tet_slots(); ++t) {
+    const auto id = core::TetId(t);
+    if (!dt.is_alive(id) || !dt.is_infinite(id)) continue;
+    LabelTriple f{};
+    int m = 0;
+    for (int i = 0; i < 4; ++i)
+      if (dt.vertex(id, i) != core::kInfiniteVertex) f[std::size_t(m++)] = dt.label(dt.vertex(id, i));
+    std::sort(f.begin(), f.end());
+    facets.push_back(f);
+  }
+  std::sort(facets.begin(), facets.end());
+  return facets;
+}
+
 }  // namespace tetstream::pipeline

@@ -4,6 +4,7 @@
 // certificate.hpp, docs/certificate.md); a window too flat to triangulate on its own
 // takes them in.
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -24,5 +25,16 @@ namespace tetstream::pipeline {
 inline constexpr std::size_t kHullSamplePoints = 16384;
 std::vector<std::uint32_t> hull_vertex_candidates(const double* xyz, std::size_t n,
                                                   std::size_t sample_points = kHullSamplePoints);
+
+// The facets of the convex hull of n distinct points (their labels, each triple in
+// increasing order, the triples sorted), as the kernel's symbolic perturbation
+// defines them: a flat face of the hull with many points on it is cut into the
+// perturbed 2D Delaunay triangles that infinite_conflict_sos describes, the same ones
+// every window's kernel finds. Given the hull's boundary points (hull_vertex_candidates),
+// these are the facets of the hull of the whole input: a point strictly inside the hull
+// is strictly below every facet's plane. Empty when the points have fewer than 4
+// affinely independent ones (no 3D hull).
+using LabelTriple = std::array<std::uint64_t, 3>;
+std::vector<LabelTriple> hull_facet_labels(const double* xyz, const std::uint64_t* labels, std::size_t n);
 
 }  // namespace tetstream::pipeline

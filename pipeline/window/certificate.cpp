@@ -228,6 +228,15 @@ bool Certificate::hull_facet_range_test(const core::Delaunay& dt, TetId t) const
   return outside_clear && strip_clear;
 }
 
+bool Certificate::is_global_hull_facet(const core::Delaunay& dt, TetId t) const {
+  if (view_.hull_facets.empty()) return false;
+  VertexId f[3];
+  hull_facet(dt, t, f);
+  LabelTriple key{dt.label(f[0]), dt.label(f[1]), dt.label(f[2])};
+  std::sort(key.begin(), key.end());
+  return std::binary_search(view_.hull_facets.begin(), view_.hull_facets.end(), key);
+}
+
 std::uint64_t Certificate::hull_facet_query(const core::Delaunay& dt, TetId t, SegmentStats& stats) {
   // Only the global hull's boundary points need to be searched. If abc is not a
   // global hull facet, a boundary point lies beyond its plane or conflicts on it: the

@@ -95,6 +95,10 @@ class Certificate {
   // The range test of infinite tet t (a hull facet of the window): true when the
   // closed half-space beyond its facet misses every place a missing point can be.
   bool hull_facet_range_test(const core::Delaunay& dt, core::TetId t) const;
+  // Whether the hull facet of infinite tet t is one of the global hull's facets that
+  // the view lists (SortedView::hull_facets): then no point conflicts with it, and no
+  // query is needed. False also when the view lists none.
+  bool is_global_hull_facet(const core::Delaunay& dt, core::TetId t) const;
   // Whether the hull facet of infinite tet t is a facet of the global hull: kNone when
   // no missing point conflicts with it, else the conflicting global hull boundary point
   // nearest the facet's centroid of the first few found.

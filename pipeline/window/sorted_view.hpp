@@ -3,6 +3,7 @@
 // point's position in the sorted file), with the key samples that bound a key range
 // without reading the file, and the global hull's boundary points with their index.
 #include "pipeline/files/temp_files.hpp"
+#include "pipeline/sort/hull.hpp"
 #include "pipeline/sort/point_record.hpp"
 #include "pipeline/sort/point_sort.hpp"
 #include "pipeline/window/point_index.hpp"
@@ -25,7 +26,11 @@ struct SortedView {
   // points conflicts with it.
   std::vector<SortedPoint> hull_points;
   const PointIndex* hull_index = nullptr;  // over hull_points
-  const PointIndex* index = nullptr;       // over points[0, count)
+  // The global hull's facets (hull.hpp, hull_facet_labels), label triples sorted: a
+  // window's hull facet whose labels are here is certified without a query. Empty
+  // when unknown (a flat input): the queries decide.
+  std::vector<LabelTriple> hull_facets;
+  const PointIndex* index = nullptr;  // over points[0, count)
   // When `points` is a read-only file mapping: the tracker that keeps the regions the
   // workers' emptiness queries map within their share of the budget, and hands them
   // back. Null for points in memory (anonymous memory must never be handed back:

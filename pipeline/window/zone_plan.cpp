@@ -100,6 +100,7 @@ PlanInputs plan_inputs(const SortedView& view, const PointIndex& index) {
   in.strip_axis = strip_axis(view);
   in.leaf_spacing = index.leaf_spacing_quantile(0.9);
   in.index_bytes = std::uint64_t(index.memory_bytes()) + view.hull_points.capacity() * sizeof(SortedPoint) +
+                   view.hull_facets.capacity() * sizeof(LabelTriple) +
                    (view.hull_index ? std::uint64_t(view.hull_index->memory_bytes()) : 0);
   return in;
 }

@@ -78,6 +78,11 @@ struct Job {
     std::sort(hull.begin(), hull.end(),
               [](const SortedPoint& a, const SortedPoint& b) { return a.original < b.original; });
     view.hull_points = hull;
+    std::vector<double> hull_xyz;
+    std::vector<std::uint64_t> hull_labels;
+    for (const SortedPoint& p : hull)
+      hull_xyz.insert(hull_xyz.end(), p.xyz, p.xyz + 3), hull_labels.push_back(p.original);
+    view.hull_facets = hull_facet_labels(hull_xyz.data(), hull_labels.data(), hull_labels.size());
     hull_index.build(records_of(view.hull_points.data()), view.hull_points.size(), 0, PointIndex::kMinBlockPoints);
     view.hull_index = &hull_index;
   }
@@ -207,6 +212,22 @@ TEST(Certificate, RangeTestIsConservativeAndQueryIsExact) {
   }
 }
 
+// The global hull's facets from its boundary points alone are those of the kernel's
+// triangulation of every point (flat faces of the lattice included, cut by the same
+// perturbation).
+TEST(Certificate, HullFacetsOfTheBoundaryPointsAreTheHulls) {
+  for (Shape shape : {Shape::kUniform, Shape::kSurface, Shape::kLattice}) {
+    const Job job(shape, 3000, 7);
+    std::vector<double> xyz;
+    std::vector<std::uint64_t> labels;
+    for (const SortedPoint& p : job.points) xyz.insert(xyz.end(), p.xyz, p.xyz + 3), labels.push_back(p.original);
+    const std::vector<LabelTriple> all = hull_facet_labels(xyz.data(), labels.data(), labels.size());
+    ASSERT_FALSE(all.empty());
+    EXPECT_EQ(job.view.hull_facets, all);
+    EXPECT_LT(job.view.hull_points.size(), job.points.size());
+  }
+}
+
 TEST(Certificate, HullFacetQueryAgreesWithBruteForce) {
   for (const Case& c : cases()) {
     SCOPED_TRACE(c.name());
@@ -225,6 +246,7 @@ TEST(Certificate, HullFacetQueryAgreesWithBruteForce) {
         ++global;
         continue;
       }
+      ASSERT_EQ(cert.is_global_hull_facet(w.dt, t), !truth) << "hull facet " << t << " and the global hull's list";
       const std::uint64_t found = cert.hull_facet_query(w.dt, t, stats);
       ASSERT_EQ(found == Certificate::kNone, !truth) << "hull facet " << t;
       global += found == Certificate::kNone;
@@ -271,8 +293,8 @@ TEST(Certificate, AClearedStarIsTheFinalStar) {
       bool certified = true;
       for (TetId t : star) {
         if (w.dt.is_infinite(t)) {
-          certified &=
-              cert.hull_facet_range_test(w.dt, t) || cert.hull_facet_query(w.dt, t, stats) == Certificate::kNone;
+          certified &= cert.hull_facet_range_test(w.dt, t) || cert.is_global_hull_facet(w.dt, t) ||
+                       cert.hull_facet_query(w.dt, t, stats) == Certificate::kNone;
         } else {
           const RangeTest r = cert.range_test(w.dt, t);
           certified &= r.clears() || cert.query(w.dt, t, r, stats) == Certificate::kNone;
