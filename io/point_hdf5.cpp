@@ -221,6 +221,20 @@ std::vector<Hdf5PointDataset> list_hdf5_point_datasets(const std::string& path) 
   return list_datasets(f.get());
 }
 
+std::array<double, 3> hdf5_box_size(const std::string& path) {
+  const Handle f = open_file(path);
+  if (H5Aexists_by_name(f.get(), "Header", "BoxSize", H5P_DEFAULT) <= 0)
+    throw UsageError(path + ": no attribute Header/BoxSize: give the box as --periodic L or Lx,Ly,Lz");
+  const Handle a(H5Aopen_by_name(f.get(), "Header", "BoxSize", H5P_DEFAULT, H5P_DEFAULT), H5Aclose);
+  const Handle space(H5Aget_space(a.get()), H5Sclose);
+  const hssize_t n = H5Sget_simple_extent_npoints(space.get());
+  double v[3] = {0, 0, 0};
+  if ((n != 1 && n != 3) || H5Aread(a.get(), H5T_NATIVE_DOUBLE, v) < 0)
+    throw UsageError(path + ": Header/BoxSize is not one number or three");
+  if (n == 1) v[1] = v[2] = v[0];
+  return {v[0], v[1], v[2]};
+}
+
 namespace detail {
 std::unique_ptr<PointReader> open_hdf5(const std::string& path, const PointReadOptions& options, bool one_of_many) {
   if (is_std_stream(path)) throw UsageError("HDF5 cannot be read from stdin: name the file");

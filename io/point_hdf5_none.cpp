@@ -13,6 +13,7 @@ namespace {
 bool hdf5_available() { return false; }
 
 std::vector<Hdf5PointDataset> list_hdf5_point_datasets(const std::string& path) { unavailable(path); }
+std::array<double, 3> hdf5_box_size(const std::string& path) { unavailable(path); }
 
 namespace detail {
 std::unique_ptr<PointReader> open_hdf5(const std::string& path, const PointReadOptions&, bool) { unavailable(path); }

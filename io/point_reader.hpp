@@ -14,6 +14,7 @@
 #include "core/error.hpp"
 #include "io/point_format.hpp"
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -133,6 +134,9 @@ struct Hdf5PointDataset {
 // The (N, 3) float datasets of an HDF5 file, in name order. Throws UsageError when this
 // build has no HDF5, InputError when the file is not HDF5.
 std::vector<Hdf5PointDataset> list_hdf5_point_datasets(const std::string& path);
+// The box of a simulation snapshot: the attribute BoxSize of the group Header (Gadget,
+// AREPO, SWIFT), one number or three. Throws UsageError when the file has none.
+std::array<double, 3> hdf5_box_size(const std::string& path);
 bool hdf5_available();  // whether this build reads HDF5
 
 }  // namespace tetstream::io

@@ -39,6 +39,10 @@ inline constexpr std::uint32_t kTagHead = make_tag("HEAD");
 inline constexpr std::uint32_t kTagPoints = make_tag("PNTS");
 inline constexpr std::uint32_t kTagFrame = make_tag("TETF");
 inline constexpr std::uint32_t kTagIndex = make_tag("INDX");
+// A periodic triangulation (docs/periodic.md, format.md §6): the box, and each tet's
+// vertex offsets. Both critical, so a reader that does not know them refuses the file.
+inline constexpr std::uint32_t kTagPeriodicBox = make_tag("PBOX");
+inline constexpr std::uint32_t kTagPeriodicOffsets = make_tag("POFS");
 std::string tag_name(std::uint32_t tag);  // "HEAD", or "0x..." when not printable
 
 // ---- §3.3 header ----

@@ -54,7 +54,7 @@ int spool_stdin() {
 }
 }  // namespace
 
-TetReader::TetReader(std::string path) : path_(std::move(path)) {
+TetReader::TetReader(std::string path, Periodic periodic) : path_(std::move(path)) {
   fd_ = path_ == "-" ? spool_stdin() : ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd_ < 0) throw IoError(path_ + ": cannot open: " + std::strerror(errno));
   note_input_fd(fd_);
@@ -115,6 +115,12 @@ TetReader::TetReader(std::string path) : path_(std::move(path)) {
         head = &s;
       } else if (s.tag == kTagPoints && !pnts) {
         pnts = &s;
+      } else if (s.tag == kTagPeriodicBox || s.tag == kTagPeriodicOffsets) {
+        if (periodic == Periodic::kRefuse) {
+          fail(s.offset, "a periodic triangulation (section " + tag_name(s.tag) +
+                             ", docs/periodic.md): this command does not read periodic containers yet");
+        }
+        if (s.tag == kTagPeriodicBox) periodic_box_ = &s;
       } else if (s.flags & kSectionCritical) {
         fail(s.offset, "unknown critical section " + tag_name(s.tag) + " (written by a newer version?)");
       }
@@ -174,6 +180,13 @@ std::span<const std::uint8_t> TetReader::section_payload(std::uint64_t offset, s
   const std::uint8_t* p = h + kSectionHeaderSize;
   if (crc32c(p, length) != get_u32(p + length)) fail(offset, what + ": checksum mismatch (the file is damaged)");
   return {p, length};
+}
+
+std::span<const std::uint8_t> TetReader::section(std::uint32_t tag) const {
+  for (const SectionEntry& s : sections_) {
+    if (s.tag == tag) return section_payload(s.offset, tag, s.length, tag_name(tag));
+  }
+  return {};
 }
 
 std::span<const std::uint8_t> TetReader::frame_payload(std::uint64_t k) const {

@@ -30,8 +30,13 @@ namespace tetstream::io {
 
 class TetReader {
  public:
+  // Whether the caller reads periodic triangulations (docs/periodic.md): their tets
+  // carry vertex offsets that a reader of plain tets would silently drop, so a
+  // periodic file is refused (one line naming the file and the section) unless the
+  // caller says it handles them.
+  enum class Periodic { kRefuse, kAccept };
   // PATH "-": standard input, copied first into an unnamed temporary file.
-  explicit TetReader(std::string path);
+  explicit TetReader(std::string path, Periodic periodic = Periodic::kRefuse);
   ~TetReader();
   TetReader(const TetReader&) = delete;
   TetReader& operator=(const TetReader&) = delete;
@@ -46,6 +51,11 @@ class TetReader {
   std::uint64_t frame_count() const { return frames_.size(); }
   const std::vector<FrameEntry>& frames() const { return frames_; }
   const std::vector<SectionEntry>& sections() const { return sections_; }
+  // A periodic container (PBOX present; only when opened with Periodic::kAccept).
+  bool periodic() const { return periodic_box_ != nullptr; }
+  // The CRC-checked payload of the first section of `tag` in the directory; empty
+  // when there is none.
+  std::span<const std::uint8_t> section(std::uint32_t tag) const;
   // Bytes of all TETF sections (headers and trailers included): the cost of the tets.
   std::uint64_t tet_bytes() const { return tet_bytes_; }
 
@@ -76,6 +86,7 @@ class TetReader {
   std::span<const std::uint8_t> frame_payload(std::uint64_t k) const;
 
   std::string path_;
+  const SectionEntry* periodic_box_ = nullptr;
   int fd_ = -1;
   const std::uint8_t* data_ = nullptr;
   std::uint64_t size_ = 0;

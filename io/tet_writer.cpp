@@ -418,6 +418,21 @@ std::uint64_t TetWriter::checkpoint() {
   return out_->offset();
 }
 
+void TetWriter::add_section(std::uint32_t tag, std::span<const std::uint8_t> payload) {
+  if (finished_ || fragment_) throw std::logic_error("TetWriter: add_section after finish or in a fragment");
+  if (points_ != header_.point_count) throw std::logic_error("TetWriter: add_section before the points");
+  if (tag == kTagHead || tag == kTagPoints || tag == kTagFrame || tag == kTagIndex) {
+    throw std::invalid_argument("TetWriter: add_section of a section the writer writes itself");
+  }
+  const std::uint64_t at = out_->offset();
+  write_section_start(tag, payload.size());
+  out_->write(payload.data(), payload.size());
+  std::uint8_t crc[4];
+  put_u32(crc, crc32c(payload.data(), payload.size()));
+  out_->write(crc, 4);
+  sections_.push_back({tag, kSectionCritical, at, payload.size()});
+}
+
 void TetWriter::finish() {
   if (finished_) throw std::logic_error("TetWriter: finish twice");
   if (fragment_) {  // frames only: the container that appends them has the index

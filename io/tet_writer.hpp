@@ -127,6 +127,11 @@ class TetWriter {
   // them itself. Flushes first.
   void adopt_placed_frames(std::span<const FrameEntry> frames, std::uint64_t bytes);
 
+  // A critical section of another kind (a periodic container's PBOX and POFS,
+  // docs/format.md §6) at the current position, listed in the directory: after the
+  // points, between frames or after the last one.
+  void add_section(std::uint32_t tag, std::span<const std::uint8_t> payload);
+
   // Flushes (and syncs, if options.sync) everything written so far and returns the
   // size of the partial file: the `committed` argument of resume(). Call it between
   // batches, after the points.

@@ -9,9 +9,14 @@
 #include "io/npy.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/util/progress.hpp"
+#include "pipeline/files/temp_files.hpp"
+#include "pipeline/periodic/unwrap.hpp"
 #include "tools/command.hpp"
 
 #include <spdlog/spdlog.h>
+
+#include <filesystem>
+#include <optional>
 
 #include <memory>
 
@@ -47,7 +52,16 @@ std::pair<std::string, io::PointReadOptions> container_input(const io::TetReader
 
 void run_convert(const ConvertArgs& args, Context& ctx) {
   const io::MeshFormat format = io::mesh_format_for(args.output);
-  const io::TetReader reader(args.input);
+  // A periodic container (docs/periodic.md): its tets unwrapped into a plain one first,
+  // image points marked by the point field "image".
+  std::optional<pipeline::TempDir> tmp;
+  std::optional<pipeline::periodic::Unwrapped> unwrapped;
+  if (!io::is_std_stream(args.input) && io::TetReader(args.input, io::TetReader::Periodic::kAccept).periodic()) {
+    if (args.las_attributes) throw UsageError("convert: --las-attributes does not apply to a periodic container");
+    tmp.emplace(std::filesystem::temp_directory_path().string(), "tetstream-run");
+    unwrapped = pipeline::periodic::unwrap_periodic(args.input, tmp->dir());
+  }
+  const io::TetReader reader(unwrapped ? unwrapped->container : args.input);
   pipeline::Progress points("converting points", "points", reader.point_count(), !ctx.global.quiet);
   pipeline::Progress tets("converting tets", "tets", reader.tet_count(), !ctx.global.quiet);
   io::MeshExportOptions options;
@@ -55,6 +69,7 @@ void run_convert(const ConvertArgs& args, Context& ctx) {
   options.compress_level = args.compress;
   options.on_points = [&points](std::uint64_t n) { points.add(n); };
   options.on_tets = [&tets](std::uint64_t n) { tets.add(n); };
+  if (unwrapped) options.point_data = unwrapped->point_data;
   if (args.las_attributes) {
     const auto [las_path, las_read] = container_input(reader);
     options.point_data = io::las_point_data(reader, las_path, las_read);

@@ -4,6 +4,8 @@
 #include "pipeline/field/field.hpp"
 #include "pipeline/util/progress.hpp"
 #include "pipeline/run/run.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/periodic/field.hpp"
 #include "tools/command.hpp"
 
 #include <spdlog/spdlog.h>
@@ -48,6 +50,34 @@ std::string field_prefix(std::string out) {
   return out;
 }
 
+bool is_periodic_container(const std::string& path) {
+  return !io::is_std_stream(path) && io::TetReader(path, io::TetReader::Periodic::kAccept).periodic();
+}
+
+// A periodic container (docs/periodic.md, "Fields"): no hull, the grid over the box.
+void run_field_periodic(const FieldArgs& args, Context& ctx) {
+  const auto& o = args.options;
+  if (o.neighbours || !o.mass.empty() || o.has_box || args.hull != "nan")
+    throw UsageError("field: a periodic container takes --density, --voronoi-volume, --grid and --dtype only (yet)");
+  pipeline::periodic::PeriodicFieldOptions p;
+  p.prefix = o.output;
+  p.density = o.density;
+  p.voronoi = o.voronoi;
+  p.grid = o.grid;
+  p.float32 = o.dtype == pipeline::FieldType::kFloat32;
+  if (!p.density && !p.voronoi && p.grid[0] == 0)
+    throw UsageError("field: ask for at least one output (--density dtfe, --voronoi-volume, --grid N)");
+  const auto s = pipeline::periodic::periodic_field(o.input, p);
+  spdlog::info("periodic: {} points, {} tets; sum rho W / 4 = {:.17g}, Voronoi volumes sum to {:.17g}", s.points,
+               s.tets, s.mass_check, s.voronoi_sum);
+  ctx.summary = {{"command", "field"},           {"input", o.input},           {"periodic", true},
+                 {"files", s.files},             {"points", s.points},         {"tets", s.tets},
+                 {"nan_points", s.nan_points},   {"nan_cells", s.nan_cells},   {"mass_check", s.mass_check},
+                 {"voronoi_sum", s.voronoi_sum}, {"star_volume_sum", s.star_sum}};
+  if (!ctx.global.json)
+    for (const auto& f : s.files) std::cout << f << "\n";
+}
+
 void run_field(FieldArgs& args, Context& ctx) {
   auto& o = args.options;
   o.output = field_prefix(o.output);
@@ -68,6 +98,10 @@ void run_field(FieldArgs& args, Context& ctx) {
   if (args.index_dtype != "auto" && args.index_dtype != "int64")
     throw UsageError("field: --index-dtype must be auto or int64, not '" + args.index_dtype + "'");
   o.neighbour_int64 = args.index_dtype == "int64";
+  if (is_periodic_container(o.input)) {
+    run_field_periodic(args, ctx);
+    return;
+  }
   const pipeline::FieldSummary s = pipeline::compute_fields(o);
   nlohmann::json files = nlohmann::json::object();
   for (const auto& f : s.files) files[f.what] = f.path;

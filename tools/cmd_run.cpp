@@ -6,6 +6,7 @@
 #include "pipeline/util/progress.hpp"
 #include "pipeline/run/run.hpp"
 #include "pipeline/distributed/run_distributed.hpp"
+#include "pipeline/periodic/periodic.hpp"
 #include "pipeline/run/summary_json.hpp"
 #include "tools/command.hpp"
 #include "tools/point_options.hpp"
@@ -22,7 +23,32 @@ namespace {
 struct RunArgs {
   pipeline::RunOptions options;
   std::string memory = "1G";
+  std::string periodic;  // --periodic: L, Lx,Ly,Lz or auto; empty: not periodic
+  std::string outside = "wrap";
+  double margin = 6.0;
 };
+
+// `run --periodic`: the triangulation of the flat torus (docs/periodic.md).
+void run_periodic(RunArgs& args, Context& ctx) {
+  auto& o = args.options;
+  if (world().size() > 1) throw UsageError("--periodic does not run under mpirun yet (docs/periodic.md)");
+  pipeline::periodic::PeriodicOptions p;
+  p.period = pipeline::periodic::parse_period(args.periodic, o.input);
+  p.wrap = args.outside == "wrap";
+  p.margin_spacings = args.margin;
+  const auto s = pipeline::periodic::run_periodic(o, p);
+  spdlog::info("periodic box {} x {} x {}: {} points ({} wrapped, {} images at margin {:.4g}) -> {} tets in {:.2f}s "
+               "({} attempt{})",
+               p.period[0], p.period[1], p.period[2], s.points, s.wrapped, s.images, s.margin[0], s.tets,
+               s.seconds_total, s.attempts, s.attempts == 1 ? "" : "s");
+  ctx.summary = pipeline::run_summary_json(o, s.padded);
+  ctx.summary["periodic"] = {{"period", p.period},         {"margin", s.margin},
+                             {"points", s.points},         {"input_points", s.input_points},
+                             {"wrapped", s.wrapped},       {"images", s.images},
+                             {"tets", s.tets},             {"attempts", s.attempts},
+                             {"seconds_pad", s.seconds_pad}, {"seconds_keep", s.seconds_keep},
+                             {"seconds_total", s.seconds_total}, {"output_bytes", s.output_bytes}};
+}
 
 // The mesh format an output name asks for (.vtu, .vtk, .mesh, .msh, .node, .xdmf); none
 // for a container (.tets, -, or any other name).
@@ -56,6 +82,11 @@ void run_run(RunArgs& args, Context& ctx) {
   o.threads = ctx.global.threads;
   o.progress = !ctx.global.quiet;
   ctx.stdout_is_data = io::is_std_stream(o.output);
+  if (!args.periodic.empty()) {
+    if (mesh) throw UsageError("--periodic writes a .tets container: convert it afterwards");
+    run_periodic(args, ctx);
+    return;
+  }
   // Under mpirun with several ranks, the distributed job (the same bytes); rank 0
   // reports it.
   pipeline::Communicator& comm = world();
@@ -132,6 +163,16 @@ void setup_run(CLI::App& app, Context& ctx) {
                 "Continue the job checkpointed for this output after a crash, kill, Ctrl-C or full disk");
   cmd->add_flag("--force", args->options.force, "Discard an existing checkpoint for this output and start over")
       ->excludes("--resume");
+  cmd->add_option("--periodic", args->periodic,
+                  "Triangulate the flat 3-torus of this box: L, Lx,Ly,Lz, or auto (the HDF5 input's Header/BoxSize); "
+                  "docs/periodic.md");
+  cmd->add_option("--periodic-outside", args->outside, "Points outside [0, L): wrap them (exactly) or refuse them")
+      ->check(CLI::IsMember({"wrap", "refuse"}))
+      ->capture_default_str();
+  cmd->add_option("--periodic-margin", args->margin,
+                  "First margin of images, in mean point spacings (doubled until the certificate holds)")
+      ->capture_default_str()
+      ->group("");
   add_point_input_options(cmd, args->options.read);
   cmd->callback([args, &ctx] { run_run(*args, ctx); });
 }

@@ -5,12 +5,16 @@
 #include "pipeline/run/run.hpp"
 #include "pipeline/run/summary_json.hpp"
 #include "pipeline/verify/verify.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/files/temp_files.hpp"
+#include "pipeline/periodic/verify.hpp"
 #include "tools/command.hpp"
 #include "tools/world.hpp"
 
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <memory>
 
@@ -36,8 +40,35 @@ struct VerifyArgs {
   pipeline::VerifyOptions options;
 };
 
+bool is_periodic(const std::string& path) {
+  return !io::is_std_stream(path) && io::TetReader(path, io::TetReader::Periodic::kAccept).periodic();
+}
+
+// A periodic container (docs/periodic.md): its own checks, in one process.
+void run_verify_periodic(VerifyArgs& args, Context& ctx) {
+  const char* env = std::getenv("TMPDIR");
+  const std::string parent = !args.options.tmpdir.empty() ? args.options.tmpdir : (env && *env ? env : "/tmp");
+  pipeline::TempDir tmp(parent, "tetstream-verify");
+  const auto r = pipeline::periodic::verify_periodic(args.input, args.options.memory_bytes, tmp.dir());
+  ctx.summary = {{"file", args.input},    {"periodic", true},        {"ok", r.ok},
+                 {"tets", r.tets},        {"points", r.points},      {"vertices", r.vertices},
+                 {"edges", r.edges},      {"facets", r.facets},      {"euler", r.euler},
+                 {"unpaired", r.unpaired}, {"not_delaunay", r.not_delaunay},
+                 {"bad_orientation", r.bad_orientation}, {"inexact", r.inexact},
+                 {"volume", double(r.volume)}, {"box_volume", double(r.expected)}};
+  if (!ctx.global.json)
+    std::cout << args.input << ": periodic, " << r.tets << " tets, V-E+F-T = " << r.vertices << "-" << r.edges << "+"
+              << r.facets << "-" << r.tets << " = " << r.euler << ", volume " << double(r.volume) << " of "
+              << double(r.expected) << ": " << (r.ok ? "OK" : r.problem) << std::endl;
+  if (!r.ok) throw InputError(args.input + ": verification failed: " + r.problem);
+}
+
 void run_verify(VerifyArgs& args, Context& ctx) {
   args.options.memory_bytes = pipeline::parse_memory_size(args.memory);
+  if (world().size() == 1 && is_periodic(args.input)) {
+    run_verify_periodic(args, ctx);
+    return;
+  }
   args.options.progress = !ctx.global.quiet;
   // Under mpirun, every rank checks its share (pipeline/verify.hpp); rank 0 reports for
   // the job, the others learn the verdict and exit with its code, silently.

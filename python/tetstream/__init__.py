@@ -43,6 +43,7 @@ from ._core import InputError, IoError, UsageError
 __all__ = [
     "delaunay",
     "Triangulation",
+    "PeriodicTriangulation",
     "run",
     "open",
     "TetFile",
@@ -354,8 +355,46 @@ class Triangulation:
                 f"{len(self.convex_hull)} hull facets, {len(self.duplicates)} duplicates>")
 
 
-def delaunay(points: ArrayLike, threads: Optional[int] = None, dtype: npt.DTypeLike = np.int64) -> Triangulation:
+class PeriodicTriangulation:
+    """The Delaunay triangulation of points on the flat 3-torus (docs/periodic.md).
+
+    ``points`` (N, 3) as given; ``simplices`` (M, 4) indices into them; ``offsets``
+    (M, 4, 3) int8: vertex j of simplex i stands at
+    ``points[simplices[i, j]] + offsets[i, j] * period``; ``period`` (3,). Every simplex is
+    positively oriented so placed; each appears once.
+    """
+
+    def __init__(self, points: np.ndarray, simplices: np.ndarray, offsets: np.ndarray, period: np.ndarray):
+        self.points, self.simplices, self.offsets, self.period = points, simplices, offsets, period
+
+    def vertices(self) -> np.ndarray:
+        """(M, 4, 3) coordinates of every simplex's vertices, unwrapped."""
+        return self.points[self.simplices] + self.offsets * self.period
+
+    def volumes(self) -> np.ndarray:
+        """(M,) volumes; they sum to the box's volume."""
+        v = self.vertices()
+        return np.linalg.det(v[:, 1:] - v[:, :1]) / 6
+
+
+def _periodic_delaunay(points: ArrayLike, periodic: Any, threads: Optional[int]) -> PeriodicTriangulation:
+    arr = np.ascontiguousarray(np.asarray(points, dtype=np.float64))
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise UsageError(f"points must be an (N, 3) array, got shape {arr.shape}")
+    with tempfile.TemporaryDirectory(prefix="tetstream-periodic-") as work:
+        out = os.path.join(work, "p.tets")
+        run(arr, out, memory="1G", threads=threads, progress=False, checkpoint=False, periodic=periodic)
+        d = _core.periodic_tets(out)
+    return PeriodicTriangulation(arr, d["simplices"], d["offsets"], np.asarray(d["period"], dtype=np.float64))
+
+
+def delaunay(points: ArrayLike, threads: Optional[int] = None, dtype: npt.DTypeLike = np.int64,
+             periodic: Any = None) -> Union[Triangulation, PeriodicTriangulation]:
     """Delaunay triangulation of 3D points, computed in memory with exact predicates.
+
+    With ``periodic=L`` (or ``(Lx, Ly, Lz)``) it is the triangulation of the flat torus
+    ``[0, L)^3`` (docs/periodic.md), computed by the out-of-core job in a temporary
+    directory, returned as a :class:`PeriodicTriangulation`.
 
     Parameters
     ----------
@@ -408,6 +447,8 @@ def delaunay(points: ArrayLike, threads: Optional[int] = None, dtype: npt.DTypeL
     >>> tri.simplices.shape[1], bool((tri.volumes() > 0).all())
     (4, True)
     """
+    if periodic is not None:
+        return _periodic_delaunay(points, periodic, threads)
     arr = np.asarray(points)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise UsageError(f"points must be an (N, 3) array, got shape {arr.shape}")
@@ -476,7 +517,9 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
         ``zone_points``, ``zones``, ``checkpoint`` (True, False or a directory),
         ``force``, and the point-input options ``format``, ``type``, ``stride``,
         ``offset``, ``byte_order``, ``columns`` (1-based, a list), ``properties``,
-        ``datasets``. An unknown name raises TypeError.
+        ``datasets``; ``periodic`` (L, (Lx, Ly, Lz) or ``"auto"``: the triangulation of
+        the flat torus, docs/periodic.md) and ``periodic_outside`` (``"wrap"`` or
+        ``"refuse"``). An unknown name raises TypeError.
 
     Returns
     -------

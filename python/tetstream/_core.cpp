@@ -28,6 +28,10 @@
 #include "pipeline/field/geometry.hpp"
 #include "io/output_file.hpp"
 #include "pipeline/run/run.hpp"
+#include "io/tet_container.hpp"
+#include "io/tet_periodic.hpp"
+#include "pipeline/periodic/periodic.hpp"
+#include "pipeline/periodic/tet_records.hpp"
 #include "pipeline/run/summary_json.hpp"
 #include "pipeline/util/interrupt.hpp"
 #include "pipeline/verify/verify.hpp"
@@ -537,7 +541,45 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
   o.threads = threads;
   o.progress = progress;
   o.resume = resume;
-  apply_run_options(o, options);
+  // periodic=L, (Lx, Ly, Lz) or "auto": the flat torus (docs/periodic.md).
+  py::dict rest;
+  std::optional<pipeline::periodic::PeriodicOptions> periodic;
+  for (const auto& [key, value] : options) {
+    const std::string k = key.cast<std::string>();
+    if (k == "periodic" && !value.is_none()) {
+      periodic.emplace();
+      if (py::isinstance<py::str>(value))
+        periodic->period = pipeline::periodic::parse_period(get_string(value), input);
+      else if (py::isinstance<py::float_>(value) || py::isinstance<py::int_>(value))
+        periodic->period.fill(value.cast<double>());
+      else
+        periodic->period = value.cast<std::array<double, 3>>();
+    } else if (k == "periodic_outside") {
+      const std::string v = get_string(value);
+      if (v != "wrap" && v != "refuse") throw UsageError("periodic_outside must be 'wrap' or 'refuse'");
+      if (!periodic) periodic.emplace();
+      periodic->wrap = v == "wrap";
+    } else {
+      rest[key] = value;
+    }
+  }
+  apply_run_options(o, rest);
+  if (periodic && periodic->period[0] == 0) throw UsageError("periodic_outside needs periodic=L");
+  if (periodic) {
+    io::forget_noted_files();
+    return run_interruptible<std::string>(
+        [o, p = *periodic] {
+          configure_logging(o.progress);
+          if (o.threads > 0) omp_set_num_threads(o.threads);
+          const auto s = pipeline::periodic::run_periodic(o, p);
+          auto j = pipeline::run_summary_json(o, s.padded);
+          j["periodic"] = {{"period", p.period}, {"margin", s.margin}, {"points", s.points},
+                           {"input_points", s.input_points}, {"wrapped", s.wrapped}, {"images", s.images},
+                           {"tets", s.tets}, {"attempts", s.attempts}, {"seconds_total", s.seconds_total}};
+          return j.dump();
+        },
+        emit);
+  }
   if (o.resume && o.force) throw UsageError("resume and force exclude each other");
   if (io::is_std_stream(o.input) || io::is_std_stream(o.output))
     throw UsageError("standard input/output ('-') is for the command line; give file names");
@@ -550,6 +592,40 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
         return pipeline::run_summary_json(o, s).dump();
       },
       emit);
+}
+
+// A periodic container's tets (docs/periodic.md): (M, 4) input indices, (M, 4, 3)
+// offsets in periods (int8), the period, and the points in the input's order.
+py::dict periodic_tets(const std::string& path) {
+  const io::TetReader r(path, io::TetReader::Periodic::kAccept);
+  if (!r.periodic()) throw InputError(path + ": not a periodic container");
+  r.verify_points();
+  const io::PeriodicBox box = io::parse_periodic_box(r.section(io::kTagPeriodicBox), path);
+  const io::PeriodicOffsetsReader offsets(r);
+  const std::size_t n = r.point_count(), m = r.tet_count();
+  std::vector<double> xyz(3 * n);
+  std::vector<std::uint64_t> ids(n);
+  r.read_points(0, n, xyz.data(), ids.data());
+  py::array_t<std::int64_t> simplices({m, std::size_t(4)});
+  py::array_t<std::int8_t> off({m, std::size_t(4), std::size_t(3)});
+  auto s = simplices.mutable_unchecked<2>();
+  auto o = off.mutable_unchecked<3>();
+  std::size_t t = 0;
+  pipeline::periodic::for_each_stored_tet(r, offsets, [&](const pipeline::periodic::KeptTet& k, std::uint64_t,
+                                                          std::size_t) {
+    int v[4][3];
+    pipeline::periodic::stored_offsets(k, v);
+    for (py::ssize_t j = 0; j < 4; ++j) {
+      s(py::ssize_t(t), j) = std::int64_t(ids[k.v[j]]);
+      for (py::ssize_t c = 0; c < 3; ++c) o(py::ssize_t(t), j, c) = std::int8_t(v[j][c]);
+    }
+    ++t;
+  });
+  py::dict d;
+  d["simplices"] = simplices;
+  d["offsets"] = off;
+  d["period"] = box.period;
+  return d;
 }
 
 // An array written to PATH for run(array): through io::OutputFile, the one way
@@ -964,6 +1040,8 @@ PYBIND11_MODULE(_core, m) {
   m.def("run", &run, py::arg("input"), py::arg("more_inputs"), py::arg("output"), py::arg("memory_bytes"),
         py::arg("threads"), py::arg("progress"), py::arg("resume"), py::arg("options"), py::arg("emit") = py::none(),
         "The out-of-core job; its summary as JSON text (what `tetstream run --json` prints).");
+  m.def("periodic_tets", &periodic_tets, py::arg("path"),
+        "A periodic container's tets: simplices (input indices), offsets (periods), period.");
   m.def("spill", &spill_array, py::arg("path"), py::arg("array"),
         "Writes a C-contiguous array's bytes to PATH (PATH.partial, renamed when complete).");
   m.def("parse_memory", &memory_size, py::arg("memory"), "Bytes of a budget such as '4G', '512M' or an int.");

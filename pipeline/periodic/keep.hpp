@@ -1,0 +1,36 @@
+#pragma once
+// The keep step of a periodic job (periodic.hpp): from the ordinary job's container of
+// the padded points, the periodic tets, each once, certified, and the output written.
+#include "io/output_file.hpp"
+#include "pipeline/periodic/pad.hpp"
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace tetstream::pipeline::periodic {
+
+struct KeepInput {
+  std::string padded;  // the ordinary job's container of the padded points
+  std::uint64_t input_points = 0;  // N: original indices below N are the points
+  const Images* images = nullptr;
+  std::array<double, 3> period{}, margin{};
+  int sort_axis = 0;
+  std::string input, output;  // the user's files (errors name the input)
+  const io::OutputClaim* claim = nullptr;
+  std::string dir;  // the job's directory (sort runs)
+  std::uint64_t memory_bytes = 0;
+  int threads = 1;
+  std::string options_json;  // the output header's options
+};
+
+struct KeepResult {
+  bool complete = false;  // every kept ball inside the padded box and every facet paired
+  std::uint64_t ball_failures = 0, unpaired_facets = 0;
+  std::uint64_t points = 0, tets = 0, output_bytes = 0;
+};
+
+// Writes the output only when the result is complete.
+KeepResult keep_periodic_tets(const KeepInput& in);
+
+}  // namespace tetstream::pipeline::periodic

@@ -1,0 +1,116 @@
+#include "pipeline/periodic/pad.hpp"
+
+#include "core/error.hpp"
+#include "pipeline/files/temp_files.hpp"
+
+#include <cmath>
+#include <sstream>
+
+namespace tetstream::pipeline::periodic {
+
+bool exact_difference(double x, double l, double& out) {
+  // TwoSum (Knuth): s + err = x - l exactly; the difference is a double iff err == 0.
+  const double s = x - l;
+  const double bv = s - x, av = s - bv;
+  const double err = (x - av) + (-l - bv);
+  out = s;
+  return err == 0.0 && std::isfinite(s);
+}
+
+namespace {
+constexpr std::size_t kChunk = std::size_t(1) << 16;
+
+std::string coordinate_text(double v) {
+  std::ostringstream s;
+  s.precision(17);
+  s << v;
+  return s.str();
+}
+
+// Wraps one coordinate into [0, l) exactly; false when that is impossible (the
+// result of fmod plus l rounds).
+bool wrap_coordinate(double& x, double l) {
+  double r = std::fmod(x, l);  // exact, with the sign of x
+  if (r < 0) {
+    double s;
+    if (!exact_difference(r, -l, s) || s >= l) return false;
+    r = s;
+  }
+  x = r + 0.0;  // -0.0 becomes 0.0
+  return true;
+}
+}  // namespace
+
+WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir) {
+  WrappedInput out;
+  out.path = dir + "/periodic-points.f64";
+  auto reader = io::open_points(input, read);
+  BinaryFile file(out.path, "wb");
+  std::vector<double> xyz(3 * kChunk);
+  static const char* kAxis[3] = {"x", "y", "z"};
+  while (const std::size_t n = reader->read(xyz.data(), kChunk)) {
+    for (std::size_t i = 0; i < n; ++i) {
+      bool moved = false;
+      for (int k = 0; k < 3; ++k) {
+        double& x = xyz[3 * i + k];
+        if (x >= 0 && x < period[k]) {
+          x += 0.0;
+          continue;
+        }
+        const std::uint64_t index = out.count + i;
+        const std::string what = std::string(kAxis[k]) + " = " + coordinate_text(x) + " lies outside [0, " +
+                                 coordinate_text(period[k]) + ")";
+        if (!wrap) throw reader->error_at(index, what + " (--periodic-outside wrap wraps it)");
+        if (!wrap_coordinate(x, period[k]))
+          throw reader->error_at(index, what + " and cannot be wrapped exactly (x + L is not a double)");
+        moved = true;
+      }
+      out.wrapped += moved;
+    }
+    file.write(xyz.data(), sizeof(double), 3 * n);
+    out.count += n;
+  }
+  file.close();
+  return out;
+}
+
+Images write_images(const WrappedInput& points, const std::array<double, 3>& period,
+                    const std::array<double, 3>& margin, const std::string& dir) {
+  Images out;
+  out.path = dir + "/periodic-images.f64";
+  BinaryFile in(points.path, "rb");
+  BinaryFile file(out.path, "wb");
+  std::vector<double> xyz(3 * kChunk), img;
+  std::uint64_t first = 0;
+  while (const std::size_t n = in.read(xyz.data(), 3 * sizeof(double), kChunk)) {
+    img.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      const double* p = &xyz[3 * i];
+      double shifted[3];
+      unsigned near = 0;  // the axes on which p lies within the margin of the upper face
+      for (int k = 0; k < 3; ++k) {
+        if (p[k] < period[k] - margin[k]) continue;
+        if (!exact_difference(p[k], period[k], shifted[k])) {
+          throw InputError(points.path + ": point " + std::to_string(first + i) + ": its image " +
+                           coordinate_text(p[k]) + " - " + coordinate_text(period[k]) +
+                           " is not a double (the margin the certificate needs exceeds half the period: too few "
+                           "points for the 1-sheeted covering, docs/periodic.md)");
+        }
+        near |= 1u << k;
+      }
+      // Every non-empty subset of those axes: the images across faces, edges, corners.
+      for (unsigned bits = 1; bits < 8; ++bits) {
+        if ((bits & near) != bits) continue;
+        for (int k = 0; k < 3; ++k) img.push_back((bits >> k & 1) ? shifted[k] : p[k]);
+        out.code.push_back((first + i) * 8 + bits);
+      }
+    }
+    file.write(img.data(), sizeof(double), img.size());
+    first += n;
+  }
+  file.close();
+  return out;
+}
+
+}  // namespace tetstream::pipeline::periodic

@@ -1,0 +1,46 @@
+#pragma once
+// The padded input of a periodic job (docs/periodic.md, "The padded set"): two raw
+// float64 files in the job's directory that the ordinary job reads as one input.
+//
+//   periodic-points.f64   the N input points, wrapped into [0, L), in input order:
+//                         the ordinary job's original index of a point is its own;
+//   periodic-images.f64   the images p + o L, o in {-1, 0}^3 \ {0}, of each point with
+//                         p_k >= L_k - M_k on every axis k where o_k = -1: the periodic
+//                         set inside [-M, L)^3 minus the box itself;
+//   images (in memory)    for image j (original index N + j), point * 8 + bits, bit k
+//                         set when o_k = -1.
+//
+// Every image coordinate is exact: p_k - L_k with p_k in [L_k/2, L_k) is a double
+// (Sterbenz); for a margin above L/2 each one is checked, and an inexact one refused.
+#include "io/point_reader.hpp"
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tetstream::pipeline::periodic {
+
+struct WrappedInput {
+  std::string path;  // periodic-points.f64
+  std::uint64_t count = 0, wrapped = 0;
+};
+
+// Reads the input once and writes it wrapped (wrap) or refuses a point outside the
+// box with its file and offset (InputError). A wrap is exact or refused.
+WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir);
+
+struct Images {
+  std::string path;                 // periodic-images.f64
+  std::vector<std::uint64_t> code;  // point * 8 + offset bits, in file order
+};
+
+// The images of the wrapped points within `margin` of the upper faces.
+Images write_images(const WrappedInput& points, const std::array<double, 3>& period,
+                    const std::array<double, 3>& margin, const std::string& dir);
+
+// x - l when it is a double, else nullopt-like false (error-free transformation).
+bool exact_difference(double x, double l, double& out);
+
+}  // namespace tetstream::pipeline::periodic

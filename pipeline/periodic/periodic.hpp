@@ -1,0 +1,51 @@
+#pragma once
+// `tetstream run --periodic L`: the Delaunay triangulation of points on the flat
+// 3-torus [0, Lx) x [0, Ly) x [0, Lz) (docs/periodic.md has the definition and the
+// proof):
+//
+//   pad      the points (wrapped into the box, or refused) and their images p - L on
+//            each axis where p lies within the margin M of the upper face: exactly the
+//            periodic point set inside [-M, L)^3, every image exact (Sterbenz, or
+//            checked);
+//   run      the ordinary exact job on them (run_job), unchanged: its labels are the
+//            points' lexicographic order, which a translation keeps, so its symbolic
+//            perturbation is the same for a point and its images;
+//   keep     each tet whose smallest original label sits at its canonical image (the
+//            one in [-M/2, L - M/2) on each axis), when its circumball (conservatively)
+//            lies inside the padded box; then every facet of the kept tets must be
+//            shared by exactly two of them (the closure that proves none is missing);
+//            otherwise the margin doubles and the job repeats, up to M = L;
+//   write    the original points in label order and the kept tets with their vertex
+//            offsets (io/tet_periodic.hpp), through the job's claim on the output.
+#include "io/tet_periodic.hpp"
+#include "pipeline/run/run.hpp"
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace tetstream::pipeline::periodic {
+
+struct PeriodicOptions {
+  std::array<double, 3> period{0, 0, 0};
+  bool wrap = true;              // points outside [0, L): wrapped (exactly), else refused
+  double margin_spacings = 6.0;  // the first margin, in mean point spacings (at most L)
+  void validate() const;         // throws UsageError
+};
+
+struct PeriodicSummary {
+  RunSummary padded;  // the ordinary job on the padded points (the last attempt's)
+  std::uint64_t input_points = 0, points = 0, wrapped = 0, images = 0, tets = 0;
+  std::uint64_t attempts = 0, ball_failures = 0;  // the last attempt's failures: 0
+  std::array<double, 3> margin{0, 0, 0};
+  double seconds_pad = 0, seconds_keep = 0, seconds_write = 0, seconds_total = 0;
+  std::uint64_t output_bytes = 0;
+};
+
+// Parses "L", "Lx,Ly,Lz" or "auto" (the HDF5 input's Header/BoxSize attribute).
+// Throws UsageError.
+std::array<double, 3> parse_period(const std::string& text, const std::string& input);
+
+PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& periodic);
+
+}  // namespace tetstream::pipeline::periodic

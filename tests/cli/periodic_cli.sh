@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# `tetstream run --periodic` as a user runs it (docs/periodic.md): the periodic job, its
+# `verify`, `field` (DTFE with no NaN, sums), `convert` (images marked), the same bytes
+# on 1 and 2 threads, a point outside the box wrapped or refused, a plain reader's
+# refusal, bad options.
+# Usage: bash periodic_cli.sh /path/to/tetstream
+set -euo pipefail
+T=$(realpath "${1:?usage: periodic_cli.sh /path/to/tetstream}")
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+cd "$dir"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+json() { python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+
+"$T" -q gen --dist uniform --n 5000 --seed 4 -o u.f64
+"$T" -q --threads 1 run u.f64 -o one.tets --periodic 1 --segment-points 500
+"$T" -q --threads 2 run u.f64 -o two.tets --periodic 1 --segment-points 500
+cmp -s one.tets two.tets || fail "1 and 2 threads differ"
+"$T" -q verify one.tets > v.txt || fail "verify: $(cat v.txt)"
+grep -q "periodic, .* V-E+F-T = .* = 0, .*: OK" v.txt || fail "verify summary: $(cat v.txt)"
+[ "$(ls -A | grep -c tetstream-)" = 0 ] || fail "work files left: $(ls)"
+
+# The fields: every point a density, none NaN, the sums.
+j=$("$T" -q --json field one.tets -o f --density dtfe --voronoi-volume --grid 16)
+[ "$(echo "$j" | json "d['nan_points'], d['nan_cells'], abs(d['mass_check'] - 5000) < 1e-12 * 5000, abs(d['voronoi_sum'] - 1) < 1e-9")" = \
+  "0 0 True True" ] || fail "field: $j"
+python3 -c "
+import numpy as np
+r = np.load('f.density.npy'); g = np.load('f.grid.npy'); v = np.load('f.voronoi.npy')
+assert r.shape == (5000,) and np.isfinite(r).all() and (r > 0).all(), r
+assert g.shape == (16, 16, 16) and np.isfinite(g).all(), g
+assert abs(v.sum() - 1) < 1e-9, v.sum()
+" || fail "field arrays"
+
+# convert: the tets unwrapped, the images marked.
+"$T" -q convert one.tets one.vtu
+grep -q 'Name="image"' one.vtu || fail "convert: no image field"
+
+# Outside the box: wrapped by default, refused on request.
+python3 -c "
+import numpy as np
+p = np.fromfile('u.f64').reshape(-1, 3); p[::7, 0] += 1.0; p[1::7, 1] -= 3.0; p.tofile('shifted.f64')"
+"$T" -q run shifted.f64 -o w.tets --periodic 1 || fail "wrap"
+"$T" -q verify w.tets > /dev/null || fail "verify wrapped"
+set +e
+"$T" -q run shifted.f64 -o r.tets --periodic 1 --periodic-outside refuse 2> err.txt; rc=$?
+set -e
+[ $rc = 1 ] && grep -q "shifted.f64: byte .*: x = .* lies outside \[0, 1)" err.txt || fail "refuse: rc $rc $(cat err.txt)"
+[ ! -e r.tets ] && [ ! -e r.tets.partial ] || fail "a refused job left files"
+
+# A command that does not read periodic containers says so, in one line.
+set +e
+"$T" -q cat one.tets > /dev/null 2> err.txt; rc=$?
+set -e
+[ $rc = 1 ] && grep -q "periodic triangulation" err.txt || fail "cat of a periodic file: rc $rc $(cat err.txt)"
+
+# Bad options: exit 2.
+set +e
+"$T" -q run u.f64 -o x.tets --periodic 0 2> err.txt; rc=$?
+set -e
+[ $rc = 2 ] || fail "--periodic 0: rc $rc $(cat err.txt)"
+echo "periodic_cli: ok"
