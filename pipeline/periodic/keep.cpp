@@ -49,7 +49,7 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
   m.plabel.resize(n);
   m.bits.resize(n);
   double threshold[3];  // a point at or past it on axis k has its canonical image at -1
-  for (int k = 0; k < 3; ++k) threshold[k] = in.period[k] - 0.5 * in.margin[k];
+  for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(in.period[k], in.margin[k]);
   for (std::uint64_t first = 0; first < n; first += kChunk) {
     const std::size_t k = std::size_t(std::min<std::uint64_t>(kChunk, n - first));
     r.read_points(first, k, xyz.data(), ids.data());
@@ -111,24 +111,27 @@ struct FrameCounts {
 
 struct Sorters {
   ExternalSorter<KeptTet, KeptTetLess> tets;
-  ExternalSorter<FacetRec, FacetLess> facets;
   std::mutex mutex;
 };
 
-// One frame of the padded container: its tets whose smallest periodic label sits at
-// its canonical image, certified, in stored form (and their facets).
+// One frame of the padded container: every tet with a vertex at its canonical image
+// certified (its ball inside the padded box), and those whose smallest periodic label
+// sits at its canonical image kept, in stored form.
 FrameCounts keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
                        const double lower[3], Sorters& out) {
   std::vector<std::uint64_t> t;
   r.read_frame(f, t);
   std::vector<KeptTet> kept;
-  std::vector<FacetRec> facets;
   FrameCounts counts;
   double xyz[4][3];
   for (std::size_t i = 0; i < t.size(); i += 4) {
     int mi = 0;
-    for (int j = 1; j < 4; ++j) mi = m.plabel[t[i + j]] < m.plabel[t[i + mi]] ? j : mi;
-    if (!(m.bits[t[i + mi]] & kCanonical)) continue;
+    bool any = false;
+    for (int j = 0; j < 4; ++j) {
+      any = any || (m.bits[t[i + j]] & kCanonical);
+      mi = m.plabel[t[i + j]] < m.plabel[t[i + mi]] ? j : mi;
+    }
+    if (!any) continue;
     const double* p[4];
     std::uint64_t label[4];
     int off[4][3];
@@ -138,47 +141,23 @@ FrameCounts keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap&
       label[j] = m.plabel[t[i + j]];
       for (int k = 0; k < 3; ++k) off[j][k] = -int(m.bits[t[i + j]] >> k & 1);
     }
+    if (!ball_inside(p, in, lower)) {
+      ++counts.failures;
+      continue;
+    }
+    if (!(m.bits[t[i + mi]] & kCanonical)) continue;
     KeptTet kt;
-    FacetRec fr[4];
-    if (!ball_inside(p, in, lower) || !stored_form(label, off, kt) || !facets_of(kt, fr)) {
+    if (!stored_form(label, off, kt)) {
       ++counts.failures;
       continue;
     }
     counts.long_edges += long_edge(p, in);
     kept.push_back(kt);
-    facets.insert(facets.end(), fr, fr + 4);
   }
   r.release_frame_pages(f);
   const std::lock_guard<std::mutex> lock(out.mutex);
   out.tets.push(std::span<const KeptTet>(kept));
-  out.facets.push(std::span<const FacetRec>(facets));
   return counts;
-}
-
-// Every facet of the kept tets shared by exactly two of them, from opposite sides.
-// Kept tets are distinct tets of the periodic Delaunay triangulation, so this closure
-// proves that none is missing (docs/periodic.md, "Completeness").
-std::uint64_t unpaired_facets(ExternalSorter<FacetRec, FacetLess>& facets) {
-  std::uint64_t bad = 0, run = 0;
-  FacetRec prev{};
-  std::uint8_t sides = 0;
-  const auto close = [&] {
-    if (run != 0 && (run != 2 || sides != 3)) bad += run;
-  };
-  facets.merge([&](std::span<const FacetRec> batch) {
-    for (const FacetRec& f : batch) {
-      if (run == 0 || facet_key(f) != facet_key(prev)) {
-        close();
-        run = 0;
-        sides = 0;
-      }
-      ++run;
-      sides |= std::uint8_t(1u << f.side);
-      prev = f;
-    }
-  });
-  close();
-  return bad;
 }
 
 void write_points(const io::TetReader& r, const KeepInput& in, io::TetWriter& w) {
@@ -257,10 +236,8 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     const double lo = (in.period[k] - in.margin[k]) - in.period[k];
     lower[k] = std::nextafter(std::nextafter(lo, 0.0), 0.0);
   }
-  const std::size_t share = std::max<std::uint64_t>(in.memory_bytes / 4, std::uint64_t(64) << 20);
-  Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(share, in.dir, "periodic-tets")),
-            ExternalSorter<FacetRec, FacetLess>(sort_options(share, in.dir, "periodic-facets")),
-            {}};
+  const std::size_t share = std::max<std::uint64_t>(in.memory_bytes / 2, std::uint64_t(64) << 20);
+  Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(share, in.dir, "periodic-tets")), {}};
   std::uint64_t failures = 0, long_edges = 0;
   const std::int64_t frames = std::int64_t(r.frame_count());
 #pragma omp parallel for schedule(dynamic, 1) num_threads(std::max(1, in.threads)) reduction(+ : failures, long_edges)
@@ -278,8 +255,6 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
                      "a triangulation of the torus by CGAL's criterion (too few points for the box; "
                      "docs/periodic.md, \"When it refuses\")");
   }
-  res.unpaired_facets = unpaired_facets(s.facets);
-  if (res.unpaired_facets != 0) return res;
 
   io::TetFileHeader h;
   h.point_count = m.points;

@@ -1,6 +1,14 @@
 #pragma once
 // The keep step of a periodic job (periodic.hpp): from the ordinary job's container of
 // the padded points, the periodic tets, each once, certified, and the output written.
+//
+// The certificate (docs/periodic.md, "Completeness"): when the padded box's 8 corner
+// cubes hold points (Images::corners_full), every canonical image v is strictly inside
+// the padded set's hull, so its star in the padded triangulation is complete (finite
+// tets only, all in the container). When every tet of those stars has its circumball
+// inside the padded box, each is a tet of DT(P*), and a set of tets of a triangulation
+// that covers a neighbourhood of v is v's whole star there: every periodic tet, whose
+// canonical copy lies in the star of its smallest label's canonical image, is kept.
 #include "io/output_file.hpp"
 #include "pipeline/periodic/pad.hpp"
 
@@ -25,8 +33,8 @@ struct KeepInput {
 };
 
 struct KeepResult {
-  bool complete = false;  // every kept ball inside the padded box and every facet paired
-  std::uint64_t ball_failures = 0, unpaired_facets = 0;
+  bool complete = false;  // every ball at a canonical image inside the padded box
+  std::uint64_t ball_failures = 0;
   std::uint64_t points = 0, tets = 0, output_bytes = 0;
 };
 

@@ -3,6 +3,7 @@
 #include "core/error.hpp"
 #include "pipeline/files/temp_files.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -83,6 +84,9 @@ Images write_images(const WrappedInput& points, const std::array<double, 3>& per
   BinaryFile file(out.path, "wb");
   std::vector<double> xyz(3 * kChunk), img;
   std::uint64_t first = 0;
+  double threshold[3];
+  for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(period[k], margin[k]);
+  bool corner[8] = {};
   while (const std::size_t n = in.read(xyz.data(), 3 * sizeof(double), kChunk)) {
     img.clear();
     for (std::size_t i = 0; i < n; ++i) {
@@ -99,6 +103,11 @@ Images write_images(const WrappedInput& points, const std::array<double, 3>& per
         }
         near |= 1u << k;
       }
+      // The corner cube it (or an image) lies in: on axis k above the threshold at
+      // offset 0 (bit set), or between L - M and the threshold at offset -1.
+      unsigned pattern = 0;
+      for (int k = 0; k < 3; ++k) pattern |= (p[k] >= threshold[k] ? 1u : 0u) << k;
+      if ((near | pattern) == 7) corner[pattern] = true;
       // Every non-empty subset of those axes: the images across faces, edges, corners.
       for (unsigned bits = 1; bits < 8; ++bits) {
         if ((bits & near) != bits) continue;
@@ -110,6 +119,7 @@ Images write_images(const WrappedInput& points, const std::array<double, 3>& per
     first += n;
   }
   file.close();
+  out.corners_full = std::all_of(corner, corner + 8, [](bool c) { return c; });
   return out;
 }
 

@@ -34,11 +34,18 @@ WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions&
 struct Images {
   std::string path;                 // periodic-images.f64
   std::vector<std::uint64_t> code;  // point * 8 + offset bits, in file order
+  // Whether each of the padded box's 8 corner cubes of side M/2 holds a padded point:
+  // then every canonical image is strictly inside the padded set's hull (keep.hpp).
+  bool corners_full = false;
 };
 
 // The images of the wrapped points within `margin` of the upper faces.
 Images write_images(const WrappedInput& points, const std::array<double, 3>& period,
                     const std::array<double, 3>& margin, const std::string& dir);
+
+// The canonical threshold t_k = L_k - M_k/2 (rounded once, here): a point at or past it
+// on axis k has its canonical image at offset -1 (keep.hpp).
+inline double canonical_threshold(double period, double margin) { return period - 0.5 * margin; }
 
 // x - l when it is a double, else nullopt-like false (error-free transformation).
 bool exact_difference(double x, double l, double& out);

@@ -116,44 +116,46 @@ PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& p
     const Images images = write_images(points, periodic.period, margin, tmp.dir());
     sum.images = images.code.size();
     sum.seconds_pad += seconds_since(t);
-    const RunOptions inner = padded_job(options, points, images, tmp.dir());
-    sum.padded = run_job(inner);
-    t = std::chrono::steady_clock::now();
-    KeepInput in;
-    in.padded = inner.output;
-    in.input_points = points.count;
-    in.images = &images;
-    in.period = periodic.period;
-    in.margin = margin;
-    in.sort_axis = sum.padded.axis;
-    in.input = options.input;
-    in.output = options.output;
-    in.claim = &claim;
-    in.dir = tmp.dir();
-    in.memory_bytes = options.memory_bytes;
-    in.threads = options.threads > 0 ? options.threads : 1;
-    in.options_json = header_options(options, periodic, margin);
-    const KeepResult kept = keep_periodic_tets(in);
-    remove_file(inner.output);
-    sum.seconds_keep += seconds_since(t);
-    sum.ball_failures = kept.ball_failures;
-    if (kept.complete) {
-      sum.points = kept.points;
-      sum.tets = kept.tets;
-      sum.output_bytes = kept.output_bytes;
-      sum.margin = margin;
-      break;
+    if (images.corners_full) {
+      const RunOptions inner = padded_job(options, points, images, tmp.dir());
+      sum.padded = run_job(inner);
+      t = std::chrono::steady_clock::now();
+      KeepInput in;
+      in.padded = inner.output;
+      in.input_points = points.count;
+      in.images = &images;
+      in.period = periodic.period;
+      in.margin = margin;
+      in.sort_axis = sum.padded.axis;
+      in.input = options.input;
+      in.output = options.output;
+      in.claim = &claim;
+      in.dir = tmp.dir();
+      in.memory_bytes = options.memory_bytes;
+      in.threads = options.threads > 0 ? options.threads : 1;
+      in.options_json = header_options(options, periodic, margin);
+      const KeepResult kept = keep_periodic_tets(in);
+      remove_file(inner.output);
+      sum.seconds_keep += seconds_since(t);
+      sum.ball_failures = kept.ball_failures;
+      if (kept.complete) {
+        sum.points = kept.points;
+        sum.tets = kept.tets;
+        sum.output_bytes = kept.output_bytes;
+        sum.margin = margin;
+        break;
+      }
+      spdlog::info("periodic: {} balls leave the padded box at margin {:.4g}: doubling it", kept.ball_failures,
+                   margin[0]);
+    } else {
+      spdlog::info("periodic: a corner of the padded box is empty at margin {:.4g}: doubling it", margin[0]);
     }
-    const bool at_limit = margin[0] >= periodic.period[0] && margin[1] >= periodic.period[1] &&
-                          margin[2] >= periodic.period[2];
-    if (at_limit) {
+    if (margin[0] >= periodic.period[0] && margin[1] >= periodic.period[1] && margin[2] >= periodic.period[2]) {
       throw InputError(options.input + ": the periodic Delaunay triangulation of these " +
                        std::to_string(points.count) +
                        " points is not certified in the 1-sheeted covering (an empty ball reaches across a whole "
                        "period): too few points for the box (docs/periodic.md, \"When it refuses\")");
     }
-    spdlog::info("periodic: {} tets not certified, {} facets unpaired at margin {:.4g}: doubling it",
-                 kept.ball_failures, kept.unpaired_facets, margin[0]);
     for (int k = 0; k < 3; ++k) margin[k] = std::min(2 * margin[k], periodic.period[k]);
   }
   sum.seconds_total = seconds_since(start);

@@ -95,7 +95,11 @@ INSTANTIATE_TEST_SUITE_P(Uniform, PeriodicVsCgal,
                          ::testing::Values(Case{1000, 1}, Case{1000, 2}, Case{1000, 3}, Case{10000, 4},
                                            Case{10000, 5}, Case{100000, 6}),
                          [](const auto& info) {
-                           return "n" + std::to_string(info.param.n) + "_seed" + std::to_string(info.param.seed);
+                           std::string name = "n";  // (appended: GCC 12 warns, wrongly, on "n" + string)
+                           name += std::to_string(info.param.n);
+                           name += "_seed";
+                           name += std::to_string(info.param.seed);
+                           return name;
                          });
 
 }  // namespace

@@ -24,22 +24,33 @@ grep -q "periodic, .* V-E+F-T = .* = 0, .*: OK" v.txt || fail "verify summary: $
 j=$("$T" -q --json field one.tets -o f --density dtfe --voronoi-volume --grid 16)
 [ "$(echo "$j" | json "d['nan_points'], d['nan_cells'], abs(d['mass_check'] - 5000) < 1e-12 * 5000, abs(d['voronoi_sum'] - 1) < 1e-9")" = \
   "0 0 True True" ] || fail "field: $j"
-python3 -c "
-import numpy as np
-r = np.load('f.density.npy'); g = np.load('f.grid.npy'); v = np.load('f.voronoi.npy')
-assert r.shape == (5000,) and np.isfinite(r).all() and (r > 0).all(), r
-assert g.shape == (16, 16, 16) and np.isfinite(g).all(), g
-assert abs(v.sum() - 1) < 1e-9, v.sum()
-" || fail "field arrays"
+python3 - <<'PY' || fail "field arrays"
+import math, struct
+def load(path):  # a little-endian float64 .npy, without numpy
+    b = open(path, 'rb').read()
+    hl = b[8] | b[9] << 8
+    data = b[10 + hl:]
+    return struct.unpack('<%dd' % (len(data) // 8), data)
+r, g, v = load('f.density.npy'), load('f.grid.npy'), load('f.voronoi.npy')
+assert len(r) == 5000 and all(math.isfinite(x) and x > 0 for x in r)
+assert len(g) == 16 ** 3 and all(math.isfinite(x) for x in g)
+assert abs(math.fsum(v) - 1) < 1e-9, math.fsum(v)
+PY
 
 # convert: the tets unwrapped, the images marked.
 "$T" -q convert one.tets one.vtu
 grep -q 'Name="image"' one.vtu || fail "convert: no image field"
 
 # Outside the box: wrapped by default, refused on request.
-python3 -c "
-import numpy as np
-p = np.fromfile('u.f64').reshape(-1, 3); p[::7, 0] += 1.0; p[1::7, 1] -= 3.0; p.tofile('shifted.f64')"
+python3 - <<'PY'
+import struct
+p = list(struct.unpack('<15000d', open('u.f64', 'rb').read()))
+for i in range(0, 5000, 7):
+    p[3 * i] += 1.0
+for i in range(1, 5000, 7):
+    p[3 * i + 1] -= 3.0
+open('shifted.f64', 'wb').write(struct.pack('<15000d', *p))
+PY
 "$T" -q run shifted.f64 -o w.tets --periodic 1 || fail "wrap"
 "$T" -q verify w.tets > /dev/null || fail "verify wrapped"
 set +e
