@@ -8,6 +8,7 @@
 #include "io/tet_periodic.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
+#include "pipeline/periodic/field.hpp"
 #include "pipeline/periodic/periodic.hpp"
 #include "pipeline/periodic/verify.hpp"
 #include "periodic_sets.hpp"
@@ -122,6 +123,24 @@ TEST_F(Periodic, AReaderOfPlainTetsRefusesAPeriodicContainer) {
   }
   const io::TetReader r(path("p.tets"), io::TetReader::Periodic::kAccept);
   EXPECT_TRUE(r.periodic());
+}
+
+TEST_F(Periodic, DtfeHasNoHullAndConservesMass) {
+  // On the torus every point has a closed star: a density for each, none NaN; the
+  // mass sum N to 1e-12; Voronoi cells tiling the box; a grid with no NaN.
+  run(testing_util::dyadic_uniform(4000, 8), "d.tets");
+  pipeline::periodic::PeriodicFieldOptions o;
+  o.prefix = path("f");
+  o.density = o.voronoi = true;
+  o.grid = {24, 24, 24};
+  const auto r = pipeline::periodic::periodic_field(path("d.tets"), o);
+  EXPECT_EQ(r.points, 4000u);
+  EXPECT_EQ(r.nan_points, 0u);
+  EXPECT_EQ(r.nan_cells, 0u);
+  EXPECT_NEAR(r.mass_check, 4000.0, 1e-12 * 4000);
+  EXPECT_NEAR(r.star_sum, 4.0, 1e-12);
+  EXPECT_NEAR(r.voronoi_sum, 1.0, 1e-12);
+  EXPECT_EQ(r.files.size(), 3u);
 }
 
 TEST_F(Periodic, AWrongOffsetIsFound) {
