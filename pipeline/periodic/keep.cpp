@@ -11,6 +11,8 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <bit>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -29,6 +31,7 @@ constexpr std::uint8_t kCanonical = 8;  // PaddedMap::bits: the point's canonica
 struct PaddedMap {
   std::vector<std::uint64_t> plabel;
   std::vector<std::uint8_t> bits;
+  std::vector<double> xyz;  // the padded points' coordinates (read once, not per tet)
   std::uint64_t points = 0;
 };
 
@@ -38,7 +41,6 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
   const std::uint64_t n = r.point_count();
   std::vector<std::uint64_t> of_point(in.input_points, kNone);
   std::vector<std::uint64_t> ids(kChunk);
-  std::vector<double> xyz(3 * kChunk);
   PaddedMap m;
   for (std::uint64_t first = 0; first < n; first += kChunk) {
     const std::size_t k = std::size_t(std::min<std::uint64_t>(kChunk, n - first));
@@ -48,11 +50,13 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
   }
   m.plabel.resize(n);
   m.bits.resize(n);
+  m.xyz.resize(3 * n);
   double threshold[3];  // a point at or past it on axis k has its canonical image at -1
   for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(in.period[k], in.margin[k]);
   for (std::uint64_t first = 0; first < n; first += kChunk) {
     const std::size_t k = std::size_t(std::min<std::uint64_t>(kChunk, n - first));
-    r.read_points(first, k, xyz.data(), ids.data());
+    r.read_points(first, k, &m.xyz[3 * first], ids.data());
+    const double* xyz = &m.xyz[3 * first];
     for (std::size_t i = 0; i < k; ++i) {
       std::uint64_t point = ids[i];
       std::uint8_t bits = 0;
@@ -123,7 +127,6 @@ FrameCounts keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap&
   r.read_frame(f, t);
   std::vector<KeptTet> kept;
   FrameCounts counts;
-  double xyz[4][3];
   for (std::size_t i = 0; i < t.size(); i += 4) {
     int mi = 0;
     bool any = false;
@@ -136,8 +139,7 @@ FrameCounts keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap&
     std::uint64_t label[4];
     int off[4][3];
     for (int j = 0; j < 4; ++j) {
-      r.read_points(t[i + j], 1, xyz[j], nullptr);
-      p[j] = xyz[j];
+      p[j] = &m.xyz[3 * t[i + j]];
       label[j] = m.plabel[t[i + j]];
       for (int k = 0; k < 3; ++k) off[j][k] = -int(m.bits[t[i + j]] >> k & 1);
     }
@@ -199,25 +201,40 @@ void points_bbox(const io::TetReader& r, const KeepInput& in, io::TetFileHeader&
 }
 
 // The kept tets in stored order, cut into frames at group boundaries, each frame's
-// offsets beside it in POFS.
-void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, std::uint64_t& count) {
+// offsets beside it in POFS. Frames go to the writer `threads` at a time, encoded
+// together (the same bytes as one at a time).
+void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, int threads, std::uint64_t& count) {
   constexpr std::size_t kFrame = std::size_t(1) << 18;
-  std::vector<std::uint64_t> labels;
-  std::vector<std::uint16_t> codes;
+  std::vector<std::vector<std::uint64_t>> labels(1);
+  std::vector<std::vector<std::uint16_t>> codes(1);
   io::PeriodicOffsetsWriter offsets;
   const auto flush = [&] {
-    if (codes.empty()) return;
-    w.add_tets(std::span<const std::uint64_t>(labels));
-    offsets.add_frame(codes);
-    count += codes.size();
-    labels.clear();
-    codes.clear();
+    std::vector<std::span<const std::uint64_t>> batches(labels.begin(), labels.end());
+    if (batches.back().empty()) batches.pop_back();
+    w.add_tets(std::span<const std::span<const std::uint64_t>>(batches));
+    for (const auto& c : codes) {
+      if (c.empty()) continue;
+      offsets.add_frame(c);
+      count += c.size();
+    }
+    labels.assign(1, {});
+    codes.assign(1, {});
   };
+  const auto start = std::chrono::steady_clock::now();
+  bool first = true;
   tets.merge([&](std::span<const KeptTet> batch) {
+    if (first) {
+      spdlog::debug("periodic keep: tets sorted in {:.2f}s",
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+      first = false;
+    }
     for (const KeptTet& t : batch) {
-      if (codes.size() >= kFrame && t.v[0] != labels[labels.size() - 4]) flush();
-      labels.insert(labels.end(), t.v, t.v + 4);
-      codes.push_back(t.code);
+      if (codes.back().size() >= kFrame && t.v[0] != labels.back()[labels.back().size() - 4]) {
+        if (int(codes.size()) >= std::max(1, threads)) flush();
+        else labels.emplace_back(), codes.emplace_back();
+      }
+      labels.back().insert(labels.back().end(), t.v, t.v + 4);
+      codes.back().push_back(t.code);
     }
   });
   flush();
@@ -229,8 +246,11 @@ void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, st
 
 KeepResult keep_periodic_tets(const KeepInput& in) {
   KeepResult res;
+  const auto start = std::chrono::steady_clock::now();
+  const auto since = [&start] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
   const io::TetReader r(in.padded);
   const PaddedMap m = map_labels(r, in);
+  spdlog::debug("periodic keep: labels mapped in {:.2f}s", since());
   double lower[3];  // the padded box's lower corner, rounded up: -M, conservatively
   for (int k = 0; k < 3; ++k) {
     const double lo = (in.period[k] - in.margin[k]) - in.period[k];
@@ -238,6 +258,8 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   }
   const std::size_t share = std::max<std::uint64_t>(in.memory_bytes / 2, std::uint64_t(64) << 20);
   Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(share, in.dir, "periodic-tets")), {}};
+  const int label_bits = std::max(1, int(std::bit_width(m.points)));
+  if (label_bits <= 32) s.tets.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
   std::uint64_t failures = 0, long_edges = 0;
   const std::int64_t frames = std::int64_t(r.frame_count());
 #pragma omp parallel for schedule(dynamic, 1) num_threads(std::max(1, in.threads)) reduction(+ : failures, long_edges)
@@ -248,6 +270,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   }
   res.ball_failures = failures;
   res.points = m.points;
+  spdlog::debug("periodic keep: frames certified in {:.2f}s", since());
   if (failures != 0) return res;
   if (long_edges != 0) {
     throw InputError(in.input + ": " + std::to_string(long_edges) +
@@ -268,10 +291,12 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   wo.threads = std::max(1, in.threads);
   io::TetWriter w(in.output, h, wo);
   write_points(r, in, w);
+  spdlog::debug("periodic keep: points written in {:.2f}s", since());
   io::PeriodicBox box{in.period, in.sort_axis};
   w.add_section(io::kTagPeriodicBox, io::serialize_periodic_box(box));
-  write_tets(s.tets, w, res.tets);
+  write_tets(s.tets, w, in.threads, res.tets);
   w.finish();
+  spdlog::debug("periodic keep: written in {:.2f}s", since());
   res.output_bytes = w.bytes_written();
   res.complete = true;
   return res;

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <filesystem>
 #include <sstream>
+#include <thread>
 
 namespace tetstream::pipeline::periodic {
 
@@ -132,7 +133,7 @@ PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& p
       in.claim = &claim;
       in.dir = tmp.dir();
       in.memory_bytes = options.memory_bytes;
-      in.threads = options.threads > 0 ? options.threads : 1;
+      in.threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
       in.options_json = header_options(options, periodic, margin);
       const KeepResult kept = keep_periodic_tets(in);
       remove_file(inner.output);

@@ -39,15 +39,32 @@ struct KeptTet {
   std::uint8_t pad[6];
 };
 static_assert(sizeof(KeptTet) == 40);
+// The stored order (format.md §4.1): (m, a, lo, hi), then the parity and the offsets,
+// which only break ties between copies that a valid output never has.
 struct KeptTetLess {
   bool operator()(const KeptTet& x, const KeptTet& y) const {
-    const auto key = [](const KeptTet& t) {
-      return std::make_tuple(t.v[0], t.v[1], std::min(t.v[2], t.v[3]), std::max(t.v[2], t.v[3]), t.v[2] > t.v[3],
-                             t.code);
-    };
-    return key(x) < key(y);
+    if (x.v[0] != y.v[0]) return x.v[0] < y.v[0];
+    if (x.v[1] != y.v[1]) return x.v[1] < y.v[1];
+    const std::uint64_t xl = std::min(x.v[2], x.v[3]), yl = std::min(y.v[2], y.v[3]);
+    if (xl != yl) return xl < yl;
+    const std::uint64_t xh = std::max(x.v[2], x.v[3]), yh = std::max(y.v[2], y.v[3]);
+    if (xh != yh) return xh < yh;
+    if ((x.v[2] > x.v[3]) != (y.v[2] > y.v[3])) return x.v[2] < x.v[3];
+    return x.code < y.code;
   }
 };
+
+// The same order by a stable LSD radix sort (labels below 2^32, `label_bits` bits
+// each): (lo, hi), then (m, a); several times faster than the comparison sort on the
+// kept tets of a large box. The kept tets of a certified job have distinct label sets
+// (the 1-sheeted covering is a simplicial complex), so the tie-breaks never matter.
+inline void radix_sort_kept(KeptTet* data, std::size_t n, int label_bits) {
+  std::vector<KeptTet> tmp;
+  radix_sort(data, n, tmp, 2 * label_bits, [label_bits](const KeptTet& t) {
+    return std::min(t.v[2], t.v[3]) << label_bits | std::max(t.v[2], t.v[3]);
+  });
+  radix_sort(data, n, tmp, 2 * label_bits, [label_bits](const KeptTet& t) { return t.v[0] << label_bits | t.v[1]; });
+}
 
 // The twelve even permutations of (0, 1, 2, 3).
 inline constexpr int kEven[12][4] = {{0, 1, 2, 3}, {0, 2, 3, 1}, {0, 3, 1, 2}, {1, 0, 3, 2}, {1, 2, 0, 3}, {1, 3, 2, 0},
