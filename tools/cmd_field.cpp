@@ -70,10 +70,17 @@ void run_field_periodic(const FieldArgs& args, Context& ctx) {
   const auto s = pipeline::periodic::periodic_field(o.input, p);
   spdlog::info("periodic: {} points, {} tets; sum rho W / 4 = {:.17g}, Voronoi volumes sum to {:.17g}", s.points,
                s.tets, s.mass_check, s.voronoi_sum);
-  ctx.summary = {{"command", "field"},           {"input", o.input},           {"periodic", true},
-                 {"files", s.files},             {"points", s.points},         {"tets", s.tets},
-                 {"nan_points", s.nan_points},   {"nan_cells", s.nan_cells},   {"mass_check", s.mass_check},
-                 {"voronoi_sum", s.voronoi_sum}, {"star_volume_sum", s.star_sum}};
+  ctx.summary = {{"command", "field"},
+                 {"input", o.input},
+                 {"periodic", true},
+                 {"files", s.files},
+                 {"points", s.points},
+                 {"tets", s.tets},
+                 {"nan_points", s.nan_points},
+                 {"nan_cells", s.nan_cells},
+                 {"mass_check", s.mass_check},
+                 {"voronoi_sum", s.voronoi_sum},
+                 {"star_volume_sum", s.star_sum}};
   if (!ctx.global.json)
     for (const auto& f : s.files) std::cout << f << "\n";
 }

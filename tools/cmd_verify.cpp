@@ -50,12 +50,21 @@ void run_verify_periodic(VerifyArgs& args, Context& ctx) {
   const std::string parent = !args.options.tmpdir.empty() ? args.options.tmpdir : (env && *env ? env : "/tmp");
   pipeline::TempDir tmp(parent, "tetstream-verify");
   const auto r = pipeline::periodic::verify_periodic(args.input, args.options.memory_bytes, tmp.dir());
-  ctx.summary = {{"file", args.input},    {"periodic", true},        {"ok", r.ok},
-                 {"tets", r.tets},        {"points", r.points},      {"vertices", r.vertices},
-                 {"edges", r.edges},      {"facets", r.facets},      {"euler", r.euler},
-                 {"unpaired", r.unpaired}, {"not_delaunay", r.not_delaunay},
-                 {"bad_orientation", r.bad_orientation}, {"inexact", r.inexact},
-                 {"volume", double(r.volume)}, {"box_volume", double(r.expected)}};
+  ctx.summary = {{"file", args.input},
+                 {"periodic", true},
+                 {"ok", r.ok},
+                 {"tets", r.tets},
+                 {"points", r.points},
+                 {"vertices", r.vertices},
+                 {"edges", r.edges},
+                 {"facets", r.facets},
+                 {"euler", r.euler},
+                 {"unpaired", r.unpaired},
+                 {"not_delaunay", r.not_delaunay},
+                 {"bad_orientation", r.bad_orientation},
+                 {"inexact", r.inexact},
+                 {"volume", double(r.volume)},
+                 {"box_volume", double(r.expected)}};
   if (!ctx.global.json)
     std::cout << args.input << ": periodic, " << r.tets << " tets, V-E+F-T = " << r.vertices << "-" << r.edges << "+"
               << r.facets << "-" << r.tets << " = " << r.euler << ", volume " << double(r.volume) << " of "

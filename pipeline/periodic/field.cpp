@@ -73,7 +73,8 @@ void sample_grid(const Tets& t, const std::vector<double>& rho_by_label, const P
         double a = q[0][k], b = q[0][k];
         for (int i = 1; i < 4; ++i) a = std::min(a, q[i][k]), b = std::max(b, q[i][k]);
         // cells whose centre (c + 0.5) L / n lies in [a, b], clipped to the box
-        const double ca = std::ceil(a / L[k] * double(n[k]) - 0.5 - 1e-9), cb = std::floor(b / L[k] * double(n[k]) - 0.5 + 1e-9);
+        const double ca = std::ceil(a / L[k] * double(n[k]) - 0.5 - 1e-9),
+                     cb = std::floor(b / L[k] * double(n[k]) - 0.5 + 1e-9);
         const double c0 = std::max(ca, 0.0), c1 = std::min(cb, double(n[k]) - 1);
         empty = c1 < c0;
         lo[k] = std::uint64_t(std::max(c0, 0.0));

@@ -26,9 +26,9 @@ struct PeriodicFieldOptions {
 struct PeriodicFieldResult {
   std::vector<std::string> files;
   std::uint64_t points = 0, tets = 0, nan_points = 0, nan_cells = 0;
-  double mass_check = 0;    // sum_i rho_i W_i / 4: N, up to rounding
-  double voronoi_sum = 0;   // sum of Voronoi volumes: the box's volume, up to rounding
-  double star_sum = 0;      // sum_i W_i: 4 times the box's volume
+  double mass_check = 0;   // sum_i rho_i W_i / 4: N, up to rounding
+  double voronoi_sum = 0;  // sum of Voronoi volumes: the box's volume, up to rounding
+  double star_sum = 0;     // sum_i W_i: 4 times the box's volume
 };
 
 PeriodicFieldResult periodic_field(const std::string& container, const PeriodicFieldOptions& options);

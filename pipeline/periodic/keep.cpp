@@ -230,8 +230,10 @@ void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, in
     }
     for (const KeptTet& t : batch) {
       if (codes.back().size() >= kFrame && t.v[0] != labels.back()[labels.back().size() - 4]) {
-        if (int(codes.size()) >= std::max(1, threads)) flush();
-        else labels.emplace_back(), codes.emplace_back();
+        if (int(codes.size()) >= std::max(1, threads))
+          flush();
+        else
+          labels.emplace_back(), codes.emplace_back();
       }
       labels.back().insert(labels.back().end(), t.v, t.v + 4);
       codes.back().push_back(t.code);
@@ -247,7 +249,9 @@ void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, in
 KeepResult keep_periodic_tets(const KeepInput& in) {
   KeepResult res;
   const auto start = std::chrono::steady_clock::now();
-  const auto since = [&start] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
+  const auto since = [&start] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
   const io::TetReader r(in.padded);
   const PaddedMap m = map_labels(r, in);
   spdlog::debug("periodic keep: labels mapped in {:.2f}s", since());
@@ -256,10 +260,13 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     const double lo = (in.period[k] - in.margin[k]) - in.period[k];
     lower[k] = std::nextafter(std::nextafter(lo, 0.0), 0.0);
   }
-  const std::size_t share = std::max<std::uint64_t>(in.memory_bytes / 2, std::uint64_t(64) << 20);
+  // A quarter of the budget: the label map (33 bytes a padded point) and the frames' pages
+  // take most of the rest.
+  const std::size_t share = std::max<std::uint64_t>(in.memory_bytes / 4, std::uint64_t(64) << 20);
   Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(share, in.dir, "periodic-tets")), {}};
   const int label_bits = std::max(1, int(std::bit_width(m.points)));
-  if (label_bits <= 32) s.tets.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
+  if (label_bits <= 32)
+    s.tets.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
   std::uint64_t failures = 0, long_edges = 0;
   const std::int64_t frames = std::int64_t(r.frame_count());
 #pragma omp parallel for schedule(dynamic, 1) num_threads(std::max(1, in.threads)) reduction(+ : failures, long_edges)

@@ -19,7 +19,7 @@
 namespace tetstream::pipeline::periodic {
 
 struct KeepInput {
-  std::string padded;  // the ordinary job's container of the padded points
+  std::string padded;              // the ordinary job's container of the padded points
   std::uint64_t input_points = 0;  // N: original indices below N are the points
   const Images* images = nullptr;
   std::array<double, 3> period{}, margin{};

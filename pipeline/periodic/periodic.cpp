@@ -40,8 +40,7 @@ std::array<double, 3> first_margin(const PeriodicOptions& p, std::uint64_t n) {
 }
 
 // The ordinary job on the padded points: the same options but for the files.
-RunOptions padded_job(const RunOptions& o, const WrappedInput& points, const Images& images,
-                      const std::string& dir) {
+RunOptions padded_job(const RunOptions& o, const WrappedInput& points, const Images& images, const std::string& dir) {
   RunOptions inner = o;
   inner.input = points.path;
   inner.read = io::PointReadOptions{};

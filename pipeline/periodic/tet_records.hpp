@@ -67,8 +67,9 @@ inline void radix_sort_kept(KeptTet* data, std::size_t n, int label_bits) {
 }
 
 // The twelve even permutations of (0, 1, 2, 3).
-inline constexpr int kEven[12][4] = {{0, 1, 2, 3}, {0, 2, 3, 1}, {0, 3, 1, 2}, {1, 0, 3, 2}, {1, 2, 0, 3}, {1, 3, 2, 0},
-                                     {2, 0, 1, 3}, {2, 1, 3, 0}, {2, 3, 0, 1}, {3, 0, 2, 1}, {3, 1, 0, 2}, {3, 2, 1, 0}};
+inline constexpr int kEven[12][4] = {{0, 1, 2, 3}, {0, 2, 3, 1}, {0, 3, 1, 2}, {1, 0, 3, 2},
+                                     {1, 2, 0, 3}, {1, 3, 2, 0}, {2, 0, 1, 3}, {2, 1, 3, 0},
+                                     {2, 3, 0, 1}, {3, 0, 2, 1}, {3, 1, 0, 2}, {3, 2, 1, 0}};
 
 // A tet as four labels and offsets (any reference vertex), positively oriented, to its
 // stored form. False when an offset relative to m leaves {-1, 0, 1} (a tet wider
@@ -130,11 +131,11 @@ void for_each_stored_tet(const io::TetReader& r, const io::PeriodicOffsetsReader
 }
 
 struct FacetRec {
-  std::uint64_t v[3];    // sorted labels
-  std::uint64_t opp;     // the opposite vertex's label
-  std::uint16_t off;     // 27 c1 + c2: v1's and v2's offsets relative to v0
-  std::uint8_t opp_code; // the opposite vertex's offset relative to v0
-  std::uint8_t side;     // parity of the sort of the outward-oriented facet
+  std::uint64_t v[3];     // sorted labels
+  std::uint64_t opp;      // the opposite vertex's label
+  std::uint16_t off;      // 27 c1 + c2: v1's and v2's offsets relative to v0
+  std::uint8_t opp_code;  // the opposite vertex's offset relative to v0
+  std::uint8_t side;      // parity of the sort of the outward-oriented facet
   std::uint32_t pad;
 };
 static_assert(sizeof(FacetRec) == 40);

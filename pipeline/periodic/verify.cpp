@@ -133,7 +133,8 @@ PeriodicVerifyReport verify_periodic(const std::string& path, std::uint64_t memo
   rep.vertices = std::uint64_t(std::count(used.begin(), used.end(), 1));
   rep.euler = std::int64_t(rep.vertices) - std::int64_t(rep.edges) + std::int64_t(rep.facets) - std::int64_t(rep.tets);
   if (rep.vertices != rep.points)
-    note(rep, std::to_string(rep.points - rep.vertices) + " points are no tet's vertex (every point of a torus is one)");
+    note(rep,
+         std::to_string(rep.points - rep.vertices) + " points are no tet's vertex (every point of a torus is one)");
   if (rep.euler != 0) note(rep, "Euler characteristic " + std::to_string(rep.euler) + ", not 0");
   rep.volume = volume.value();
   rep.volume_bound = bound.value();

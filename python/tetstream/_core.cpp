@@ -573,9 +573,15 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
           if (o.threads > 0) omp_set_num_threads(o.threads);
           const auto s = pipeline::periodic::run_periodic(o, p);
           auto j = pipeline::run_summary_json(o, s.padded);
-          j["periodic"] = {{"period", p.period}, {"margin", s.margin}, {"points", s.points},
-                           {"input_points", s.input_points}, {"wrapped", s.wrapped}, {"images", s.images},
-                           {"tets", s.tets}, {"attempts", s.attempts}, {"seconds_total", s.seconds_total}};
+          j["periodic"] = {{"period", p.period},
+                           {"margin", s.margin},
+                           {"points", s.points},
+                           {"input_points", s.input_points},
+                           {"wrapped", s.wrapped},
+                           {"images", s.images},
+                           {"tets", s.tets},
+                           {"attempts", s.attempts},
+                           {"seconds_total", s.seconds_total}};
           return j.dump();
         },
         emit);
@@ -611,16 +617,17 @@ py::dict periodic_tets(const std::string& path) {
   auto s = simplices.mutable_unchecked<2>();
   auto o = off.mutable_unchecked<3>();
   std::size_t t = 0;
-  pipeline::periodic::for_each_stored_tet(r, offsets, [&](const pipeline::periodic::KeptTet& k, std::uint64_t,
-                                                          std::size_t) {
-    int v[4][3];
-    pipeline::periodic::stored_offsets(k, v);
-    for (py::ssize_t j = 0; j < 4; ++j) {
-      s(py::ssize_t(t), j) = std::int64_t(ids[k.v[j]]);
-      for (py::ssize_t c = 0; c < 3; ++c) o(py::ssize_t(t), j, c) = std::int8_t(v[j][c]);
-    }
-    ++t;
-  });
+  pipeline::periodic::for_each_stored_tet(r, offsets,
+                                          [&](const pipeline::periodic::KeptTet& k, std::uint64_t, std::size_t) {
+                                            int v[4][3];
+                                            pipeline::periodic::stored_offsets(k, v);
+                                            for (py::ssize_t j = 0; j < 4; ++j) {
+                                              s(py::ssize_t(t), j) = std::int64_t(ids[k.v[j]]);
+                                              for (py::ssize_t c = 0; c < 3; ++c)
+                                                o(py::ssize_t(t), j, c) = std::int8_t(v[j][c]);
+                                            }
+                                            ++t;
+                                          });
   py::dict d;
   d["simplices"] = simplices;
   d["offsets"] = off;

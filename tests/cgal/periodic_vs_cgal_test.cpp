@@ -59,9 +59,8 @@ class PeriodicVsCgal : public ::testing::TestWithParam<Case> {};
 
 TEST_P(PeriodicVsCgal, SameTets) {
   const Case c = GetParam();
-  const auto dir = std::filesystem::temp_directory_path() /
-                   ("tetstream-pvcgal-" + std::to_string(::getpid()) + "-" + std::to_string(c.n) + "-" +
-                    std::to_string(c.seed));
+  const auto dir = std::filesystem::temp_directory_path() / ("tetstream-pvcgal-" + std::to_string(::getpid()) + "-" +
+                                                             std::to_string(c.n) + "-" + std::to_string(c.seed));
   std::filesystem::create_directories(dir);
   const auto xyz = testing_util::dyadic_uniform(c.n, c.seed);
   const std::string input = (dir / "points.f64").string(), output = (dir / "out.tets").string();
@@ -92,8 +91,8 @@ TEST_P(PeriodicVsCgal, SameTets) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Uniform, PeriodicVsCgal,
-                         ::testing::Values(Case{1000, 1}, Case{1000, 2}, Case{1000, 3}, Case{10000, 4},
-                                           Case{10000, 5}, Case{100000, 6}),
+                         ::testing::Values(Case{1000, 1}, Case{1000, 2}, Case{1000, 3}, Case{10000, 4}, Case{10000, 5},
+                                           Case{100000, 6}),
                          [](const auto& info) {
                            std::string name = "n";  // (appended: GCC 12 warns, wrongly, on "n" + string)
                            name += std::to_string(info.param.n);

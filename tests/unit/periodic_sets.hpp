@@ -80,14 +80,14 @@ inline std::vector<PeriodicKey> container_periodic_keys(const std::string& path)
   std::vector<std::uint64_t> ids(r.point_count());
   r.read_points(0, ids.size(), nullptr, ids.data());
   std::vector<PeriodicKey> out;
-  pipeline::periodic::for_each_stored_tet(r, offsets, [&](const pipeline::periodic::KeptTet& t, std::uint64_t,
-                                                          std::size_t) {
-    int off[4][3];
-    pipeline::periodic::stored_offsets(t, off);
-    std::uint64_t orig[4];
-    for (int j = 0; j < 4; ++j) orig[j] = ids[t.v[j]];
-    out.push_back(periodic_key(orig, off));
-  });
+  pipeline::periodic::for_each_stored_tet(r, offsets,
+                                          [&](const pipeline::periodic::KeptTet& t, std::uint64_t, std::size_t) {
+                                            int off[4][3];
+                                            pipeline::periodic::stored_offsets(t, off);
+                                            std::uint64_t orig[4];
+                                            for (int j = 0; j < 4; ++j) orig[j] = ids[t.v[j]];
+                                            out.push_back(periodic_key(orig, off));
+                                          });
   std::sort(out.begin(), out.end());
   return out;
 }
