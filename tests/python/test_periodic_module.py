@@ -52,3 +52,21 @@ def test_points_outside_refused_on_request(tmp_path):
     with pytest.raises(tetstream.InputError, match="outside"):
         tetstream.run(pts, str(tmp_path / "r.tets"), progress=False, checkpoint=False, periodic=1.0,
                       periodic_outside="refuse")
+
+
+def test_periodic_auto_reads_the_snapshots_box(tmp_path):
+    # A Gadget-like snapshot: float32 coordinates in [0, 50), Header/BoxSize = 50.
+    h5py = pytest.importorskip("h5py")
+    rng = np.random.default_rng(4)
+    pts = (rng.random((3000, 3)) * 50).astype(np.float32)
+    snap = str(tmp_path / "snap.hdf5")
+    with h5py.File(snap, "w") as f:
+        f.create_group("Header").attrs["BoxSize"] = 50.0
+        f.create_dataset("PartType1/Coordinates", data=pts)
+    out = str(tmp_path / "snap.tets")
+    s = tetstream.run(snap, out, progress=False, checkpoint=False, periodic="auto",
+                      datasets=["/PartType1/Coordinates"])
+    assert s["periodic"]["period"] == [50.0, 50.0, 50.0]
+    d = tetstream._core.periodic_tets(out)
+    v = pts.astype(np.float64)[d["simplices"]] + d["offsets"] * 50.0
+    assert abs(np.linalg.det(v[:, 1:] - v[:, :1]).sum() / 6 - 50.0**3) < 1e-6 * 50.0**3
