@@ -25,7 +25,7 @@ struct RunArgs {
   std::string memory = "1G";
   std::string periodic;  // --periodic: L, Lx,Ly,Lz or auto; empty: not periodic
   std::string outside = "wrap";
-  double margin = 6.0;
+  double margin = 8.0;
 };
 
 // `run --periodic`: the triangulation of the flat torus (docs/periodic.md).

@@ -254,6 +254,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   };
   const io::TetReader r(in.padded);
   const PaddedMap m = map_labels(r, in);
+  r.release_point_pages(0, r.point_count());  // read once into the map: their pages go back
   spdlog::debug("periodic keep: labels mapped in {:.2f}s", since());
   double lower[3];  // the padded box's lower corner, rounded up: -M, conservatively
   for (int k = 0; k < 3; ++k) {
@@ -298,6 +299,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   wo.threads = std::max(1, in.threads);
   io::TetWriter w(in.output, h, wo);
   write_points(r, in, w);
+  r.release_point_pages(0, r.point_count());
   spdlog::debug("periodic keep: points written in {:.2f}s", since());
   io::PeriodicBox box{in.period, in.sort_axis};
   w.add_section(io::kTagPeriodicBox, io::serialize_periodic_box(box));

@@ -16,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 
@@ -111,6 +112,27 @@ TEST_F(Periodic, PointsOutsideTheBoxAreWrappedOrRefused) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("lies outside [0, 1)"), std::string::npos) << e.what();
   }
+}
+
+TEST_F(Periodic, DuplicatesAfterWrappingAreMerged) {
+  // The lattice plus copies of its x = 0 face at x = 1: wrapped onto the face, merged.
+  auto xyz = testing_util::lattice(8);
+  for (std::size_t i = 0; i < 64; ++i) xyz.insert(xyz.end(), {1.0, xyz[3 * i + 1], xyz[3 * i + 2]});
+  const auto s = run(xyz, "dup.tets");
+  EXPECT_EQ(s.padded.input_points - s.padded.points, s.padded.duplicates);
+  EXPECT_EQ(s.points, 512u);
+  expect_clean(verify("dup.tets"), 512);
+}
+
+TEST_F(Periodic, TooFewPointsForOneSheetAreRefused) {
+  try {
+    run(testing_util::dyadic_uniform(12, 4), "few.tets");
+    FAIL() << "12 points in a box were triangulated in one sheet";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("1-sheeted"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(path("few.tets")));
+  EXPECT_FALSE(std::filesystem::exists(path("few.tets.partial")));
 }
 
 TEST_F(Periodic, AReaderOfPlainTetsRefusesAPeriodicContainer) {
