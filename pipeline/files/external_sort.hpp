@@ -25,9 +25,12 @@
 // equal (drop duplicates, add counts, ...) and returns how many records it kept at the
 // front of the run. Records of one key may still arrive from several runs in merge().
 //
-// Threads: runs are sorted with all OpenMP threads (in-place parallel quicksort);
-// push() and merge() are called from one thread.
+// Threads: runs are sorted with all OpenMP threads (in-place parallel quicksort), and
+// the merge runs on them too (merge_runs_in_rounds: each round merges what every run
+// holds in memory up to a bound, split among the threads by splitters, with the
+// sequential merge's result); push() and merge() are called from one thread.
 #include "core/error.hpp"
+#include "pipeline/files/parallel_merge.hpp"
 #include "pipeline/files/temp_files.hpp"
 
 #include <algorithm>
@@ -111,46 +114,6 @@ int max_threads();   // omp_get_max_threads()
 bool in_parallel();  // omp_in_parallel(): no nested teams
 int team_size();     // omp_get_num_threads()
 int thread_id();     // omp_get_thread_num()
-
-// The heap of a k-way merge: a binary min-heap of source indices, ordered by the
-// sources' current heads (`before(a, b)`: source a's head comes first; ties go to the
-// smaller index, so equal records leave in source order).
-template <class Before>
-class MergeHeap {
- public:
-  MergeHeap(Before before, std::size_t capacity) : before_(std::move(before)) { heap_.reserve(capacity); }
-  void push(std::size_t source) { heap_.push_back(source); }
-  void build() {
-    for (std::size_t i = heap_.size(); i-- > 0;) sift_down(i);
-  }
-  bool empty() const { return heap_.empty(); }
-  std::size_t top() const { return heap_[0]; }
-  // After the top source advanced: `exhausted` drops it, otherwise it is re-placed.
-  void advance_top(bool exhausted) {
-    if (exhausted) {
-      heap_[0] = heap_.back();
-      heap_.pop_back();
-    }
-    if (!heap_.empty()) sift_down(0);
-  }
-
- private:
-  bool first(std::size_t a, std::size_t b) const { return before_(a, b) || (!before_(b, a) && a < b); }
-  void sift_down(std::size_t i) {
-    const std::size_t n = heap_.size();
-    for (;;) {
-      std::size_t m = i;
-      const std::size_t l = 2 * i + 1, r = l + 1;
-      if (l < n && first(heap_[l], heap_[m])) m = l;
-      if (r < n && first(heap_[r], heap_[m])) m = r;
-      if (m == i) return;
-      std::swap(heap_[i], heap_[m]);
-      i = m;
-    }
-  }
-  Before before_;
-  std::vector<std::size_t> heap_;
-};
 
 }  // namespace detail
 
@@ -307,7 +270,9 @@ class ExternalSorter {
     release_buffer();
     // Fan-in: one block per run plus the output batch.
     const std::size_t min_block = std::max<std::size_t>(opt_.min_block_bytes / sizeof(T), 1);
-    const std::size_t fan_in = std::max<std::size_t>(opt_.memory_bytes / sizeof(T) / (min_block + 1), 2);
+    // The merge in rounds holds its blocks in half the budget (the round's output in the other).
+    const std::size_t block_budget = opt_.memory_bytes / sizeof(T) / (merge_threads() > 1 ? 2 : 1);
+    const std::size_t fan_in = std::max<std::size_t>(block_budget / (min_block + 1), 2);
     while (runs_.size() > fan_in) {
       ++stats_.merge_passes;
       std::vector<Run> next;
@@ -434,9 +399,105 @@ class ExternalSorter {
     buf_.shrink_to_fit();
   }
 
+  // Threads the merge may use: OpenMP's, unless the sorter is told to stay on one or
+  // is already inside a team.
+  int merge_threads() const { return opt_.parallel && !detail::in_parallel() ? std::max(1, detail::max_threads()) : 1; }
+
+  // One run of a merge in rounds, read a window at a time: the records a round did not
+  // take move to the window's front at the next refill.
+  class Window {
+   public:
+    Window(const std::string& path, std::size_t capacity, bool give_back)
+        : file_(path, give_back ? "r+b" : "rb"), buf_(capacity), give_back_(give_back) {}
+    std::span<const T> held() const { return {buf_.data() + pos_, end_ - pos_}; }
+    bool file_done() const { return eof_; }  // every record of the run is in held() or taken
+    bool done() const { return eof_ && pos_ == end_; }
+    void take(std::size_t n) { pos_ += n; }
+    void refill() {
+      if (eof_) return;
+      std::copy(buf_.begin() + std::ptrdiff_t(pos_), buf_.begin() + std::ptrdiff_t(end_), buf_.begin());
+      end_ -= pos_;
+      pos_ = 0;
+      const std::size_t want = buf_.size() - end_;
+      if (want == 0) return;
+      const std::size_t got = file_.read(buf_.data() + end_, sizeof(T), want);
+      end_ += got;
+      served_ += got * sizeof(T);
+      eof_ = got < want;
+      // As Cursor: the bytes read are given back to the filesystem in steps.
+      if (give_back_ && (eof_ || served_ >= given_back_ + Cursor::kGiveBackBytes)) {
+        file_.give_back_before(eof_ ? served_ + 4095 : served_);
+        given_back_ = served_;
+      }
+    }
+
+   private:
+    BinaryFile file_;
+    std::vector<T> buf_;
+    std::size_t pos_ = 0, end_ = 0;
+    bool eof_ = false, give_back_;
+    std::uint64_t served_ = 0, given_back_ = 0;
+  };
+
+  // What a round may take of each window: the records that come before the bound, the
+  // least (last held record, run) of the runs with more on disk, in the merge's order
+  // (record, then run). Every record still on disk comes after it, so the round's
+  // output is the merged sequence's next piece. The bound's own run is taken whole,
+  // so each round makes progress.
+  void round_takes(const std::vector<std::unique_ptr<Window>>& win, std::vector<std::span<const T>>& take) const {
+    const std::size_t k = win.size();
+    std::size_t bound = k;
+    for (std::size_t r = 0; r < k; ++r)
+      if (!win[r]->file_done() && (bound == k || less_(win[r]->held().back(), win[bound]->held().back()))) bound = r;
+    for (std::size_t r = 0; r < k; ++r) {
+      const std::span<const T> held = win[r]->held();
+      if (bound == k || r == bound) {
+        take[r] = held;
+        continue;
+      }
+      const T& b = win[bound]->held().back();
+      take[r] = held.first(detail::cut_of(held, r, b, bound, std::size_t(0), less_));
+    }
+  }
+
+  // The k-way merge on `threads` threads, in rounds: every window refilled, the
+  // records before the round's bound merged in parallel (detail::parallel_merge_spans)
+  // into the output block, served in batches. Half the budget holds the windows, the
+  // other half the output block (never more than the windows held).
+  template <class Emit>
+  void merge_runs_in_rounds(const std::vector<Run>& runs, Emit&& emit, int threads) {
+    const std::size_t k = runs.size();
+    const std::size_t total = opt_.memory_bytes / sizeof(T);
+    const std::size_t block = std::max<std::size_t>(total / 2 / k, 1);
+    std::vector<std::unique_ptr<Window>> win;
+    std::size_t held_most = 0;
+    for (const Run& r : runs) {
+      const std::size_t cap = std::clamp<std::size_t>(std::size_t(r.records), 1, block);
+      win.push_back(std::make_unique<Window>(r.path, cap, opt_.give_back_runs));
+      held_most += cap;
+    }
+    std::vector<T> out(held_most);
+    std::vector<std::span<const T>> take(k);
+    const std::size_t batch = std::max<std::size_t>(opt_.batch_records, 1);
+    for (;;) {
+      for (auto& w : win) w->refill();
+      round_takes(win, take);
+      std::size_t m = 0;
+      for (const auto& t : take) m += t.size();
+      if (m == 0) break;  // every run is done: a run with more on disk always gives its window
+      detail::parallel_merge_spans(take, out.data(), less_, threads);
+      for (std::size_t r = 0; r < k; ++r) win[r]->take(take[r].size());
+      for (std::size_t i = 0; i < m; i += batch) emit(std::span<const T>(out.data() + i, std::min(batch, m - i)));
+    }
+  }
+
   // k-way merge of `runs` into batches for `emit`; ties go to the earlier run.
   template <class Emit>
   void merge_runs(const std::vector<Run>& runs, Emit&& emit) {
+    if (const int threads = merge_threads(); threads > 1) {
+      merge_runs_in_rounds(runs, emit, threads);
+      return;
+    }
     const std::size_t k = runs.size();
     const std::size_t total = opt_.memory_bytes / sizeof(T);
     const std::size_t out_records =

@@ -149,6 +149,13 @@ RunSummary Job::run() {
   DiskMeter disk(dir_, io::is_std_stream(options_.output) ? "" : options_.output + ".partial");
   const StageContext context{options_, dir_, checkpoint_, state_, &disk};
 
+  const StageMeter job_meter;
+  StageMeter meter;
+  auto stage_done = [&](const char* name) {
+    summary.stages.emplace_back(name, meter.elapsed());
+    meter.restart();
+  };
+
   // ---- sort: the external sort, or what the checkpoint kept of it ----
   SortStage sort(context, budget_, threads_, claim_);
   sort.prepare();
@@ -160,6 +167,10 @@ RunSummary Job::run() {
   summary.duplicates = sorted.duplicates;
   summary.axis = sorted.axis;
   summary.seconds_sort = seconds_since(start_);
+  stage_done("sort");
+  summary.stages.emplace_back("sort.scan", sorted.time_scan);  // zero for phases a checkpoint kept
+  summary.stages.emplace_back("sort.runs", sorted.time_runs);
+  summary.stages.emplace_back("sort.merge", sorted.time_merge);
   spdlog::info("sorted {} points ({} duplicates merged) along {} in {} runs, {:.1f}s", sorted.count, sorted.duplicates,
                "xyz"[sorted.axis], sorted.runs, summary.seconds_sort);
   if (sorted.count < 4) throw InputError(options_.input + ": fewer than 4 distinct points");
@@ -170,12 +181,14 @@ RunSummary Job::run() {
   index.prepare();
   index.run();
   summary.seconds_index = seconds_since(index_start);
+  stage_done("index");
   summary.hull_vertices = index.view().hull_points.size();
 
   // The triangulation's shares of the ledger, from the indexes as built, with the
   // frames of the budget the output was started with.
   budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
   const TriangulatePlan plan = plan_triangulation(index, options_, budget_, threads_);
+  stage_done("plan");
 
   // ---- write, started before the triangulation feeds it: the output, new or resumed ----
   // Declared before the triangulation that feeds it, so destroyed after it on a failure.
@@ -189,6 +202,7 @@ RunSummary Job::run() {
   triangulate.prepare(write.first_label(), write.segments_done());
   budget_.plan_triangulate(plan.shares.index_bytes, triangulate.window_bytes());  // the windows as measured
   triangulate.run(write);
+  stage_done("triangulate");
   write.commit();
   disk.sample();
   write.finish();
@@ -206,6 +220,8 @@ RunSummary Job::run() {
   summary.output_bytes = write.bytes_written();
   summary.tet_bytes = write.tet_bytes();
   summary.seconds_total = seconds_since(start_);
+  stage_done("tail");
+  summary.stages.emplace_back("total", job_meter.elapsed());
   summary.memory_ceiling = budget_.ceiling();
   summary.memory_shares = budget_.shares();
   return summary;

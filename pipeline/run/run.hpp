@@ -15,10 +15,13 @@
 //                                              container on its own thread
 #include "io/point_reader.hpp"
 #include "pipeline/util/memory_budget.hpp"
+#include "pipeline/util/stage_time.hpp"
 #include "pipeline/window/zone_plan.hpp"
 
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace tetstream::pipeline {
 
@@ -87,6 +90,12 @@ struct RunSummary {
   double seconds_segments = 0;     // summed over segments (more than the wall time with threads)
   double seconds_writer_busy = 0;  // the writer thread compressing and writing (overlapped)
   double seconds_writer_wait = 0;  // the segment loop blocked on the writer (full queue, drains)
+  // Each stage's wall time and busy thread-seconds (pipeline/util/stage_time.hpp), in
+  // the job's order: "sort" (and its phases "sort.scan", "sort.runs", "sort.merge"),
+  // "index", "plan", "triangulate" (the segments, with the writer's work overlapped),
+  // "tail" (from the last segment handed to the writer to the output's rename: the
+  // frames still queued), "total". Empty for a job under mpirun.
+  std::vector<std::pair<std::string, StageTime>> stages;
   // The ledger (pipeline/memory_budget.hpp): --memory after any cap, and each share as
   // planned for this input (empty when a finished checkpoint was only collected).
   std::uint64_t memory_ceiling = 0;

@@ -53,6 +53,12 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
   nlohmann::json memory = {{"ceiling", s.memory_ceiling}};
   for (const MemoryBudget::Share& share : s.memory_shares) memory[share.phase][share.name] = share.bytes;
   j["memory_planned"] = memory;
+  // Each stage's wall time and busy thread-seconds: a stage whose busy / wall stays
+  // near 1 on many threads is a serial one (scripts/bench-threads reads these).
+  nlohmann::json stages = nlohmann::json::object();
+  for (const auto& [name, t] : s.stages)
+    stages[name] = {{"wall_seconds", t.wall}, {"busy_thread_seconds", t.busy}, {"parallelism", t.parallelism()}};
+  j["stages"] = stages;
   if (!s.ranks.empty()) {
     nlohmann::json ranks = nlohmann::json::array();
     for (const RunSummary::Rank& r : s.ranks)

@@ -120,6 +120,7 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
                          const PointSortOptions& options, const std::string& dir, SortProgress& done,
                          SortedPoints& result) {
   auto t0 = Clock::now();
+  StageMeter meter;
   std::optional<MemoryBudget> own_budget;
   const SortShares shares = sort_shares(options, result.input_count, own_budget);
   ExternalSortOptions sorter_options;
@@ -131,8 +132,10 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
   std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
   write_runs<R>(sorter, source, source_options, options, dir, shares, done, result, hull_originals);
   result.seconds_runs = since(t0);
+  result.time_runs = meter.elapsed();
 
   t0 = Clock::now();
+  meter.restart();
   // The merge punches holes in the runs behind its reads: from here on they are not
   // runs a resumed job could adopt. The state says so before the first hole (a job
   // resumed during the merge sorts its runs again from the input).
@@ -147,6 +150,7 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
   sort_detail::merge_runs_into<R>(sorter, hull_originals, *sink, /*sync=*/options.resume != nullptr, options.progress,
                                   result.input_count, result);
   result.seconds_merge = since(t0);
+  result.time_merge = meter.elapsed();
 }
 }  // namespace
 
@@ -159,6 +163,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
 
   // ---- pass 1: bounding box and count (stdin is spooled so it can be read again) ----
   auto t0 = Clock::now();
+  const StageMeter scan_meter;
   std::string source = input;
   io::PointReadOptions source_options = read_options;
   if (io::is_std_stream(input)) {
@@ -205,6 +210,7 @@ SortedPoints sort_points(const std::string& input, const io::PointReadOptions& r
   result.axis = done.axis;
   for (int k = 0; k < 3; ++k) result.bbox_min[k] = done.bbox_min[k], result.bbox_max[k] = done.bbox_max[k];
   result.seconds_scan = since(t0);
+  result.time_scan = scan_meter.elapsed();
 
   if (options.on_scanned) options.on_scanned(done);
   result.layout = RecordLayout::for_input(done.float32, done.input_count);

@@ -15,6 +15,7 @@
 #include "io/point_reader.hpp"
 #include "pipeline/sort/point_record.hpp"
 #include "pipeline/files/temp_files.hpp"
+#include "pipeline/util/stage_time.hpp"
 
 #include <cstdint>
 #include <functional>
@@ -108,6 +109,7 @@ struct SortedPoints {
   std::uint32_t crc32c = 0;                // of the sorted file's bytes
   std::size_t runs = 0;
   double seconds_scan = 0, seconds_runs = 0, seconds_merge = 0;
+  StageTime time_scan, time_runs, time_merge;  // the same phases' wall and busy thread-seconds
 };
 
 // Sorts the points of `input` into a new file in `dir` (with its runs and, for stdin,

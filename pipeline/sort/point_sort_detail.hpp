@@ -99,6 +99,86 @@ void sort_and_push_run(typename RecordSort<R>::Sorter& sorter, std::vector<Sorte
   ++runs;
 }
 
+// A batch of the merge, in label order, with exact duplicates dropped and the hull
+// candidates' labels found, on the OpenMP threads for a large batch: each thread marks
+// its slice (a duplicate: equal to the record before it, the last one of the batch
+// before for the first), then copies its kept records to their place after the
+// slices before it. Equal records are adjacent, so comparing with the one before is
+// comparing with the last kept.
+template <class R>
+class DuplicateFilter {
+ public:
+  explicit DuplicateFilter(const std::unordered_set<std::uint64_t>& hull_originals) : hull_(hull_originals) {}
+
+  // The batch's kept records into `kept` (resized), its candidates' labels appended
+  // to `hull_labels`; result.count and result.duplicates count them.
+  void filter(std::span<const R> batch, std::vector<R>& kept, std::vector<std::uint64_t>& hull_labels,
+              SortedPoints& result) {
+    const std::size_t n = batch.size();
+    const int threads = n >= (std::size_t(1) << 14) ? std::max(1, detail::max_threads()) : 1;
+    flags_.resize(n);
+    kept.resize(n);
+    slice_kept_.assign(std::size_t(threads) + 1, 0);
+    slice_hull_.resize(std::size_t(threads));
+    for (auto& h : slice_hull_) h.clear();
+    std::size_t team = 1;  // the team OpenMP gave (maybe fewer than asked)
+    const std::uint64_t base = result.count;
+#pragma omp parallel num_threads(threads) if (threads > 1)
+    {
+      const std::size_t t = std::size_t(detail::thread_id()), nt = std::size_t(detail::team_size());
+      const std::size_t lo = n * t / nt, hi = n * (t + 1) / nt;
+      slice_kept_[t + 1] = mark(batch, lo, hi);
+#pragma omp barrier
+#pragma omp single
+      {
+        team = nt;
+        for (std::size_t u = 0; u < nt; ++u) slice_kept_[u + 1] += slice_kept_[u];
+      }
+      copy_kept(batch, lo, hi, slice_kept_[t], base, kept, slice_hull_[t]);
+    }
+    const std::size_t total = slice_kept_[team];
+    kept.resize(total);
+    for (auto& h : slice_hull_) hull_labels.insert(hull_labels.end(), h.begin(), h.end());
+    result.count += total;
+    result.duplicates += n - total;
+    if (n) last_ = batch[n - 1], have_last_ = true;
+  }
+
+ private:
+  static constexpr std::uint8_t kDuplicate = 1, kCandidate = 2;
+  // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
+  static bool same_point(const R& a, const R& b) {
+    return a.coord(0) == b.coord(0) && a.coord(1) == b.coord(1) && a.coord(2) == b.coord(2);
+  }
+  // Flags [lo, hi) of the batch; returns how many it keeps.
+  std::size_t mark(std::span<const R> batch, std::size_t lo, std::size_t hi) {
+    std::size_t keep = 0;
+    for (std::size_t i = lo; i < hi; ++i) {
+      const R* before = i > 0 ? &batch[i - 1] : have_last_ ? &last_ : nullptr;
+      const bool duplicate = before && same_point(batch[i], *before);
+      flags_[i] = std::uint8_t((duplicate ? kDuplicate : 0) | (hull_.count(batch[i].original()) ? kCandidate : 0));
+      keep += !duplicate;
+    }
+    return keep;
+  }
+  // Copies the kept records of [lo, hi) from kept[at] on; a candidate's label is that
+  // of the record it is (or, a duplicate, the kept record it equals).
+  void copy_kept(std::span<const R> batch, std::size_t lo, std::size_t hi, std::size_t at, std::uint64_t base,
+                 std::vector<R>& kept, std::vector<std::uint64_t>& hull) const {
+    for (std::size_t i = lo; i < hi; ++i) {
+      if (!(flags_[i] & kDuplicate)) kept[at++] = batch[i];
+      if (flags_[i] & kCandidate) hull.push_back(base + at - 1);
+    }
+  }
+
+  const std::unordered_set<std::uint64_t>& hull_;
+  std::vector<std::uint8_t> flags_;
+  std::vector<std::size_t> slice_kept_;
+  std::vector<std::vector<std::uint64_t>> slice_hull_;
+  R last_{};
+  bool have_last_ = false;
+};
+
 // The merge: the runs into `out` in label order, exact duplicates dropped (the first,
 // the smallest original index, stays), the hull candidates' labels found (labels
 // counted from 0: a rank's own). Sets result.count, duplicates and hull_labels, and
@@ -106,36 +186,17 @@ void sort_and_push_run(typename RecordSort<R>::Sorter& sorter, std::vector<Sorte
 template <class R>
 void merge_runs_into(typename RecordSort<R>::Sorter& sorter, const std::unordered_set<std::uint64_t>& hull_originals,
                      SortedSink& out, bool sync, bool progress_on, std::uint64_t progress_total, SortedPoints& result) {
-  std::vector<R> block;
-  block.reserve(std::size_t(1) << 15);
-  R last{};
-  bool have_last = false;
+  DuplicateFilter<R> filter(hull_originals);
+  std::vector<R> kept;
   std::vector<std::uint64_t> hull_labels;
   Progress progress("merging", "points", progress_total, progress_on);
   sorter.merge([&](std::span<const R> batch) {
     check_interrupted();
-    for (const R& p : batch) {
-      const bool candidate = hull_originals.count(p.original()) != 0;
-      // Equal as numbers (so -0.0 == 0.0), as the kernel compares points.
-      if (have_last && p.coord(0) == last.coord(0) && p.coord(1) == last.coord(1) && p.coord(2) == last.coord(2)) {
-        ++result.duplicates;  // the first occurrence (smallest original index) stays
-        if (candidate) hull_labels.push_back(result.count - 1);
-        continue;
-      }
-      if (candidate) hull_labels.push_back(result.count);
-      block.push_back(p);
-      last = p;
-      have_last = true;
-      ++result.count;
-      if (block.size() == block.capacity()) {
-        out.write(block.data(), sizeof(R) * block.size());
-        block.clear();
-      }
-    }
+    filter.filter(batch, kept, hull_labels, result);
+    if (!kept.empty()) out.write(kept.data(), sizeof(R) * kept.size());
     // Counted as read from the runs, duplicates included: the total is the input count.
     progress.add(batch.size());
   });
-  out.write(block.data(), sizeof(R) * block.size());
   progress.finish();
   std::sort(hull_labels.begin(), hull_labels.end());
   hull_labels.erase(std::unique(hull_labels.begin(), hull_labels.end()), hull_labels.end());
