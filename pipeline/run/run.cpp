@@ -182,6 +182,7 @@ RunSummary Job::run() {
   index.run();
   summary.seconds_index = seconds_since(index_start);
   stage_done("index");
+  for (const auto& phase : index.phases()) summary.stages.push_back(phase);
   summary.hull_vertices = index.view().hull_points.size();
 
   // The triangulation's shares of the ledger, from the indexes as built, with the

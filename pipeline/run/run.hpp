@@ -92,9 +92,10 @@ struct RunSummary {
   double seconds_writer_wait = 0;  // the segment loop blocked on the writer (full queue, drains)
   // Each stage's wall time and busy thread-seconds (pipeline/util/stage_time.hpp), in
   // the job's order: "sort" (and its phases "sort.scan", "sort.runs", "sort.merge"),
-  // "index", "plan", "triangulate" (the segments, with the writer's work overlapped),
-  // "tail" (from the last segment handed to the writer to the output's rename: the
-  // frames still queued), "total". Empty for a job under mpirun.
+  // "index" (and "index.keys", "index.build", "index.hull"), "plan", "triangulate"
+  // (the segments, with the writer's work overlapped), "tail" (from the last segment
+  // handed to the writer to the output's rename: the frames still queued), "total".
+  // Empty for a job under mpirun.
   std::vector<std::pair<std::string, StageTime>> stages;
   // The ledger (pipeline/memory_budget.hpp): --memory after any cap, and each share as
   // planned for this input (empty when a finished checkpoint was only collected).

@@ -41,10 +41,18 @@ std::uint32_t IndexStage::block_points(std::uint64_t count) const {
 void IndexStage::run() {
   const ScopedThreads threads(threads_);
   SortedView& view = view_;
+  StageMeter meter;
+  auto phase_done = [&](const char* name) {
+    phases_.emplace_back(name, meter.elapsed());
+    meter.restart();
+  };
   view.sample_keys(/*release_file_pages=*/true);
+  phase_done("index.keys");
   index_.build(view.points, view.count, view.axis, block_points(view.count), /*release_pages=*/true);
   view.index = &index_;
+  phase_done("index.build");
   find_hull();
+  phase_done("index.hull");
 }
 
 std::uint64_t IndexStage::build_shared_part(int rank, int ranks) {

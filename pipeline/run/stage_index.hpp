@@ -8,12 +8,15 @@
 #include "pipeline/window/point_index.hpp"
 #include "pipeline/sort/point_sort.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
+#include "pipeline/util/stage_time.hpp"
 
 #include <boost/iostreams/device/mapped_file.hpp>
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace tetstream::pipeline {
 
@@ -59,6 +62,9 @@ class IndexStage {
   const char* mapped_data() const { return mapping_.data(); }
   std::size_t mapped_bytes() const { return mapping_.size(); }
   const std::string& path() const { return sorted_.path; }
+  // run()'s phases, timed: "index.keys" (the key samples), "index.build" (the point
+  // index), "index.hull" (the global hull and its index), for the summary's stages.
+  const std::vector<std::pair<std::string, StageTime>>& phases() const { return phases_; }
 
  private:
   std::uint32_t block_points(std::uint64_t count) const;  // the index blocks' labels for `count` points
@@ -71,6 +77,7 @@ class IndexStage {
   boost::iostreams::mapped_file_source index_mapping_;  // the shared index's file (attach_shared)
   SortedView view_;
   PointIndex index_, hull_index_;
+  std::vector<std::pair<std::string, StageTime>> phases_;
 };
 
 }  // namespace tetstream::pipeline

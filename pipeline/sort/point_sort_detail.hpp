@@ -62,6 +62,8 @@ inline void sort_run_and_find_hull(std::vector<SortedPoint>& run, int axis, cons
   parallel_sort(run.data(), run.data() + run.size(),
                 [axis](const SortedPoint& a, const SortedPoint& b) { return sorted_before(a, b, axis); });
   run_xyz.resize(3 * run.size());
+  // On every thread: a serial copy of a run was a share of the sort that did not scale.
+#pragma omp parallel for schedule(static) if (run.size() >= (std::size_t(1) << 16))
   for (std::size_t i = 0; i < run.size(); ++i) std::memcpy(&run_xyz[3 * i], run[i].xyz, 3 * sizeof(double));
   run_hull.clear();
   const std::size_t piece = shares.hull_piece_points;

@@ -94,8 +94,10 @@ SortShares MemoryBudget::plan_sort() {
 
 int MemoryBudget::encoders_for(std::uint64_t ceiling, int cores) {
   // As many as the machine has cores, whatever --threads (one encoder left a core idle
-  // in every burst of a segment's tets), one per 512 MiB of budget, at most 4.
-  return std::clamp(std::min<int>(cores, int(std::min<std::uint64_t>(ceiling >> 29, 1 << 20))), 1, 4);
+  // in every burst of a segment's tets), one per 256 MiB of budget (each holds about
+  // three frames: 27 MiB at the largest), at most 16: on 16 cores 2 encoders could
+  // not keep up with the insertion threads (issue 38: the writer busy 72 of 98 s).
+  return std::clamp(std::min<int>(cores, int(std::min<std::uint64_t>(ceiling >> 28, 1 << 20))), 1, 16);
 }
 
 std::size_t MemoryBudget::frame_tets_for(std::uint64_t ceiling) {
@@ -109,7 +111,10 @@ std::uint64_t MemoryBudget::writer_bytes_for(int encoders, std::uint64_t tets, s
   // compressed; no more than the output has, and none larger than the output.
   const double frame = double(std::min<std::uint64_t>(frame_tets, std::max<std::uint64_t>(tets, 1)));
   const double frames = std::min(2.0 * encoders + 1, std::ceil(double(tets) / double(frame_tets)) + 1);
-  return std::uint64_t((frames * kFrameBytesPerTet + encoders * kEncoderBytesPerTet) * frame * 1.05);
+  // An encoder's scratch is made when a frame first needs it (io::TetWriter): no more
+  // of them than the output has frames.
+  const double busy = std::min<double>(encoders, std::ceil(double(tets) / double(frame_tets)));
+  return std::uint64_t((frames * kFrameBytesPerTet + busy * kEncoderBytesPerTet) * frame * 1.05);
 }
 
 TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, double windows_planned) {
