@@ -127,6 +127,11 @@ void sort_runs_and_merge(const std::string& source, const io::PointReadOptions& 
   sorter_options.memory_bytes = shares.merge_bytes;
   sorter_options.dir = dir;
   sorter_options.name = "points";
+  // Batches of 2^18 records (7 MiB at most, beside the merge's share): each is one
+  // parallel region of the duplicate filter, and a region's barrier is a cost of its
+  // own when the cores are shared (2^16-record batches made the merge slower on two
+  // threads than on one on a loaded machine).
+  sorter_options.batch_records = std::size_t(1) << 18;
   sorter_options.keep_files = options.resume != nullptr;
   typename RecordSort<R>::Sorter sorter(sorter_options, typename RecordSort<R>::Less{result.axis});
   std::unordered_set<std::uint64_t> hull_originals;  // original indices of candidates
