@@ -369,9 +369,9 @@ set -e
 # with as many ranks as cores, it does not (2 cores or more; OpenMPI binds one or two
 # ranks to a core each by default).
 if [ "$(nproc)" -ge 2 ] && [ "$(nproc)" -le 64 ]; then
-  mpirun -q -n 1 "$T" -q run grid.f64 -o bound.tets --memory 32M --no-checkpoint 2>bound.err
+  mpirun -q -n 1 "$T" -q run grid.f64 -o bound.tets --memory 48M --no-checkpoint 2>bound.err
   grep -q "each rank may use 1 of this node's" bound.err || { cat bound.err >&2; fail "no warning for a rank bound to one core"; }
-  mpirun -q --bind-to none -n 1 "$T" -q run grid.f64 -o unbound.tets --memory 32M --no-checkpoint 2>unbound.err
+  mpirun -q --bind-to none -n 1 "$T" -q run grid.f64 -o unbound.tets --memory 48M --no-checkpoint 2>unbound.err
   [ ! -s unbound.err ] || { cat unbound.err >&2; fail "a warning for an unbound rank"; }
   cmp bound.tets unbound.tets || fail "a bound rank wrote other bytes"
 fi
