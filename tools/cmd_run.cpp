@@ -42,19 +42,7 @@ void run_periodic(RunArgs& args, Context& ctx) {
       "({} attempt{})",
       p.period[0], p.period[1], p.period[2], s.points, s.wrapped, s.images, s.margin[0], s.tets, s.seconds_total,
       s.attempts, s.attempts == 1 ? "" : "s");
-  ctx.summary = pipeline::run_summary_json(o, s.padded);
-  ctx.summary["periodic"] = {{"period", p.period},
-                             {"margin", s.margin},
-                             {"points", s.points},
-                             {"input_points", s.input_points},
-                             {"wrapped", s.wrapped},
-                             {"images", s.images},
-                             {"tets", s.tets},
-                             {"attempts", s.attempts},
-                             {"seconds_pad", s.seconds_pad},
-                             {"seconds_keep", s.seconds_keep},
-                             {"seconds_total", s.seconds_total},
-                             {"output_bytes", s.output_bytes}};
+  ctx.summary = pipeline::periodic::periodic_summary_json(o, p, s);
 }
 
 // The mesh format an output name asks for (.vtu, .vtk, .mesh, .msh, .node, .xdmf); none

@@ -1,5 +1,7 @@
 #include "pipeline/periodic/periodic.hpp"
 
+#include "pipeline/run/summary_json.hpp"
+
 #include "core/error.hpp"
 #include "io/output_file.hpp"
 #include "io/point_reader.hpp"
@@ -160,6 +162,24 @@ PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& p
   }
   sum.seconds_total = seconds_since(start);
   return sum;
+}
+
+nlohmann::json periodic_summary_json(const RunOptions& options, const PeriodicOptions& periodic,
+                                     const PeriodicSummary& s) {
+  nlohmann::json j = run_summary_json(options, s.padded);
+  j["periodic"] = {{"period", periodic.period},
+                   {"margin", s.margin},
+                   {"points", s.points},
+                   {"input_points", s.input_points},
+                   {"wrapped", s.wrapped},
+                   {"images", s.images},
+                   {"tets", s.tets},
+                   {"attempts", s.attempts},
+                   {"seconds_pad", s.seconds_pad},
+                   {"seconds_keep", s.seconds_keep},
+                   {"seconds_total", s.seconds_total},
+                   {"output_bytes", s.output_bytes}};
+  return j;
 }
 
 }  // namespace tetstream::pipeline::periodic

@@ -20,6 +20,8 @@
 #include "io/tet_periodic.hpp"
 #include "pipeline/run/run.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include <array>
 #include <cstdint>
 #include <string>
@@ -47,5 +49,10 @@ struct PeriodicSummary {
 std::array<double, 3> parse_period(const std::string& text, const std::string& input);
 
 PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& periodic);
+
+// The --json summary of a periodic job: the padded job's (run_summary_json) with a
+// "periodic" object, for the CLI and the Python module alike.
+nlohmann::json periodic_summary_json(const RunOptions& options, const PeriodicOptions& periodic,
+                                     const PeriodicSummary& s);
 
 }  // namespace tetstream::pipeline::periodic

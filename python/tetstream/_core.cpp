@@ -571,18 +571,7 @@ std::string run(const std::string& input, const std::vector<std::string>& more_i
         [o, p = *periodic] {
           configure_logging(o.progress);
           if (o.threads > 0) omp_set_num_threads(o.threads);
-          const auto s = pipeline::periodic::run_periodic(o, p);
-          auto j = pipeline::run_summary_json(o, s.padded);
-          j["periodic"] = {{"period", p.period},
-                           {"margin", s.margin},
-                           {"points", s.points},
-                           {"input_points", s.input_points},
-                           {"wrapped", s.wrapped},
-                           {"images", s.images},
-                           {"tets", s.tets},
-                           {"attempts", s.attempts},
-                           {"seconds_total", s.seconds_total}};
-          return j.dump();
+          return pipeline::periodic::periodic_summary_json(o, p, pipeline::periodic::run_periodic(o, p)).dump();
         },
         emit);
   }
