@@ -26,6 +26,7 @@ struct RunArgs {
   std::string periodic;  // --periodic: L, Lx,Ly,Lz or auto; empty: not periodic
   std::string outside = "wrap";
   double margin = 8.0;
+  std::string index = "auto";  // --index
 };
 
 // `run --periodic`: the triangulation of the flat torus (docs/periodic.md).
@@ -58,6 +59,8 @@ std::optional<io::MeshFormat> mesh_output(const std::string& path) {
 
 void run_run(RunArgs& args, Context& ctx) {
   auto& o = args.options;
+  using Placement = pipeline::RunOptions::IndexPlacement;
+  o.index = args.index == "disk" ? Placement::kDisk : args.index == "memory" ? Placement::kMemory : Placement::kAuto;
   // `-o out.vtu`: the job writes the container out.vtu.tets (checkpointed and resumable
   // under that name, as any output), then converts it and removes it.
   const std::optional<io::MeshFormat> mesh = mesh_output(o.output);
@@ -145,6 +148,12 @@ void setup_run(CLI::App& app, Context& ctx) {
                   "0: the number that wastes the least on buffers for --memory")
       ->capture_default_str()
       ->check(CLI::Range(0, 4096));
+  cmd->add_option("--index", args->index,
+                  "Where the point index lives: memory (about 7.5 bytes a point), disk (a file in the work "
+                  "directory, its pages held within a sixteenth of --memory), or auto (disk when the index would "
+                  "take more than an eighth of --memory). The output is the same")
+      ->check(CLI::IsMember({"auto", "memory", "disk"}))
+      ->capture_default_str();
   cmd->add_option("--sort-run-points", args->options.sort_run_points,
                   "Points per sorted run (default: from --memory; tests force many runs)")
       ->group("");  // hidden: a testing knob

@@ -72,7 +72,8 @@ bool remove_stale_work_dir(const StaleWorkDir& stale);
 // The names of the files a job writes in its work directory: state.json, the sort's
 // and verify's runs (NAME-K.run, NAME-K.run.hull; a rank's: rank-R-NAME-K.run),
 // sorted.points, hull.labels, stdin.f64, pending-S.tets, index.shared (the point index
-// the ranks of a job share), rank-R.progress (a rank's count for rank 0's progress
+// on disk: the ranks of a job share it, and one process keeps it there with --index
+// disk), rank-R.progress (a rank's count for rank 0's progress
 // line), and the .tmp of each while it is written atomically.
 bool is_work_file_name(const std::string& name);
 // The rank R of a work file that rank R of a job under mpirun wrote (rank-R.json,

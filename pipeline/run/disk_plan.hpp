@@ -28,7 +28,8 @@
 // Under mpirun (pipeline/run_distributed.hpp) the work directory holds more, for the
 // whole triangulation: the shared point index (8 bytes a point) and the fragments of
 // ranks 1..K-1 (their tets, 28 (K - 1) / K bytes a point) until they are placed;
-// `more_work` is that, per point.
+// `more_work` is that, per point; for one process with its point index on disk (`run
+// --index`), the index's file, 8 bytes a point.
 #include <cstdint>
 #include <string>
 #include <vector>

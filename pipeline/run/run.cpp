@@ -64,6 +64,11 @@ std::uint64_t parse_memory_size(const std::string& text) {
   return std::uint64_t(value * scale);
 }
 
+bool RunOptions::index_on_disk(std::uint64_t points) const {
+  if (index != IndexPlacement::kAuto) return index == IndexPlacement::kDisk;
+  return index_crowds_budget(points, memory_bytes);
+}
+
 void RunOptions::validate() const {
   if (input.empty()) throw UsageError("no input given");
   if (output.empty()) throw UsageError("no output given (-o OUT.tets)");
@@ -179,7 +184,15 @@ RunSummary Job::run() {
   IndexStage index(sorted, threads_);
   const auto index_start = StageClock::now();
   index.prepare();
-  index.run();
+  if (options_.index_on_disk(sorted.count)) {
+    const std::uint64_t share = index_disk_share(options_.memory_bytes);
+    spdlog::debug("point index: on disk (index.shared in the work directory), at most {} of it resident",
+                  human_bytes(double(share)));
+    index.run_on_disk(dir_ + "/index.shared", share);
+  } else {
+    spdlog::debug("point index: in memory");
+    index.run();
+  }
   summary.seconds_index = seconds_since(index_start);
   stage_done("index");
   for (const auto& phase : index.phases()) summary.stages.push_back(phase);
@@ -269,7 +282,9 @@ std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_p
   if (out_dir.empty()) out_dir = ".";
   const std::vector<DiskNeed> plan =
       plan_disk(*points, reader->float32_input(), work_parent, out_dir, io::is_std_stream(o.output), checkpointed,
-                ranks > 1 ? distributed_work_bytes_per_point(ranks) : 0);
+                ranks > 1                  ? distributed_work_bytes_per_point(ranks)
+                : o.index_on_disk(*points) ? 8
+                                           : 0);
   std::uint64_t need = 0;
   for (const DiskNeed& d : plan) {
     need += d.need;

@@ -43,6 +43,12 @@ struct RunOptions {
   // segments are triangulated `threads` at a time. The output's bytes depend on
   // neither this nor the thread count.
   int zones = 0;
+  // Where the point index lives (IndexStage): in memory (about 7.5 bytes a point), or
+  // in a file of the work directory whose pages are held by region within a share
+  // of the budget (index_disk_share). kAuto: the file when the index would take more
+  // than an eighth of the budget. The output's bytes do not depend on it.
+  enum class IndexPlacement { kAuto, kMemory, kDisk };
+  IndexPlacement index = IndexPlacement::kAuto;
   bool progress = true;
   // Checkpoints (pipeline/checkpoint.hpp): the job keeps its working files and its
   // progress in OUTPUT's file name + ".ckpt", a directory it makes in `checkpoint_dir`
@@ -56,6 +62,8 @@ struct RunOptions {
   bool force = false;
 
   void validate() const;  // throws UsageError
+  // Whether a job of `points` points keeps its point index on disk (`index`, above).
+  bool index_on_disk(std::uint64_t points) const;
   // What the zone plan reads of these options (pipeline/window/zone_plan.hpp).
   PlanOptions plan_options() const { return {memory_bytes, buffer_spacings, segment_points, zones}; }
 };

@@ -16,6 +16,16 @@
 
 namespace tetstream::pipeline {
 
+namespace {
+// The index file, opened without following a link (it is in the job's own work
+// directory, which the job, or rank 0, holds locked).
+int open_shared(const std::string& path, int flags) {
+  const int fd = ::open(path.c_str(), flags | O_NOFOLLOW | O_CLOEXEC, 0600);
+  if (fd < 0) throw IoError(path + ": cannot open the point index's file: " + std::strerror(errno));
+  return fd;
+}
+}  // namespace
+
 void IndexStage::prepare() {
   try {
     // From the file's start to the records' end: a points section inside the partial
@@ -38,21 +48,72 @@ std::uint32_t IndexStage::block_points(std::uint64_t count) const {
   return PointIndex::block_points_for(count, view_.bbox_max[view_.axis] - view_.bbox_min[view_.axis], volume);
 }
 
-void IndexStage::run() {
+// The stage's phases around the point index's build, timed for the summary.
+template <class BuildPointIndex>
+void IndexStage::run_phases(BuildPointIndex&& build_point_index) {
   const ScopedThreads threads(threads_);
-  SortedView& view = view_;
   StageMeter meter;
   auto phase_done = [&](const char* name) {
     phases_.emplace_back(name, meter.elapsed());
     meter.restart();
   };
-  view.sample_keys(/*release_file_pages=*/true);
+  view_.sample_keys(/*release_file_pages=*/true);
   phase_done("index.keys");
-  index_.build(view.points, view.count, view.axis, block_points(view.count), /*release_pages=*/true);
-  view.index = &index_;
+  build_point_index();
+  view_.index = &index_;
   phase_done("index.build");
   find_hull();
   phase_done("index.hull");
+}
+
+void IndexStage::run() {
+  run_phases([&] { index_.build(view_.points, view_.count, view_.axis, block_points(view_.count), true); });
+}
+
+void IndexStage::run_on_disk(const std::string& path, std::uint64_t resident_bytes) {
+  run_phases([&] { build_on_disk(path, resident_bytes); });
+}
+
+void IndexStage::build_on_disk(const std::string& path, std::uint64_t resident_bytes) {
+  const SortedView& view = view_;
+  const std::uint32_t points_a_block = block_points(view.count);
+  const std::uint64_t blocks = PointIndex::blocks_for(view.count, points_a_block);
+  const std::uint64_t total_nodes = PointIndex::node_count_for(view.count, points_a_block);
+  create_shared_file(path, total_nodes);
+  // A chunk of blocks at a time, each built on every thread as build() does, within
+  // the share: a block is 6 bytes a point and a 36-byte node for every ~24 points.
+  const std::uint64_t block_bytes = std::uint64_t(points_a_block) * 8;
+  const std::uint64_t chunk = std::max<std::uint64_t>(std::uint64_t(std::max(threads_, 1)) * 2,
+                                                      resident_bytes / std::max<std::uint64_t>(block_bytes, 1));
+  const int fd = open_shared(path, O_RDWR);
+  try {
+    std::uint64_t first_node = 0;
+    for (std::uint64_t b = 0; b < blocks; b += chunk) {
+      index_.build_part(view.points, view.count, view.axis, points_a_block, b, std::min(blocks, b + chunk),
+                        /*release_file_pages=*/true);
+      const std::uint64_t nodes = index_.part_nodes();
+      index_.write_part(fd, path, total_nodes, first_node);
+      first_node += nodes;
+    }
+    if (first_node != total_nodes) throw std::logic_error("run_on_disk: the blocks' nodes do not add up");
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  ::close(fd);
+  const PointIndex::FileLayout layout = PointIndex::file_layout(view.count, total_nodes, blocks);
+  try {
+    index_mapping_.open(path, std::size_t(layout.bytes));
+  } catch (const std::exception& e) {
+    throw IoError(path + ": cannot map: " + e.what());
+  }
+  const std::uint64_t share = std::min<std::uint64_t>(resident_bytes, layout.bytes);
+  index_regions_ =
+      std::make_unique<MappedRegions>(index_mapping_.data(), index_mapping_.size(),
+                                      std::max<std::size_t>(1, std::size_t(share / MappedRegions::kRegionBytes)));
+  index_.attach(reinterpret_cast<const std::byte*>(index_mapping_.data()), view.points, view.count, view.axis,
+                points_a_block, total_nodes, share);
+  index_.track_regions(index_regions_.get());
 }
 
 std::uint64_t IndexStage::build_shared_part(int rank, int ranks) {
@@ -64,16 +125,6 @@ std::uint64_t IndexStage::build_shared_part(int rank, int ranks) {
                     blocks * (r + 1) / k, /*release_file_pages=*/true);
   return index_.part_nodes();
 }
-
-namespace {
-// The shared index file, opened without following a link (it is in the job's own work
-// directory, which rank 0 holds locked).
-int open_shared(const std::string& path, int flags) {
-  const int fd = ::open(path.c_str(), flags | O_NOFOLLOW | O_CLOEXEC, 0600);
-  if (fd < 0) throw IoError(path + ": cannot open the shared point index: " + std::strerror(errno));
-  return fd;
-}
-}  // namespace
 
 void IndexStage::create_shared_file(const std::string& path, std::uint64_t total_nodes) const {
   // A stopped job's file is rebuilt, never trusted (nothing records it).
@@ -118,6 +169,7 @@ void IndexStage::attach_shared(const std::string& path, std::uint64_t total_node
 
 void IndexStage::release_pages() const {
   release_mapped_pages(mapping_.data(), mapping_.size());
+  if (index_regions_) index_regions_->release_all();
   if (index_mapping_.is_open()) release_mapped_pages(index_mapping_.data(), index_mapping_.size());
 }
 

@@ -14,6 +14,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -35,6 +36,14 @@ class IndexStage {
   // hull of the sort's candidates, by increasing label) and their index. Every page
   // of the sorted file that this reads is handed back behind it.
   void run();
+  // The same, with the point index in a file of the job's work directory (`path`)
+  // instead of memory: built a chunk of blocks at a time and written there, then
+  // mapped, its pages counted in 2 MiB regions within `resident_bytes`
+  // (MappedRegions) and handed back least recently read first, and all of them after
+  // each zone (release_pages). For inputs whose index would crowd the windows out of
+  // the budget (about 7.5 bytes a point resident: 7.5 GB at 10^9 points); the queries
+  // read the blocks near their window, so the file's share stays small.
+  void run_on_disk(const std::string& path, std::uint64_t resident_bytes);
 
   // ---- the ranks of a job build one index together (pipeline/run_distributed.cpp),
   // shared through a file in the job's work directory: each rank builds a K-th of the
@@ -68,13 +77,17 @@ class IndexStage {
 
  private:
   std::uint32_t block_points(std::uint64_t count) const;  // the index blocks' labels for `count` points
+  template <class BuildPointIndex>
+  void run_phases(BuildPointIndex&& build_point_index);  // run()'s phases around the point index's build
+  void build_on_disk(const std::string& path, std::uint64_t resident_bytes);  // run_on_disk's point index
   void find_hull();  // the hull's boundary points (of the sort's candidates) and their index
 
   const SortedPoints& sorted_;
   const int threads_;
   // Declared before the view and the indexes, which point into it.
   boost::iostreams::mapped_file_source mapping_;
-  boost::iostreams::mapped_file_source index_mapping_;  // the shared index's file (attach_shared)
+  boost::iostreams::mapped_file_source index_mapping_;  // the shared index's file (attach_shared, run_on_disk)
+  std::unique_ptr<MappedRegions> index_regions_;        // its resident pages (run_on_disk)
   SortedView view_;
   PointIndex index_, hull_index_;
   std::vector<std::pair<std::string, StageTime>> phases_;

@@ -24,9 +24,26 @@
 
 namespace tetstream::pipeline {
 
-// The least the point index takes (a leaf's 4-byte entry per point), for refusals
-// before the sort, which must never refuse a job that would fit.
+// The least the point index takes in memory (a leaf's 4-byte entry per point), for
+// refusals before the sort, which must never refuse a job that would fit; an index on
+// disk takes its share instead (below), so the bound is the smaller of the two.
 inline constexpr double kIndexBytesLowerBound = 4;
+// The point index in memory, about (PointIndex: a 4-byte entry and a 2-byte cell a
+// point, a 36-byte node for every ~24 points).
+inline constexpr double kIndexBytesPerPoint = 7.5;
+// The point index on disk (IndexStage::run_on_disk, `run --index`): the share of its
+// file's pages held resident, a sixteenth of the budget and at least 32 MiB (a window's
+// queries read the blocks of its label range and of its neighbours, three 2 MiB regions
+// a block). It goes to disk, unless told otherwise, when in memory it would take more
+// than an eighth of the budget: at 10^9 points, 7.5 GB, which left 8G no room for the
+// windows.
+inline constexpr std::uint64_t kIndexDiskShareFloor = std::uint64_t(32) << 20;
+inline std::uint64_t index_disk_share(std::uint64_t memory_bytes) {
+  return memory_bytes / 16 > kIndexDiskShareFloor ? memory_bytes / 16 : kIndexDiskShareFloor;
+}
+inline bool index_crowds_budget(std::uint64_t points, std::uint64_t memory_bytes) {
+  return kIndexBytesPerPoint * double(points) > double(memory_bytes) / 8;
+}
 
 // Tets per frame, about: a frame is cut at the first change of minimum label after
 // this many tets (pipeline/frame_cutter.hpp). The segments emit their tets grouped by

@@ -172,6 +172,36 @@ void PointIndex::build_part(const PointRecords& points, std::uint64_t count, int
   }
 }
 
+std::uint64_t PointIndex::node_count_for(std::uint64_t count, std::uint32_t block_points) {
+  const std::uint64_t bp = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
+  // build_block's recursion: one node for a range of n points, and when n exceeds
+  // kLeafPoints, the nodes of its halves n / 2 and n - n / 2. The sizes at one depth
+  // differ by at most one, so each depth has at most two, and a small table suffices.
+  auto nodes = [](std::uint64_t n) {
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> level{{n, 1}}, next;  // (size, how many)
+    std::uint64_t total = 0;
+    while (!level.empty()) {
+      next.clear();
+      for (auto [size, times] : level) {
+        total += times;
+        if (size <= kLeafPoints) continue;
+        for (std::uint64_t half : {size / 2, size - size / 2}) {
+          auto it = std::find_if(next.begin(), next.end(), [&](const auto& e) { return e.first == half; });
+          if (it == next.end())
+            next.emplace_back(half, times);
+          else
+            it->second += times;
+        }
+      }
+      level.swap(next);
+    }
+    return total;
+  };
+  if (count == 0) return 0;
+  const std::uint64_t full = count / bp, rest = count % bp;
+  return full * nodes(bp) + (rest > 0 ? nodes(rest) : 0);
+}
+
 PointIndex::FileLayout PointIndex::file_layout(std::uint64_t count, std::uint64_t node_count,
                                                std::uint64_t block_count) {
   FileLayout l;
@@ -227,6 +257,7 @@ double PointIndex::leaf_spacing_quantile(double q, std::uint64_t first, std::uin
   const std::size_t b0 = std::size_t(std::min<std::uint64_t>(first / block_points_, blocks_.size() - 1));
   const std::size_t b1 = std::size_t(std::min<std::uint64_t>((last - 1) / block_points_, blocks_.size() - 1));
   for (std::size_t b = b0; b <= b1; ++b) {
+    touch_block(b);
     const Block& block = blocks_[b];
     for (std::uint32_t i = block.first_node; i < block.first_node + block.nodes; ++i) {
       const Node& node = nodes_[i];
@@ -247,6 +278,7 @@ double PointIndex::leaf_spacing_quantile(double q, std::uint64_t first, std::uin
 std::vector<std::uint64_t> PointIndex::compact_sample(std::uint64_t b, std::uint32_t max_points, bool last) const {
   std::vector<std::uint64_t> labels;
   if (b >= blocks_.size()) return labels;
+  touch_block(b);
   const Block& block = blocks_[std::size_t(b)];
   if (block.nodes == 0) return labels;
   std::uint32_t i = block.first_node;

@@ -38,6 +38,7 @@
 //
 // Memory, by the layout: a 4-byte entry per point plus a 36-byte node per 16 points
 // (2^18-label blocks split into leaves of 32): about 6 bytes per point.
+#include "pipeline/files/temp_files.hpp"
 #include "pipeline/sort/point_record.hpp"
 #include "pipeline/window/ball_bounds.hpp"
 
@@ -103,6 +104,11 @@ class PointIndex {
     const std::uint64_t bp = std::clamp<std::uint32_t>(block_points, 1, kMaxBlockPoints);
     return (count + bp - 1) / bp;
   }
+  // The nodes build() makes for `count` points in blocks of `block_points`: a block's
+  // tree has a shape fixed by its point count (median splits down to kLeafPoints), so
+  // a file can be laid out before any block is built (the single-process index on
+  // disk, which writes its blocks a chunk at a time).
+  static std::uint64_t node_count_for(std::uint64_t count, std::uint32_t block_points);
   // Builds blocks [first_block, end_block) as build() would (release_file_pages as
   // there); part_nodes() nodes, numbered from 0. The index cannot answer queries until
   // attach().
@@ -118,6 +124,12 @@ class PointIndex {
   // cache's; the caller hands them back, see stage_index.hpp).
   void attach(const std::byte* mapping, const PointRecords& points, std::uint64_t count, int axis,
               std::uint32_t block_points, std::uint64_t total_nodes, std::uint64_t resident_bytes);
+
+  // An attached index read through a mapping whose resident pages are bounded by
+  // `regions` (MappedRegions, 2 MiB regions held least recently used first): every
+  // read of a block (a query's, the spacing estimate's, a sample's) touches the
+  // regions of its entries, cells and nodes first. Null (the default): no tracking.
+  void track_regions(MappedRegions* regions) { regions_ = regions; }
 
   // Calls visit(label) for every label in [first, last) whose point may lie in the
   // closed ball (center, radius), except some inside `exclude`; points certainly
@@ -222,6 +234,7 @@ class PointIndex {
   template <bool kScaled, class MayMeet, class Visit, class Stop>
   bool scan_block(std::uint64_t b, MayMeet& may_meet, std::uint64_t first, std::uint64_t last, double axis_lo,
                   double axis_hi, Visit& visit, Stop& stop, const ExcludedSlab& exclude) const {
+    touch_block(b);
     const std::uint64_t base = b * block_points_;
     const double scale = blocks_[b].scale;
     // Nodes in preorder; `next` of a node is the first node after its subtree, so
@@ -262,6 +275,23 @@ class PointIndex {
       i = node.next;
     }
     return false;
+  }
+  // Registers block b's regions with regions_ (track_regions). Each of its three
+  // ranges (entries, cells, nodes) is under 2 MiB, so its first and last bytes name
+  // every region it spans.
+  void touch_block(std::uint64_t b) const {
+    if (!regions_) return;
+    const std::uint64_t base = b * block_points_, n = std::min<std::uint64_t>(block_points_, count_ - base);
+    const Block& block = blocks_[b];
+    regions_->touch(&block);
+    regions_->touch(&entries_[base]);
+    regions_->touch(&entries_[base + n - 1]);
+    regions_->touch(&fine_[base]);
+    regions_->touch(&fine_[base + n - 1]);
+    if (block.nodes > 0) {
+      regions_->touch(&nodes_[block.first_node]);
+      regions_->touch(&nodes_[block.first_node + block.nodes - 1]);
+    }
   }
   // A leaf's entry for a point: its label's offset in the block (kOffsetBits) and its
   // cell in the leaf's box above it: the box cut into 256 slices along each axis, the
@@ -342,6 +372,7 @@ class PointIndex {
   std::uint64_t count_ = 0;  // the points the whole index covers
   std::uint64_t first_block_ = 0;
   std::uint64_t resident_bytes_ = 0;  // an attached index's share (attach)
+  MappedRegions* regions_ = nullptr;  // track_regions
 };
 
 }  // namespace tetstream::pipeline

@@ -266,7 +266,7 @@ void refuse_budget_before_sort(const SortProgress& p, const PlanOptions& o, int 
   in.axis = p.axis;
   in.strip_axis = in.extent[(p.axis + 1) % 3] >= in.extent[(p.axis + 2) % 3] ? (p.axis + 1) % 3 : (p.axis + 2) % 3;
   in.leaf_spacing = std::numeric_limits<double>::min();  // buffers of width ~0: a lower bound of the need
-  in.index_bytes = std::uint64_t(kIndexBytesLowerBound * double(p.input_count));
+  in.index_bytes = std::min(std::uint64_t(kIndexBytesLowerBound * double(p.input_count)), kIndexDiskShareFloor);
   try {
     plan_for_budget(in, o, threads);
   } catch (const UsageError& e) {

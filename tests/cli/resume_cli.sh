@@ -124,6 +124,21 @@ mv saved.partial out.tets.partial
 cmp reference.tets out.tets || fail "output resumed after the damage was undone differs"
 rm out.tets
 
+# The point index on disk (--index disk: index.shared in the checkpoint, rebuilt on a
+# resume, never trusted): a job killed mid-triangulation and resumed, in memory or on
+# disk, ends with the same bytes; the file goes with the checkpoint.
+saved_opts=("${opts[@]}")
+opts+=(--index disk)
+kill_when '[ "$(segments_done)" -ge 9 ]' 2
+opts=("${saved_opts[@]}")
+if [ ! -e out.tets ]; then  # killed (a fast machine may finish first)
+  [ -e out.tets.ckpt/index.shared ] || fail "--index disk: no index file in the checkpoint"
+  "$T" "${opts[@]}" --resume
+fi
+cmp reference.tets out.tets || fail "a job resumed after a kill with --index disk differs"
+[ ! -e out.tets.ckpt ] || fail "--index disk: the checkpoint (and its index file) left behind"
+rm out.tets
+
 # Disk full: an injected failure (the error a full disk gives) in the sort, in a
 # segment and in the writer: exit 3, the checkpoint kept, and --resume (with space
 # again) ends with the same bytes.

@@ -28,6 +28,25 @@ no_leftovers
 # --segment-points is the option's name; --zone-points its old one: the same job.
 "$T" -q run points.f64 -o seg.tets --memory 64M --tmpdir tmp --segment-points 2000
 cmp -s out.tets seg.tets || fail "--segment-points and --zone-points differ"
+# The point index in a file of the work directory (--index disk): the same bytes as in
+# memory, on a surface and clustered points (whose queries reach far), at a plan of many
+# segments and zones, on 1 and 2 threads; the file goes with the work directory.
+for dist in ellipsoid-shell hills clusters; do
+  "$T" -q gen --dist $dist --n 20000 --seed 3 -o ix.f64
+  "$T" -q run ix.f64 -o ix-memory.tets --memory 64M --tmpdir tmp --segment-points 2500 --zones 3 --index memory
+  for threads in 1 2; do
+    "$T" -q run ix.f64 -o ix-disk.tets --memory 64M --tmpdir tmp --segment-points 2500 --zones 3 --index disk \
+      --threads $threads
+    cmp -s ix-memory.tets ix-disk.tets || fail "$dist: --index disk on $threads threads differs from --index memory"
+    no_leftovers
+  done
+done
+"$T" -q verify ix-disk.tets >/dev/null || fail "verify rejected the --index disk output"
+# auto puts it on disk when it would take more than an eighth of --memory: not at 64M
+# for 20,000 points (150 KB); the debug log says which.
+"$T" run ix.f64 -o ix-auto.tets --memory 64M --tmpdir tmp --log-level debug 2> ix.log
+grep -q "point index: in memory" ix.log || fail "--index auto: $(grep 'point index' ix.log)"
+rm -f ix.f64 ix-*.tets ix.log
 # The ledger's shares in --json, each phase within the budget.
 [ "$(echo "$s" | json "all(sum(d['memory_planned'][p].values()) <= d['memory_planned']['ceiling'] for p in ('sort', 'triangulate'))")" = "True" ] \
   || fail "memory_planned over the ceiling or missing: $s"

@@ -17,6 +17,7 @@
 #include <cmath>
 #include <random>
 #include <set>
+#include <string>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -94,6 +95,29 @@ TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
 // The index built in parts (the ranks of a job, each its blocks), written into one file
 // and mapped, answers every query as the index built whole: the same labels in the same
 // order, whatever the parts (one block, uneven parts, an empty part).
+// Random balls (every tenth a huge one) over random label ranges: `other` reports the
+// same candidates as `whole`, in the same order; after each query, check() holds.
+template <class Check>
+void expect_same_candidates(const PointIndex& whole, const PointIndex& other, std::uint64_t count, unsigned seed,
+                            int queries, const std::string& what, Check&& check) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.2, 1.2);
+  std::uniform_int_distribution<std::uint64_t> label(0, count);
+  for (int q = 0; q < queries; ++q) {
+    const double c[3] = {u(rng), 3 * u(rng), u(rng)};
+    const double r = q % 10 == 0 ? 2.0 : 0.05 + 0.3 * std::abs(u(rng));
+    std::uint64_t first = label(rng), last = label(rng);
+    if (first > last) std::swap(first, last);
+    std::vector<std::uint64_t> a, b;
+    whole.for_each_candidate(
+        c, r, first, last, [&](std::uint64_t l) { a.push_back(l); }, [] { return false; });
+    other.for_each_candidate(
+        c, r, first, last, [&](std::uint64_t l) { b.push_back(l); }, [] { return false; });
+    ASSERT_EQ(a, b) << "query " << q << ", " << what;
+    check();
+  }
+}
+
 class SharedIndex : public testing_util::ScratchDirTest {
  protected:
   SharedIndex() : ScratchDirTest("shared-index") {}
@@ -128,22 +152,64 @@ TEST_F(SharedIndex, PartsInOneFileAnswerAsTheWholeIndex) {
     shared.attach(reinterpret_cast<const std::byte*>(mapping.data()), records_of(p.data()), p.size(), axis, block,
                   first_node.back(), 1234);
     EXPECT_EQ(shared.memory_bytes(), 1234u);
-    std::mt19937_64 rng(cuts.size());
-    std::uniform_real_distribution<double> u(-1.2, 1.2);
-    std::uniform_int_distribution<std::uint64_t> label(0, p.size());
-    for (int q = 0; q < 200; ++q) {
-      const double c[3] = {u(rng), 3 * u(rng), u(rng)};
-      const double r = q % 10 == 0 ? 2.0 : 0.05 + 0.3 * std::abs(u(rng));
-      std::uint64_t first = label(rng), last = label(rng);
-      if (first > last) std::swap(first, last);
-      std::vector<std::uint64_t> a, b;
-      whole.for_each_candidate(
-          c, r, first, last, [&](std::uint64_t l) { a.push_back(l); }, [] { return false; });
-      shared.for_each_candidate(
-          c, r, first, last, [&](std::uint64_t l) { b.push_back(l); }, [] { return false; });
-      ASSERT_EQ(a, b) << "query " << q << ", " << parts.size() << " parts";
-    }
+    expect_same_candidates(whole, shared, p.size(), unsigned(cuts.size()), 200, std::to_string(parts.size()) + " parts",
+                           [] {});
     EXPECT_EQ(whole.leaf_spacing_quantile(0.5), shared.leaf_spacing_quantile(0.5));
+    EXPECT_EQ(PointIndex::node_count_for(p.size(), block), first_node.back());
+  }
+}
+
+// The node count a file is laid out for before any block is built (the single-process
+// index on disk) is the count the build makes: full blocks, a short last block, blocks
+// of a leaf or less, one point.
+TEST(PointIndex, NodeCountIsKnownBeforeTheBuild) {
+  const std::vector<SortedPoint> p = sorted_points(20011, 1, true, 5);
+  for (std::uint64_t n : {std::uint64_t(1), std::uint64_t(48), std::uint64_t(49), std::uint64_t(97),
+                          std::uint64_t(5000), std::uint64_t(20011)}) {
+    for (std::uint32_t block : {8192u, 1000u, 48u, 7u}) {
+      PointIndex index;
+      index.build_part(records_of(p.data()), n, 1, block, 0, PointIndex::blocks_for(n, block));
+      EXPECT_EQ(PointIndex::node_count_for(n, block), index.part_nodes()) << n << " points, blocks of " << block;
+    }
+  }
+}
+
+// An attached index whose pages are tracked by region (IndexStage::run_on_disk) answers
+// as the index in memory, with no more regions held than its share, also a share of one
+// region that every block's reads evict again.
+TEST_F(SharedIndex, TrackedRegionsAnswerAsTheIndexInMemory) {
+  const int axis = 2;
+  const std::vector<SortedPoint> p = sorted_points(700000, axis, false, 17);  // a file of 3 regions
+  const std::uint32_t block = 8192;
+  PointIndex whole;
+  whole.build(records_of(p.data()), p.size(), axis, block);
+  const std::uint64_t blocks = PointIndex::blocks_for(p.size(), block);
+  const std::uint64_t nodes = PointIndex::node_count_for(p.size(), block);
+  PointIndex part;
+  part.build_part(records_of(p.data()), p.size(), axis, block, 0, blocks);
+  const std::string file = path("index");
+  const PointIndex::FileLayout layout = PointIndex::file_layout(p.size(), nodes, blocks);
+  const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_TRUNC, 0644);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::ftruncate(fd, off_t(layout.bytes)), 0);
+  part.write_part(fd, file, nodes, 0);
+  ::close(fd);
+  boost::iostreams::mapped_file_source mapping(file);
+  ASSERT_GT(mapping.size(), 2 * MappedRegions::kRegionBytes);  // several regions to juggle
+  for (std::size_t share : {std::size_t(1), std::size_t(2), std::size_t(64)}) {
+    MappedRegions regions(mapping.data(), mapping.size(), share);
+    PointIndex tracked;
+    tracked.attach(reinterpret_cast<const std::byte*>(mapping.data()), records_of(p.data()), p.size(), axis, block,
+                   nodes, share * MappedRegions::kRegionBytes);
+    tracked.track_regions(&regions);
+    expect_same_candidates(whole, tracked, p.size(), unsigned(share), 300,
+                           "a share of " + std::to_string(share) + " regions",
+                           [&] { ASSERT_LE(regions.held(), share); });
+    EXPECT_EQ(whole.leaf_spacing_quantile(0.9), tracked.leaf_spacing_quantile(0.9));
+    EXPECT_LE(regions.held(), share);
+    if (share < 4) {
+      EXPECT_GT(regions.releases(), 0u) << "the share never made room";
+    }
   }
 }
 
