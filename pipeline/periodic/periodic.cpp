@@ -304,6 +304,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
         in.claim = &job->claim();
         in.dir = dir;
         in.memory_bytes = options.memory_bytes;
+        in.frame_tets = MemoryBudget::frame_tets_for(job->header_memory());
         in.threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
         in.options_json = header_options(job->header_memory(), periodic, margin);
         const KeepResult kept = keep_periodic_tets(in);
@@ -314,6 +315,8 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
           sum.tets = kept.tets;
           sum.output_bytes = kept.output_bytes;
           sum.margin = margin;
+          auto& ledger = sum.padded.memory_shares;
+          ledger.insert(ledger.end(), kept.memory_shares.begin(), kept.memory_shares.end());
           job->state()["done"] = done_record(sum);
         } else {
           spdlog::info("periodic: {} balls leave the padded box at margin {:.4g}: doubling it", kept.ball_failures,
