@@ -75,10 +75,11 @@ void info_tets(const std::string& path, Context& ctx, bool check) {
                   shortest(h.bbox_min[c]).c_str(), shortest(h.bbox_max[c]).c_str());
     }
     if (box) {
-      std::printf("periodic: the flat torus [0, %s) x [0, %s) x [0, %s) (each tet's vertex offsets in POFS; "
-                  "sort axis %c)\n",
-                  shortest(box->period[0]).c_str(), shortest(box->period[1]).c_str(),
-                  shortest(box->period[2]).c_str(), "xyz"[box->sort_axis]);
+      std::printf(
+          "periodic: the flat torus [0, %s) x [0, %s) x [0, %s) (each tet's vertex offsets in POFS; "
+          "sort axis %c)\n",
+          shortest(box->period[0]).c_str(), shortest(box->period[1]).c_str(), shortest(box->period[2]).c_str(),
+          "xyz"[box->sort_axis]);
     }
     std::printf("made by:  %s\n", h.tool.empty() ? "(unknown)" : h.tool.c_str());
     std::printf("options:  %s\n", h.options.empty() ? "(none)" : h.options.c_str());

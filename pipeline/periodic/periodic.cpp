@@ -100,9 +100,14 @@ std::string header_options(std::uint64_t memory, const PeriodicOptions& p, const
 }
 
 json done_record(const PeriodicSummary& s) {
-  return {{"input_points", s.input_points}, {"points", s.points},   {"wrapped", s.wrapped},
-          {"images", s.images},             {"tets", s.tets},       {"attempts", s.attempts},
-          {"margin", s.margin},             {"output_bytes", s.output_bytes}};
+  return {{"input_points", s.input_points},
+          {"points", s.points},
+          {"wrapped", s.wrapped},
+          {"images", s.images},
+          {"tets", s.tets},
+          {"attempts", s.attempts},
+          {"margin", s.margin},
+          {"output_bytes", s.output_bytes}};
 }
 
 void from_done_record(const json& j, PeriodicSummary& s) {
@@ -184,8 +189,12 @@ bool Root::open(PeriodicSummary& sum) {
 // The flags rank 0 broadcasts before each attempt's padded job.
 struct Attempt {
   bool corners_full = false, images = false, skip = false, resume = false;
-  std::string encode() const { return {char('0' + corners_full), char('0' + images), char('0' + skip), char('0' + resume)}; }
-  static Attempt decode(const std::string& s) { return {s.at(0) == '1', s.at(1) == '1', s.at(2) == '1', s.at(3) == '1'}; }
+  std::string encode() const {
+    return {char('0' + corners_full), char('0' + images), char('0' + skip), char('0' + resume)};
+  }
+  static Attempt decode(const std::string& s) {
+    return {s.at(0) == '1', s.at(1) == '1', s.at(2) == '1', s.at(3) == '1'};
+  }
 };
 }  // namespace
 
@@ -257,7 +266,8 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
       if (points.rewritten || images.rewritten) {
         state.erase("padded");
         discard_padded_job(dir);  // stale: made from other padded points
-      } else if (!state.contains("padded") || state["padded"].value("fingerprint", json()) != fingerprint_if_there(padded)) {
+      } else if (!state.contains("padded") ||
+                 state["padded"].value("fingerprint", json()) != fingerprint_if_there(padded)) {
         state.erase("padded");
         if (!nested) remove_file(padded);  // complete but not recorded (or damaged): made again
       }

@@ -122,9 +122,11 @@ KeepShares MemoryBudget::plan_keep(std::uint64_t map_bytes, std::uint64_t frame_
   const std::uint64_t fixed = runtime_ + map_bytes + frame_bytes;
   if (fixed + kLeastSort > ceiling_) {
     const std::uint64_t need = (fixed + kLeastSort + kMiB - 1) / kMiB;
-    throw UsageError("--memory " + std::to_string(ceiling_ / kMiB) + "M is too small for the keep step of this periodic job (its label map takes " +
-                     std::to_string((map_bytes + kMiB - 1) / kMiB) + "M, its frames " + std::to_string((frame_bytes + kMiB - 1) / kMiB) +
-                     "M): at least --memory " + std::to_string(need) + "M");
+    throw UsageError("--memory " + std::to_string(ceiling_ / kMiB) +
+                     "M is too small for the keep step of this periodic job (its label map takes " +
+                     std::to_string((map_bytes + kMiB - 1) / kMiB) + "M, its frames " +
+                     std::to_string((frame_bytes + kMiB - 1) / kMiB) + "M): at least --memory " + std::to_string(need) +
+                     "M");
   }
   KeepShares k{map_bytes, frame_bytes, std::min(ceiling_ - fixed, std::max(ceiling_ / 4, kLeastSort))};
   record("keep", "runtime", runtime_);

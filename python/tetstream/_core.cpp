@@ -1014,7 +1014,7 @@ class Reader {
 
  private:
   std::unique_ptr<io::TetReader> reader_;
-  io::PeriodicBox box_;                                // a periodic container's (offsets_ set)
+  io::PeriodicBox box_;                                 // a periodic container's (offsets_ set)
   std::unique_ptr<io::PeriodicOffsetsReader> offsets_;  // reads reader_'s POFS: declared after it
   mutable std::once_flag points_checked_;
 };
