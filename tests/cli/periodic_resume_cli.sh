@@ -4,7 +4,8 @@
 # periodic job's), during the keep step (the padded job recorded as complete), each
 # resumed with --resume, ends with the bytes of an uninterrupted run; a checkpoint is
 # refused without --resume or --force, and with other periodic options; --force starts
-# over; a job that needs a second margin resumes too; nothing is left behind.
+# over; another --memory resumes (its frames are the first budget's); a job that needs a
+# second margin resumes too; nothing is left behind.
 # Usage: bash periodic_resume_cli.sh /path/to/tetstream
 set -euo pipefail
 T=$(realpath "${1:?usage: periodic_resume_cli.sh /path/to/tetstream}")
@@ -66,6 +67,13 @@ set -e
 "$T" "${opts[@]}" --force
 cmp reference.tets out.tets || fail "--force: output differs"
 [ ! -e $ckpt ] || fail "checkpoint left after --force"
+rm out.tets
+
+# Another --memory may resume the job (the header and the frames keep the first's).
+kill_when '[ "$(segments_done)" -ge 5 ]' 2
+[ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
+"$T" -q run u.f64 -o out.tets --periodic 1 --memory 256M --segment-points 800 --resume
+cmp reference.tets out.tets || fail "resumed with another --memory: output differs"
 rm out.tets
 
 # A job that needs a second margin (the first, 0.5 spacings, leaves balls outside the
