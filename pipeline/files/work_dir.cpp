@@ -252,6 +252,9 @@ bool remove_stale_work_dir(const StaleWorkDir& stale) {
   try {
     WorkDir w = WorkDir::open_or_create(stale.path);  // refuses a link or a directory not ours, or a live job's
     if (stale.checkpoint) remove_orphaned_partial(w.dir());
+    // A periodic job's checkpoint holds its padded job's, one level down (a work
+    // directory of its own, stale with it): that one first, by the same rules.
+    for (const StaleWorkDir& inner : find_stale_work_dirs(w.dir())) remove_stale_work_dir(inner);
     return w.remove();
   } catch (const Error&) {
     return false;

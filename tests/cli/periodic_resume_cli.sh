@@ -5,7 +5,8 @@
 # resumed with --resume, ends with the bytes of an uninterrupted run; a checkpoint is
 # refused without --resume or --force, and with other periodic options; --force starts
 # over; another --memory resumes (its frames are the first budget's); a job that needs a
-# second margin resumes too; nothing is left behind.
+# second margin resumes too; `clean --checkpoints` removes both checkpoints; nothing is
+# left behind.
 # Usage: bash periodic_resume_cli.sh /path/to/tetstream
 set -euo pipefail
 T=$(realpath "${1:?usage: periodic_resume_cli.sh /path/to/tetstream}")
@@ -97,4 +98,9 @@ wait $pid 2>/dev/null || true
 [ -e $ckpt ] && "$T" "${mopts[@]}" --resume
 cmp reference.tets out.tets || fail "resumed in the second attempt: output differs"
 [ ! -e $ckpt ] || fail "checkpoint left"
+# `clean --checkpoints` removes a killed periodic job's checkpoint, the nested one in it.
+kill_when '[ "$(segments_done)" -ge 5 ]' 1
+[ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
+"$T" -q clean --checkpoints .
+[ ! -e $ckpt ] && [ ! -e out.tets.partial ] || fail "clean --checkpoints left: $(ls -A . $ckpt 2>&1)"
 echo "periodic_resume_cli: ok ($kills kills)"
