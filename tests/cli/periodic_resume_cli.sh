@@ -98,7 +98,9 @@ wait $pid 2>/dev/null || true
 [ -e $ckpt ] && "$T" "${mopts[@]}" --resume
 cmp reference.tets out.tets || fail "resumed in the second attempt: output differs"
 [ ! -e $ckpt ] || fail "checkpoint left"
-# `clean --checkpoints` removes a killed periodic job's checkpoint, the nested one in it.
+# `clean --checkpoints` removes a killed periodic job's checkpoint, the nested one in it,
+# and its partial output (still empty: the keep step writes it).
+rm out.tets
 kill_when '[ "$(segments_done)" -ge 5 ]' 1
 [ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
 "$T" -q clean --checkpoints .
