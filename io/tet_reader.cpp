@@ -163,6 +163,10 @@ TetReader::TetReader(std::string path, Periodic periodic) : path_(std::move(path
   }
 }
 
+bool TetReader::is_periodic_file(const std::string& path) {
+  return path != "-" && TetReader(path, Periodic::kAccept).periodic();
+}
+
 TetReader::~TetReader() {
   if (data_) ::munmap(const_cast<std::uint8_t*>(data_), size_);
   if (fd_ >= 0) ::close(fd_);

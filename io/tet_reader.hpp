@@ -53,6 +53,9 @@ class TetReader {
   const std::vector<SectionEntry>& sections() const { return sections_; }
   // A periodic container (PBOX present; only when opened with Periodic::kAccept).
   bool periodic() const { return periodic_box_ != nullptr; }
+  // Whether the container at PATH is periodic (false for "-": a stream is not opened
+  // twice). Throws InputError as the constructor does.
+  static bool is_periodic_file(const std::string& path);
   // The CRC-checked payload of the first section of `tag` in the directory; empty
   // when there is none.
   std::span<const std::uint8_t> section(std::uint32_t tag) const;

@@ -8,6 +8,10 @@
 //   --points        the points instead: "x y z original_id\n" per label, in label order;
 //                   with --format f64, 3 little-endian float64 per point (a raw .f64 file)
 //
+// A periodic container (docs/periodic.md): "a b c d  bx by bz  cx cy cz  dx dy dz\n"
+// per tet, text only: the vertices and the offsets (in periods, each -1, 0 or 1) of b,
+// c and d relative to a (POFS, docs/format.md §6); --points as for any container.
+//
 // Quiet by default, as a filter should be: no progress and no log line unless -v.
 // The --json summary goes to stderr (or --json-file), never between the tets.
 //
@@ -17,6 +21,7 @@
 // and the exit status says whether the stream was complete (index and footer agree).
 #include "core/error.hpp"
 #include "io/output_file.hpp"
+#include "io/tet_periodic.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_stream_reader.hpp"
 #include "pipeline/util/progress.hpp"
@@ -28,6 +33,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <vector>
 #include <unistd.h>
 
@@ -123,6 +129,32 @@ void write_tets(const std::vector<std::uint64_t>& labels, const std::string& for
   }
 }
 
+// A periodic frame as text: each tet's four vertices, then the offsets of its last
+// three relative to its first (io/tet_periodic.hpp).
+void write_periodic_tets(const std::vector<std::uint64_t>& labels, const std::vector<std::uint16_t>& codes,
+                         Stdout& out) {
+  for (std::size_t t = 0; t < codes.size(); ++t) {
+    char* s = out.reserve(160);
+    char* e = s;
+    for (int c = 0; c < 4; ++c) {
+      e = std::to_chars(e, s + 160, labels[4 * t + std::size_t(c)]).ptr;
+      *e++ = ' ';
+    }
+    int vertex[3];
+    io::tet_offset_codes(codes[t], vertex);
+    for (int v = 0; v < 3; ++v) {
+      int o[3];
+      io::offset_of_code(vertex[v], o);
+      for (int k = 0; k < 3; ++k) {
+        *e++ = ' ';
+        e = std::to_chars(e, s + 160, o[k]).ptr;
+      }
+    }
+    *e++ = '\n';
+    out.advance(std::size_t(e - s));
+  }
+}
+
 // `cat -`: the container read front to back from a pipe as its writer writes it.
 void run_cat_stream(const CatArgs& args, Context& ctx) {
   if (args.points || !args.frames.empty()) throw UsageError("cat -: --points and --frames need a container file");
@@ -148,8 +180,14 @@ void run_cat(const CatArgs& args, Context& ctx) {
   ctx.stdout_is_data = true;
   if (args.format == "f64" && !args.points) throw UsageError("--format f64 is for --points; tets are text, u32 or u64");
   if (args.path == "-") return run_cat_stream(args, ctx);
-  const io::TetReader r(args.path);
+  const io::TetReader r(args.path, io::TetReader::Periodic::kAccept);
   io::refuse_stdout_into_input();
+  std::optional<io::PeriodicOffsetsReader> offsets;
+  if (r.periodic() && !args.points) {
+    if (args.format != "text")
+      throw UsageError(args.path + " is periodic: its tets carry vertex offsets and are written as text only");
+    offsets.emplace(r);
+  }
   // Points and original ids are trusted only after the points' CRC (frames are
   // checked one by one as they are read).
   if (args.points || args.original_ids) r.verify_points();
@@ -217,10 +255,16 @@ void run_cat(const CatArgs& args, Context& ctx) {
   pipeline::Progress progress("cat", "tets", total, reports(ctx));
   std::vector<std::uint64_t> labels;
   std::vector<std::uint32_t> narrow;
+  std::vector<std::uint16_t> codes;
   for (std::uint64_t k = first; k < last; ++k) {
     r.read_frame(k, labels);
     if (args.original_ids) r.map_to_original(labels);
-    write_tets(labels, args.format, out, narrow);
+    if (offsets) {
+      offsets->read(k, codes);
+      write_periodic_tets(labels, codes, out);
+    } else {
+      write_tets(labels, args.format, out, narrow);
+    }
     written += labels.size() / 4;
     progress.add(labels.size() / 4);
   }

@@ -50,10 +50,6 @@ std::string field_prefix(std::string out) {
   return out;
 }
 
-bool is_periodic_container(const std::string& path) {
-  return !io::is_std_stream(path) && io::TetReader(path, io::TetReader::Periodic::kAccept).periodic();
-}
-
 // A periodic container (docs/periodic.md, "Fields"): no hull, the grid over the box.
 void run_field_periodic(const FieldArgs& args, Context& ctx) {
   const auto& o = args.options;
@@ -105,7 +101,7 @@ void run_field(FieldArgs& args, Context& ctx) {
   if (args.index_dtype != "auto" && args.index_dtype != "int64")
     throw UsageError("field: --index-dtype must be auto or int64, not '" + args.index_dtype + "'");
   o.neighbour_int64 = args.index_dtype == "int64";
-  if (is_periodic_container(o.input)) {
+  if (io::TetReader::is_periodic_file(o.input)) {
     run_field_periodic(args, ctx);
     return;
   }

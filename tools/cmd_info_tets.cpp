@@ -1,11 +1,14 @@
 // `tetstream info OUT.tets`: what a container holds, what it costs, and how it was made.
 // Reads only the header, index and footer (the open checks them), so it is instant on
 // any size of file; `--check` also reads every point and frame and checks their CRCs.
+// A periodic container (docs/periodic.md) shows its box; --check decodes its offsets.
+#include "io/tet_periodic.hpp"
 #include "io/tet_reader.hpp"
 #include "pipeline/util/progress.hpp"
 #include "tools/info_tets.hpp"
 
 #include <charconv>
+#include <optional>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -20,14 +23,23 @@ std::string shortest(double v) {
 }  // namespace
 
 void info_tets(const std::string& path, Context& ctx, bool check) {
-  const io::TetReader r(path);
+  const io::TetReader r(path, io::TetReader::Periodic::kAccept);
+  std::optional<io::PeriodicBox> box;
+  std::optional<io::PeriodicOffsetsReader> offsets;
+  if (r.periodic()) {
+    box = io::parse_periodic_box(r.section(io::kTagPeriodicBox), path);
+    offsets.emplace(r);
+  }
   if (check) {
-    // Everything a reader relies on: the points' CRC, each frame's CRC and decoding.
+    // Everything a reader relies on: the points' CRC, each frame's CRC and decoding
+    // (and a periodic frame's offsets: their CRC, decoding and count).
     r.verify_points();
     pipeline::Progress progress("checking", "frames", r.frame_count(), !ctx.global.quiet);
     std::vector<std::uint64_t> labels;
+    std::vector<std::uint16_t> codes;
     for (std::uint64_t k = 0; k < r.frame_count(); ++k) {
       r.read_frame(k, labels);
+      if (offsets) offsets->read(k, codes);
       progress.add(1);
     }
     progress.finish();
@@ -62,6 +74,13 @@ void info_tets(const std::string& path, Context& ctx, bool check) {
                            : "z",
                   shortest(h.bbox_min[c]).c_str(), shortest(h.bbox_max[c]).c_str());
     }
+    if (box) {
+      std::printf(
+          "periodic: the flat torus [0, %s) x [0, %s) x [0, %s) (each tet's vertex offsets in POFS; "
+          "sort axis %c)\n",
+          shortest(box->period[0]).c_str(), shortest(box->period[1]).c_str(), shortest(box->period[2]).c_str(),
+          "xyz"[box->sort_axis]);
+    }
     std::printf("made by:  %s\n", h.tool.empty() ? "(unknown)" : h.tool.c_str());
     std::printf("options:  %s\n", h.options.empty() ? "(none)" : h.options.c_str());
     std::printf("checked:  %s\n", check ? "header, index, footer, every point and frame (CRCs, decoding)"
@@ -89,6 +108,7 @@ void info_tets(const std::string& path, Context& ctx, bool check) {
                  {"tool", h.tool},
                  {"options", options},
                  {"checked", check ? "all" : "header"}};
+  if (box) ctx.summary["periodic"] = {{"period", box->period}, {"sort_axis", box->sort_axis}};
 }
 
 }  // namespace tetstream::cli

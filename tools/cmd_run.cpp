@@ -32,17 +32,19 @@ struct RunArgs {
 // `run --periodic`: the triangulation of the flat torus (docs/periodic.md).
 void run_periodic(RunArgs& args, Context& ctx) {
   auto& o = args.options;
-  if (world().size() > 1) throw UsageError("--periodic does not run under mpirun yet (docs/periodic.md)");
   pipeline::periodic::PeriodicOptions p;
   p.period = pipeline::periodic::parse_period(args.periodic, o.input);
   p.wrap = args.outside == "wrap";
   p.margin_spacings = args.margin;
-  const auto s = pipeline::periodic::run_periodic(o, p);
+  // Under mpirun every rank runs the padded job (the same bytes); rank 0 reports.
+  pipeline::Communicator& comm = world();
+  const auto s = pipeline::periodic::run_periodic(o, p, comm);
+  if (comm.rank() != 0) return;
   spdlog::info(
       "periodic box {} x {} x {}: {} points ({} wrapped, {} images at margin {:.4g}) -> {} tets in {:.2f}s "
-      "({} attempt{})",
+      "({} attempt{}{})",
       p.period[0], p.period[1], p.period[2], s.points, s.wrapped, s.images, s.margin[0], s.tets, s.seconds_total,
-      s.attempts, s.attempts == 1 ? "" : "s");
+      s.attempts, s.attempts == 1 ? "" : "s", s.resumed ? ", resumed" : "");
   ctx.summary = pipeline::periodic::periodic_summary_json(o, p, s);
 }
 

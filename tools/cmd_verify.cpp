@@ -40,10 +40,6 @@ struct VerifyArgs {
   pipeline::VerifyOptions options;
 };
 
-bool is_periodic(const std::string& path) {
-  return !io::is_std_stream(path) && io::TetReader(path, io::TetReader::Periodic::kAccept).periodic();
-}
-
 // A periodic container (docs/periodic.md): its own checks, in one process.
 void run_verify_periodic(VerifyArgs& args, Context& ctx) {
   const char* env = std::getenv("TMPDIR");
@@ -74,7 +70,7 @@ void run_verify_periodic(VerifyArgs& args, Context& ctx) {
 
 void run_verify(VerifyArgs& args, Context& ctx) {
   args.options.memory_bytes = pipeline::parse_memory_size(args.memory);
-  if (world().size() == 1 && is_periodic(args.input)) {
+  if (world().size() == 1 && io::TetReader::is_periodic_file(args.input)) {
     run_verify_periodic(args, ctx);
     return;
   }

@@ -101,7 +101,7 @@ void write_marker(const std::string& dir) {
 
 bool is_work_file_name(const std::string& name) {
   static const std::regex kNames(
-      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?|periodic-(points|images)\.f64|periodic-(padded|unwrapped)\.tets(\.partial)?)");
+      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?|periodic-(points|images)\.f64(\.tmp)?|periodic-(padded|unwrapped)\.tets(\.partial)?)");
   return std::regex_match(name, kNames);
 }
 
@@ -221,8 +221,10 @@ std::vector<StaleWorkDir> find_stale_work_dirs(const std::string& parent) {
 namespace {
 // The partial output a stale checkpoint's job kept for --resume (state.json names the
 // output): removed with the checkpoint, which alone could finish it. Only a regular
-// file of one link that starts as a container and that no process holds locked (a
-// live job's claim holds its flock) is removed.
+// file of one link, this user's, that starts as a container or is still empty (the
+// job's claim made it and was killed before writing: a periodic job's output stays
+// empty until its keep step) and that no process holds locked (a live job's claim
+// holds its flock) is removed: an empty file holds nothing to lose.
 void remove_orphaned_partial(const std::string& dir) {
   std::string output;
   try {
@@ -239,8 +241,9 @@ void remove_orphaned_partial(const std::string& dir) {
   struct stat st {};
   unsigned char magic[8] = {};
   const bool ours = ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode) && st.st_nlink == 1 && st.st_uid == ::geteuid() &&
-                    ::pread(fd, magic, sizeof magic, 0) == ssize_t(sizeof magic) &&
-                    std::memcmp(magic, io::kFileMagic.data(), sizeof magic) == 0 && ::flock(fd, LOCK_EX | LOCK_NB) == 0;
+                    (st.st_size == 0 || (::pread(fd, magic, sizeof magic, 0) == ssize_t(sizeof magic) &&
+                                         std::memcmp(magic, io::kFileMagic.data(), sizeof magic) == 0)) &&
+                    ::flock(fd, LOCK_EX | LOCK_NB) == 0;
   struct stat at {};
   if (ours && ::lstat(partial.c_str(), &at) == 0 && at.st_dev == st.st_dev && at.st_ino == st.st_ino)
     ::unlink(partial.c_str());
@@ -252,6 +255,9 @@ bool remove_stale_work_dir(const StaleWorkDir& stale) {
   try {
     WorkDir w = WorkDir::open_or_create(stale.path);  // refuses a link or a directory not ours, or a live job's
     if (stale.checkpoint) remove_orphaned_partial(w.dir());
+    // A periodic job's checkpoint holds its padded job's, one level down (a work
+    // directory of its own, stale with it): that one first, by the same rules.
+    for (const StaleWorkDir& inner : find_stale_work_dirs(w.dir())) remove_stale_work_dir(inner);
     return w.remove();
   } catch (const Error&) {
     return false;

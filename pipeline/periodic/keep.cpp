@@ -6,6 +6,7 @@
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/files/external_sort.hpp"
+#include "pipeline/util/memory_budget.hpp"
 #include "pipeline/periodic/tet_records.hpp"
 
 #include <spdlog/spdlog.h>
@@ -203,8 +204,9 @@ void points_bbox(const io::TetReader& r, const KeepInput& in, io::TetFileHeader&
 // The kept tets in stored order, cut into frames at group boundaries, each frame's
 // offsets beside it in POFS. Frames go to the writer `threads` at a time, encoded
 // together (the same bytes as one at a time).
-void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, int threads, std::uint64_t& count) {
-  constexpr std::size_t kFrame = std::size_t(1) << 18;
+void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, int threads, std::size_t frame_tets,
+                std::uint64_t& count) {
+  const std::size_t kFrame = frame_tets;
   std::vector<std::vector<std::uint64_t>> labels(1);
   std::vector<std::vector<std::uint16_t>> codes(1);
   io::PeriodicOffsetsWriter offsets;
@@ -253,6 +255,17 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
   const io::TetReader r(in.padded);
+  // The ledger's keep phase: the label map (33 bytes a padded point, and 8 an input
+  // point while it is built), each thread's decoded frame and kept tets (72 bytes a
+  // tet) and the writer's batches (34 bytes a tet, and the encoded frame); the sort the rest.
+  const int threads = std::max(1, in.threads);
+  std::uint64_t frame_tets = 0;
+  for (const auto& f : r.frames()) frame_tets = std::max<std::uint64_t>(frame_tets, f.tet_count);
+  MemoryBudget budget(in.memory_bytes, r.point_count(), threads, threads);
+  const KeepShares shares = budget.plan_keep(
+      r.point_count() * (sizeof(std::uint64_t) + 1 + 3 * sizeof(double)) + in.input_points * sizeof(std::uint64_t),
+      std::uint64_t(threads) * (frame_tets * 72 + in.frame_tets * 36));
+  res.memory_shares = budget.shares();
   const PaddedMap m = map_labels(r, in);
   r.release_point_pages(0, r.point_count());  // read once into the map: their pages go back
   spdlog::debug("periodic keep: labels mapped in {:.2f}s", since());
@@ -261,10 +274,8 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     const double lo = (in.period[k] - in.margin[k]) - in.period[k];
     lower[k] = std::nextafter(std::nextafter(lo, 0.0), 0.0);
   }
-  // A quarter of the budget: the label map (33 bytes a padded point) and the frames' pages
-  // take most of the rest.
-  const std::size_t share = std::max<std::uint64_t>(in.memory_bytes / 4, std::uint64_t(64) << 20);
-  Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(share, in.dir, "periodic-tets")), {}};
+  Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(std::size_t(shares.sort_bytes), in.dir, "periodic-tets")),
+            {}};
   const int label_bits = std::max(1, int(std::bit_width(m.points)));
   if (label_bits <= 32)
     s.tets.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
@@ -303,7 +314,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   spdlog::debug("periodic keep: points written in {:.2f}s", since());
   io::PeriodicBox box{in.period, in.sort_axis};
   w.add_section(io::kTagPeriodicBox, io::serialize_periodic_box(box));
-  write_tets(s.tets, w, in.threads, res.tets);
+  write_tets(s.tets, w, in.threads, in.frame_tets, res.tets);
   w.finish();
   spdlog::debug("periodic keep: written in {:.2f}s", since());
   res.output_bytes = w.bytes_written();

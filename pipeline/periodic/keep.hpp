@@ -11,10 +11,12 @@
 // canonical copy lies in the star of its smallest label's canonical image, is kept.
 #include "io/output_file.hpp"
 #include "pipeline/periodic/pad.hpp"
+#include "pipeline/util/memory_budget.hpp"
 
 #include <array>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace tetstream::pipeline::periodic {
 
@@ -28,6 +30,9 @@ struct KeepInput {
   const io::OutputClaim* claim = nullptr;
   std::string dir;  // the job's directory (sort runs)
   std::uint64_t memory_bytes = 0;
+  // Tets a frame of the output, about (cut at groups): MemoryBudget::frame_tets_for the
+  // budget the job started with (its header's), as a plain run's frames.
+  std::size_t frame_tets = std::size_t(1) << 18;
   int threads = 1;
   std::string options_json;  // the output header's options
 };
@@ -36,6 +41,7 @@ struct KeepResult {
   bool complete = false;  // every ball at a canonical image inside the padded box
   std::uint64_t ball_failures = 0;
   std::uint64_t points = 0, tets = 0, output_bytes = 0;
+  std::vector<MemoryBudget::Share> memory_shares;  // the keep phase of the ledger (plan_keep)
 };
 
 // Writes the output only when the result is complete.

@@ -1,10 +1,15 @@
 #include "pipeline/periodic/pad.hpp"
 
 #include "core/error.hpp"
+#include "io/tet_container.hpp"
+#include "pipeline/files/checkpoint.hpp"
 #include "pipeline/files/temp_files.hpp"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstdio>
+#include <cstring>
 #include <sstream>
 
 namespace tetstream::pipeline::periodic {
@@ -20,6 +25,35 @@ bool exact_difference(double x, double l, double& out) {
 
 namespace {
 constexpr std::size_t kChunk = std::size_t(1) << 16;
+
+// A file written through PATH.tmp: fsynced, then PATH replaced unless it already holds
+// exactly these bytes (then it is left untouched, its modification time too).
+class ReplacedFile {
+ public:
+  explicit ReplacedFile(std::string path) : path_(std::move(path)), file_(path_ + ".tmp", "wb") {}
+  void write(const double* data, std::size_t n) {
+    file_.write(data, sizeof(double), n);
+    crc_ = io::crc32c(data, n * sizeof(double), crc_);
+    bytes_ += n * sizeof(double);
+  }
+  // True when PATH was replaced (its bytes were not these).
+  bool close() {
+    file_.close(/*sync=*/true);
+    if (file_matches(path_, bytes_, crc_)) {
+      remove_file(path_ + ".tmp");
+      return false;
+    }
+    if (std::rename((path_ + ".tmp").c_str(), path_.c_str()) != 0)
+      throw IoError(path_ + ": cannot rename into place: " + std::strerror(errno));
+    return true;
+  }
+
+ private:
+  std::string path_;
+  BinaryFile file_;
+  std::uint32_t crc_ = 0;
+  std::uint64_t bytes_ = 0;
+};
 
 std::string coordinate_text(double v) {
   std::ostringstream s;
@@ -47,7 +81,7 @@ WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions&
   WrappedInput out;
   out.path = dir + "/periodic-points.f64";
   auto reader = io::open_points(input, read);
-  BinaryFile file(out.path, "wb");
+  ReplacedFile file(out.path);
   std::vector<double> xyz(3 * kChunk);
   static const char* kAxis[3] = {"x", "y", "z"};
   while (const std::size_t n = reader->read(xyz.data(), kChunk)) {
@@ -69,10 +103,10 @@ WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions&
       }
       out.wrapped += moved;
     }
-    file.write(xyz.data(), sizeof(double), 3 * n);
+    file.write(xyz.data(), 3 * n);
     out.count += n;
   }
-  file.close();
+  out.rewritten = file.close();
   return out;
 }
 
@@ -81,7 +115,7 @@ Images write_images(const WrappedInput& points, const std::array<double, 3>& per
   Images out;
   out.path = dir + "/periodic-images.f64";
   BinaryFile in(points.path, "rb");
-  BinaryFile file(out.path, "wb");
+  ReplacedFile file(out.path);
   std::vector<double> xyz(3 * kChunk), img;
   std::uint64_t first = 0;
   double threshold[3];
@@ -115,10 +149,10 @@ Images write_images(const WrappedInput& points, const std::array<double, 3>& per
         out.code.push_back((first + i) * 8 + bits);
       }
     }
-    file.write(img.data(), sizeof(double), img.size());
+    file.write(img.data(), img.size());
     first += n;
   }
-  file.close();
+  out.rewritten = file.close();
   out.corners_full = std::all_of(corner, corner + 8, [](bool c) { return c; });
   return out;
 }

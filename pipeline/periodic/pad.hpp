@@ -12,6 +12,12 @@
 //
 // Every image coordinate is exact: p_k - L_k with p_k in [L_k/2, L_k) is a double
 // (Sterbenz); for a margin above L/2 each one is checked, and an inexact one refused.
+//
+// Both files are deterministic (the input and the margin decide every byte), so a
+// resumed job writes them again: each is written to NAME.tmp, fsynced, and replaces
+// NAME only when its bytes differ (CRC32C and size). A file left in place keeps its
+// modification time, so the checkpointed padded job (which fingerprints its input)
+// resumes; `rewritten` says the bytes changed and the padded job's work is stale.
 #include "io/point_reader.hpp"
 
 #include <array>
@@ -24,6 +30,7 @@ namespace tetstream::pipeline::periodic {
 struct WrappedInput {
   std::string path;  // periodic-points.f64
   std::uint64_t count = 0, wrapped = 0;
+  bool rewritten = false;  // the file was not there with these bytes
 };
 
 // Reads the input once and writes it wrapped (wrap) or refuses a point outside the
@@ -37,6 +44,7 @@ struct Images {
   // Whether each of the padded box's 8 corner cubes of side M/2 holds a padded point:
   // then every canonical image is strictly inside the padded set's hull (keep.hpp).
   bool corners_full = false;
+  bool rewritten = false;  // the file was not there with these bytes
 };
 
 // The images of the wrapped points within `margin` of the upper faces.

@@ -5,7 +5,11 @@
 #include "core/error.hpp"
 #include "io/output_file.hpp"
 #include "io/point_reader.hpp"
+#include "io/tet_reader.hpp"
+#include "pipeline/distributed/run_distributed.hpp"
+#include "pipeline/files/checkpoint.hpp"
 #include "pipeline/files/temp_files.hpp"
+#include "pipeline/run/run_internal.hpp"
 #include "pipeline/periodic/keep.hpp"
 #include "pipeline/periodic/pad.hpp"
 
@@ -15,21 +19,20 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 #include <sstream>
 #include <thread>
 
 namespace tetstream::pipeline::periodic {
 
 namespace {
+using nlohmann::json;
+
 double seconds_since(std::chrono::steady_clock::time_point t) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
 }
 
-std::string work_parent(const RunOptions& o) {
-  std::string dir = o.tmpdir;
-  if (dir.empty()) dir = std::filesystem::path(o.output).parent_path().string();
-  return dir.empty() ? "." : dir;
-}
+constexpr const char* kPadded = "periodic-padded.tets";
 
 // The first margin: `spacings` mean spacings of the box's N points, at most half a
 // period (where every image is exact by Sterbenz's lemma).
@@ -41,29 +44,158 @@ std::array<double, 3> first_margin(const PeriodicOptions& p, std::uint64_t n) {
   return m;
 }
 
-// The ordinary job on the padded points: the same options but for the files.
-RunOptions padded_job(const RunOptions& o, const WrappedInput& points, const Images& images, const std::string& dir) {
+// The ordinary job on the padded points in the job's directory `dir`: the same options
+// but for the files. Checkpointed when the periodic job is, its checkpoint nested in
+// the periodic one's (dir/periodic-padded.tets.ckpt).
+RunOptions padded_job(const RunOptions& o, const std::string& dir, bool images) {
   RunOptions inner = o;
-  inner.input = points.path;
+  inner.input = dir + "/periodic-points.f64";
   inner.read = io::PointReadOptions{};
   inner.read.format = io::PointFormat::kRaw;
   inner.read.type = io::ScalarType::kFloat64;
-  if (!images.code.empty()) inner.read.more_inputs = {images.path};
-  inner.output = dir + "/periodic-padded.tets";
+  if (images) inner.read.more_inputs = {dir + "/periodic-images.f64"};
+  inner.output = dir + "/" + kPadded;
   inner.tmpdir = dir;
-  inner.checkpoint = false;
+  inner.checkpoint_dir = dir;
   inner.resume = inner.force = false;
   return inner;
 }
 
-std::string header_options(const RunOptions& o, const PeriodicOptions& p, const std::array<double, 3>& margin) {
-  nlohmann::json j;
+// The padded job's work in `dir`: its nested checkpoint (reopened through its lock and
+// marker, so only a directory tetstream made, holding only its files, is removed) and
+// its output, partial or complete.
+void discard_padded_job(const std::string& dir) {
+  const std::string nested = dir + "/" + kPadded + ".ckpt";
+  std::error_code ec;
+  if (std::filesystem::symlink_status(nested, ec).type() != std::filesystem::file_type::not_found) {
+    Checkpoint c(nested);
+    c.create_and_lock();
+    c.remove();
+  }
+  remove_file(dir + "/" + kPadded);
+  remove_file(dir + "/" + kPadded + ".partial");
+}
+
+bool exists(const std::string& path) {
+  std::error_code ec;
+  return std::filesystem::symlink_status(path, ec).type() != std::filesystem::file_type::not_found;
+}
+
+json fingerprint_if_there(const std::string& path) { return exists(path) ? fingerprint_file(path) : json(); }
+
+// What of the periodic options changes the output's bytes (the checkpoint's identity
+// beside the plain job's: docs/periodic.md). Not --memory: a resumed job may take
+// another, and the header keeps the first (as a plain run's does).
+json periodic_identity(const PeriodicOptions& p) {
+  return {{"period", p.period}, {"wrap", p.wrap}, {"margin_spacings", p.margin_spacings}};
+}
+
+std::string header_options(std::uint64_t memory, const PeriodicOptions& p, const std::array<double, 3>& margin) {
+  json j;
   j["command"] = "run";
   j["periodic"] = p.period;
   j["margin"] = margin;
-  j["memory"] = o.memory_bytes;
+  j["memory"] = memory;
   return j.dump();
 }
+
+json done_record(const PeriodicSummary& s) {
+  return {{"input_points", s.input_points},
+          {"points", s.points},
+          {"wrapped", s.wrapped},
+          {"images", s.images},
+          {"tets", s.tets},
+          {"attempts", s.attempts},
+          {"margin", s.margin},
+          {"output_bytes", s.output_bytes}};
+}
+
+void from_done_record(const json& j, PeriodicSummary& s) {
+  s.input_points = j.at("input_points");
+  s.points = j.at("points");
+  s.wrapped = j.at("wrapped");
+  s.images = j.at("images");
+  s.tets = j.at("tets");
+  s.attempts = j.at("attempts");
+  s.margin = j.at("margin");
+  s.output_bytes = j.at("output_bytes");
+}
+
+// Rank 0's side of a periodic job: the user's files, the job's directory and its state.
+class Root {
+ public:
+  Root(const RunOptions& options, const PeriodicOptions& periodic, int ranks)
+      : options_(options), periodic_(periodic), ranks_(ranks) {}
+
+  // Claims the output, opens the checkpoint (--resume, --force, or refused as a plain
+  // run's) or a temporary directory. True when the checkpointed job had finished (its
+  // summary in `sum`, the checkpoint removed).
+  bool open(PeriodicSummary& sum);
+  const std::string& dir() const { return dir_; }
+  Checkpoint* checkpoint() { return checkpoint_ ? &*checkpoint_ : nullptr; }
+  const io::OutputClaim& claim() const { return *claim_; }
+  json& state() { return state_; }
+  void save() {
+    if (checkpoint_) checkpoint_->save(state_);
+  }
+  std::uint64_t header_memory() const { return state_.value("memory", options_.memory_bytes); }
+
+ private:
+  const RunOptions& options_;
+  const PeriodicOptions& periodic_;
+  int ranks_;
+  std::optional<io::OutputClaim> claim_;
+  std::optional<Checkpoint> checkpoint_;
+  std::optional<TempDir> tmp_;
+  json state_ = json::object();
+  std::string dir_;
+};
+
+bool Root::open(PeriodicSummary& sum) {
+  io::refuse_input_as_output(options_.input, options_.output);
+  for (const std::string& more : options_.read.more_inputs) io::refuse_input_as_output(more, options_.output);
+  claim_.emplace(options_.output);
+  if (!options_.checkpoint) {
+    detail::remove_stale_temporary_dirs(detail::work_parent(options_));
+    tmp_.emplace(detail::work_parent(options_), "tetstream-run");
+    dir_ = tmp_->dir();
+    return false;
+  }
+  checkpoint_.emplace(checkpoint_directory(options_));
+  detail::OpenedJob opened = detail::open_checkpointed_job(options_, *checkpoint_, *claim_, ranks_);
+  state_ = std::move(opened.state);
+  dir_ = checkpoint_->dir();
+  if (options_.force) discard_padded_job(dir_);  // --force: the nested checkpoint too
+  const json identity = periodic_identity(periodic_);
+  if (!state_.contains("periodic")) {
+    state_["periodic"] = identity;
+    state_["memory"] = options_.memory_bytes;
+    save();
+    return false;
+  }
+  if (state_["periodic"] != identity)
+    throw UsageError("cannot resume from " + dir_ + ": the periodic options were " + state_["periodic"].dump() +
+                     ", now " + identity.dump() + "; " + detail::kHowToRestart);
+  if (!state_.contains("done")) return false;
+  // Written, renamed into place: only the checkpoint's removal was cut short.
+  detail::trusting_checkpoint(*checkpoint_, [&] { from_done_record(state_.at("done"), sum); });
+  const io::TetReader finished(options_.output);  // throws unless complete
+  spdlog::info("the checkpointed job had finished: {} is complete", options_.output);
+  discard_padded_job(dir_);
+  checkpoint_->remove();
+  return true;
+}
+
+// The flags rank 0 broadcasts before each attempt's padded job.
+struct Attempt {
+  bool corners_full = false, images = false, skip = false, resume = false;
+  std::string encode() const {
+    return {char('0' + corners_full), char('0' + images), char('0' + skip), char('0' + resume)};
+  }
+  static Attempt decode(const std::string& s) {
+    return {s.at(0) == '1', s.at(1) == '1', s.at(2) == '1', s.at(3) == '1'};
+  }
+};
 }  // namespace
 
 void PeriodicOptions::validate() const {
@@ -94,71 +226,176 @@ std::array<double, 3> parse_period(const std::string& text, const std::string& i
   return {v[0], v[1], v[2]};
 }
 
-PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& periodic) {
-  const auto start = std::chrono::steady_clock::now();
-  periodic.validate();
-  options.validate();
-  if (io::is_std_stream(options.input) || io::is_std_stream(options.output))
-    throw UsageError("--periodic needs an input file and an output file (not standard input or output)");
-  if (options.resume) throw UsageError("--periodic jobs cannot be resumed yet (docs/periodic.md): rerun the job");
-  io::refuse_input_as_output(options.input, options.output);
-  for (const std::string& more : options.read.more_inputs) io::refuse_input_as_output(more, options.output);
-  const io::OutputClaim claim(options.output);
-  TempDir tmp(work_parent(options), "tetstream-run");
-
-  PeriodicSummary sum;
-  const WrappedInput points = write_wrapped(options.input, options.read, periodic.period, periodic.wrap, tmp.dir());
-  sum.input_points = points.count;
-  sum.wrapped = points.wrapped;
-  std::array<double, 3> margin = first_margin(periodic, points.count);
-  sum.seconds_pad += seconds_since(start);
-  for (;;) {
-    ++sum.attempts;
-    auto t = std::chrono::steady_clock::now();
-    const Images images = write_images(points, periodic.period, margin, tmp.dir());
-    sum.images = images.code.size();
+namespace {
+// Pads, runs the padded job and keeps, doubling the margin until the certificate holds
+// (docs/periodic.md). Every rank runs the padded job; rank 0 (job) all else.
+void attempts(const RunOptions& options, const PeriodicOptions& periodic, Communicator& comm, const std::string& dir,
+              Root* job, PeriodicSummary& sum) {
+  const bool root = comm.rank() == 0;
+  WrappedInput points;
+  std::array<double, 3> margin{};
+  together(comm, [&] {
+    if (!root) return;
+    const auto t = std::chrono::steady_clock::now();
+    points = write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir);
+    sum.input_points = points.count;
+    sum.wrapped = points.wrapped;
+    margin = first_margin(periodic, points.count);
+    if (job->checkpoint()) {
+      detail::trusting_checkpoint(*job->checkpoint(), [&] {
+        if (job->state().contains("margin")) margin = job->state()["margin"].get<std::array<double, 3>>();
+        sum.attempts = job->state().value("attempts", std::uint64_t(0));
+      });
+    }
     sum.seconds_pad += seconds_since(t);
-    if (images.corners_full) {
-      const RunOptions inner = padded_job(options, points, images, tmp.dir());
-      sum.padded = run_job(inner);
-      t = std::chrono::steady_clock::now();
-      KeepInput in;
-      in.padded = inner.output;
-      in.input_points = points.count;
-      in.images = &images;
-      in.period = periodic.period;
-      in.margin = margin;
-      in.sort_axis = sum.padded.axis;
-      in.input = options.input;
-      in.output = options.output;
-      in.claim = &claim;
-      in.dir = tmp.dir();
-      in.memory_bytes = options.memory_bytes;
-      in.threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
-      in.options_json = header_options(options, periodic, margin);
-      const KeepResult kept = keep_periodic_tets(in);
-      remove_file(inner.output);
-      sum.seconds_keep += seconds_since(t);
-      sum.ball_failures = kept.ball_failures;
-      if (kept.complete) {
-        sum.points = kept.points;
-        sum.tets = kept.tets;
-        sum.output_bytes = kept.output_bytes;
-        sum.margin = margin;
-        break;
+  });
+  for (;;) {
+    Attempt a;
+    Images images;
+    together(comm, [&] {
+      if (!root) return;
+      const auto t = std::chrono::steady_clock::now();
+      ++sum.attempts;
+      images = write_images(points, periodic.period, margin, dir);
+      sum.images = images.code.size();
+      // The padded job's work in the checkpoint: its nested checkpoint resumes, its
+      // output (recorded with its fingerprint once complete) is kept; any other is redone.
+      json& state = job->state();
+      const std::string padded = dir + "/" + kPadded;
+      const bool nested = exists(padded + ".ckpt");
+      if (points.rewritten || images.rewritten) {
+        state.erase("padded");
+        discard_padded_job(dir);  // stale: made from other padded points
+      } else if (!state.contains("padded") ||
+                 state["padded"].value("fingerprint", json()) != fingerprint_if_there(padded)) {
+        state.erase("padded");
+        if (!nested) remove_file(padded);  // complete but not recorded (or damaged): made again
       }
-      spdlog::info("periodic: {} balls leave the padded box at margin {:.4g}: doubling it", kept.ball_failures,
-                   margin[0]);
-    } else {
+      state["margin"] = margin;
+      state["attempts"] = sum.attempts;
+      job->save();
+      a.corners_full = images.corners_full;
+      a.images = !images.code.empty();
+      a.skip = state.contains("padded");
+      a.resume = exists(dir + "/" + kPadded + ".ckpt");
+      sum.seconds_pad += seconds_since(t);
+    });
+    a = Attempt::decode(comm.broadcast(root ? a.encode() : "", 0));
+    bool complete = false;
+    if (a.corners_full) {
+      RunOptions inner = padded_job(options, dir, a.images);
+      inner.resume = a.resume;
+      if (!a.skip) {
+        sum.padded = comm.size() > 1 ? run_job_distributed(inner, comm) : run_job(inner);
+        together(comm, [&] {
+          if (!root) return;
+          job->state()["padded"] = {{"axis", sum.padded.axis}, {"fingerprint", fingerprint_file(inner.output)}};
+          job->save();
+        });
+      }
+      together(comm, [&] {
+        if (!root) return;
+        const auto t = std::chrono::steady_clock::now();
+        if (a.skip) {  // the padded job had finished before a kill: only the keep step again
+          spdlog::info("resuming the periodic job in {}: its padded job had finished", dir);
+          sum.resumed = true;
+          detail::trusting_checkpoint(*job->checkpoint(),
+                                      [&] { sum.padded.axis = job->state().at("padded").at("axis").get<int>(); });
+        }
+        KeepInput in;
+        in.padded = inner.output;
+        in.input_points = points.count;
+        in.images = &images;
+        in.period = periodic.period;
+        in.margin = margin;
+        in.sort_axis = sum.padded.axis;
+        in.input = options.input;
+        in.output = options.output;
+        in.claim = &job->claim();
+        in.dir = dir;
+        in.memory_bytes = options.memory_bytes;
+        in.frame_tets = MemoryBudget::frame_tets_for(job->header_memory());
+        in.threads = options.threads > 0 ? options.threads : int(std::max(1u, std::thread::hardware_concurrency()));
+        in.options_json = header_options(job->header_memory(), periodic, margin);
+        const KeepResult kept = keep_periodic_tets(in);
+        sum.ball_failures = kept.ball_failures;
+        complete = kept.complete;
+        if (complete) {
+          sum.points = kept.points;
+          sum.tets = kept.tets;
+          sum.output_bytes = kept.output_bytes;
+          sum.margin = margin;
+          auto& ledger = sum.padded.memory_shares;
+          ledger.insert(ledger.end(), kept.memory_shares.begin(), kept.memory_shares.end());
+          job->state()["done"] = done_record(sum);
+        } else {
+          spdlog::info("periodic: {} balls leave the padded box at margin {:.4g}: doubling it", kept.ball_failures,
+                       margin[0]);
+          job->state().erase("padded");
+        }
+        job->save();  // before the padded output it no longer names goes
+        remove_file(inner.output);
+        sum.seconds_keep += seconds_since(t);
+      });
+    } else if (root) {
       spdlog::info("periodic: a corner of the padded box is empty at margin {:.4g}: doubling it", margin[0]);
     }
-    if (margin[0] >= periodic.period[0] && margin[1] >= periodic.period[1] && margin[2] >= periodic.period[2]) {
-      throw InputError(options.input + ": the periodic Delaunay triangulation of these " +
-                       std::to_string(points.count) +
-                       " points is not certified in the 1-sheeted covering (an empty ball reaches across a whole "
-                       "period): too few points for the box (docs/periodic.md, \"When it refuses\")");
+    if (comm.broadcast(complete ? "1" : "", 0) == "1") break;
+    together(comm, [&] {
+      if (!root) return;
+      if (margin[0] >= periodic.period[0] && margin[1] >= periodic.period[1] && margin[2] >= periodic.period[2]) {
+        throw InputError(options.input + ": the periodic Delaunay triangulation of these " +
+                         std::to_string(points.count) +
+                         " points is not certified in the 1-sheeted covering (an empty ball reaches across a whole "
+                         "period): too few points for the box (docs/periodic.md, \"When it refuses\")");
+      }
+      for (int k = 0; k < 3; ++k) margin[k] = std::min(2 * margin[k], periodic.period[k]);
+    });
+  }
+  if (job && job->checkpoint()) {
+    discard_padded_job(dir);
+    job->checkpoint()->remove();
+  }
+}
+}  // namespace
+
+PeriodicSummary run_periodic(const RunOptions& requested, const PeriodicOptions& periodic, Communicator& comm) {
+  const auto start = std::chrono::steady_clock::now();
+  const bool root = comm.rank() == 0;
+  RunOptions options;
+  // The same checks on every rank (the same options): the same answer everywhere.
+  together(comm, [&] {
+    periodic.validate();
+    options = detail::capped_options(requested);
+    if (io::is_std_stream(options.input) || io::is_std_stream(options.output))
+      throw UsageError("--periodic needs an input file and an output file (not standard input or output)");
+  });
+  PeriodicSummary sum;
+  std::optional<Root> job;
+  bool finished = false;
+  together(comm, [&] {
+    if (!root) return;
+    job.emplace(options, periodic, comm.size());
+    finished = job->open(sum);
+  });
+  if (comm.broadcast(finished ? "1" : "", 0) == "1") {
+    sum.resumed = true;
+    sum.seconds_total = seconds_since(start);
+    return sum;
+  }
+  const std::string dir = comm.broadcast(root ? job->dir() : "", 0);
+  try {
+    attempts(options, periodic, comm, dir, job ? &*job : nullptr, sum);
+  } catch (...) {
+    if (!root || !job->checkpoint()) throw;
+    try {
+      throw;
+    } catch (const DamagedCheckpoint&) {
+    } catch (const InputError&) {
+      discard_padded_job(dir);  // nothing to resume: the nested checkpoint goes with the job's
+    } catch (...) {
     }
-    for (int k = 0; k < 3; ++k) margin[k] = std::min(2 * margin[k], periodic.period[k]);
+    detail::rethrow_job_failure(*job->checkpoint(), options);
   }
   sum.seconds_total = seconds_since(start);
   return sum;
@@ -178,6 +415,7 @@ nlohmann::json periodic_summary_json(const RunOptions& options, const PeriodicOp
                    {"seconds_pad", s.seconds_pad},
                    {"seconds_keep", s.seconds_keep},
                    {"seconds_total", s.seconds_total},
+                   {"resumed", s.resumed},
                    {"output_bytes", s.output_bytes}};
   return j;
 }

@@ -17,8 +17,20 @@
 //            the job repeats, up to M = L;
 //   write    the original points in label order and the kept tets with their vertex
 //            offsets (io/tet_periodic.hpp), through the job's claim on the output.
+//
+// Checkpoint (docs/periodic.md, "Resume and mpirun"): the job's own, OUT.ckpt, as a
+// plain run's: its state.json (the job's identity, the periodic options, the current
+// margin, the padded job once it is complete, the result once written), the padded
+// input (deterministic, rewritten on a resume only when its bytes differ), the padded
+// job's checkpoint nested in it (OUT.ckpt/periodic-padded.tets.ckpt) and its output
+// (fingerprinted in the state). A resume continues the padded job or, when it had
+// finished, redoes only the keep step.
+//
+// Under mpirun (comm of several ranks): rank 0 pads, every rank runs the padded job
+// (run_job_distributed), rank 0 keeps and writes: the same bytes as one process.
 #include "io/tet_periodic.hpp"
 #include "pipeline/run/run.hpp"
+#include "pipeline/util/communicator.hpp"
 
 #include <nlohmann/json.hpp>
 
@@ -42,13 +54,16 @@ struct PeriodicSummary {
   std::array<double, 3> margin{0, 0, 0};
   double seconds_pad = 0, seconds_keep = 0, seconds_write = 0, seconds_total = 0;
   std::uint64_t output_bytes = 0;
+  bool resumed = false;  // continued a checkpoint (the padded job, or the whole job, done before)
 };
 
 // Parses "L", "Lx,Ly,Lz" or "auto" (the HDF5 input's Header/BoxSize attribute).
 // Throws UsageError.
 std::array<double, 3> parse_period(const std::string& text, const std::string& input);
 
-PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& periodic);
+// Rank 0's summary holds the job's figures; the other ranks' only their padded part.
+PeriodicSummary run_periodic(const RunOptions& options, const PeriodicOptions& periodic,
+                             Communicator& comm = single_process());
 
 // The --json summary of a periodic job: the padded job's (run_summary_json) with a
 // "periodic" object, for the CLI and the Python module alike.

@@ -117,6 +117,25 @@ std::uint64_t MemoryBudget::writer_bytes_for(int encoders, std::uint64_t tets, s
   return std::uint64_t((frames * kFrameBytesPerTet + busy * kEncoderBytesPerTet) * frame * 1.05);
 }
 
+KeepShares MemoryBudget::plan_keep(std::uint64_t map_bytes, std::uint64_t frame_bytes) {
+  constexpr std::uint64_t kLeastSort = 4 * kMiB;
+  const std::uint64_t fixed = runtime_ + map_bytes + frame_bytes;
+  if (fixed + kLeastSort > ceiling_) {
+    const std::uint64_t need = (fixed + kLeastSort + kMiB - 1) / kMiB;
+    throw UsageError("--memory " + std::to_string(ceiling_ / kMiB) +
+                     "M is too small for the keep step of this periodic job (its label map takes " +
+                     std::to_string((map_bytes + kMiB - 1) / kMiB) + "M, its frames " +
+                     std::to_string((frame_bytes + kMiB - 1) / kMiB) + "M): at least --memory " + std::to_string(need) +
+                     "M");
+  }
+  KeepShares k{map_bytes, frame_bytes, std::min(ceiling_ - fixed, std::max(ceiling_ / 4, kLeastSort))};
+  record("keep", "runtime", runtime_);
+  record("keep", "label map", k.map_bytes);
+  record("keep", "frames", k.frame_bytes);
+  record("keep", "sort", k.sort_bytes);
+  return k;
+}
+
 TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, double windows_planned) {
   TriangulateShares t;
   t.encoders = encoders_for(ceiling_, cores_);

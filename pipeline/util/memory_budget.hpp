@@ -12,7 +12,9 @@
 //   triangulate  the point indexes (measured once built), the writer's frames and
 //                encoders, the windows with their kernels and held output, and the
 //                pages of the sorted file that the queries map;
-// and in both a runtime reserve: the process, the allocator's slack, the page-cache
+// and in both a runtime reserve. A periodic job (docs/periodic.md) has a third, after
+// its padded job: keep (its label map, its frames and the kept tets' sort);
+// and in every phase a runtime reserve: the process, the allocator's slack, the page-cache
 // folios that sequential scans map before handing them back (ReleaseBehind).
 //
 // Invariant (checked as the shares are made, and by tests/unit/memory_budget_test.cpp):
@@ -71,6 +73,12 @@ struct TriangulateShares {
   double window_bytes = 0;             // the windows: kernels, coordinates, held output (the plan's "available")
 };
 
+struct KeepShares {
+  std::uint64_t map_bytes = 0;    // the periodic labels, offsets and coordinates of the padded points
+  std::uint64_t frame_bytes = 0;  // the frames the threads decode and the writer encodes
+  std::uint64_t sort_bytes = 0;   // the kept tets' external sort (it spills beyond)
+};
+
 class MemoryBudget {
  public:
   struct Share {
@@ -111,6 +119,13 @@ class MemoryBudget {
   std::size_t frame_tets() const { return frame_tets_; }
   void set_frame_tets(std::size_t tets) { frame_tets_ = tets; }
   static std::uint64_t writer_bytes_for(int encoders, std::uint64_t tets, std::size_t frame_tets);
+
+  // The keep step of a periodic job (pipeline/periodic/keep.hpp), recorded: its label
+  // map and frames as they will be allocated, and the sort what is left, at most a
+  // quarter of the ceiling (the padded container's pages, read as the frames are,
+  // take the slack: scripts/bench-periodic's peak) and at least 4 MiB. UsageError
+  // naming the --memory that would do when the map and frames do not fit.
+  KeepShares plan_keep(std::uint64_t map_bytes, std::uint64_t frame_bytes);
 
   const std::vector<Share>& shares() const { return shares_; }
   // Sum of the recorded shares of a phase ("sort", "triangulate"), the reserve included.

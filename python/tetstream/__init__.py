@@ -32,7 +32,7 @@ import operator
 import os
 import sys
 import tempfile
-from typing import Any, Callable, Dict, Iterator, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Iterator, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -623,6 +623,11 @@ class TetFile:
     :attr:`points`, which are in the container's order (sorted along the longest axis,
     duplicates merged); ``original_ids=True`` gives indices into the job's input instead
     (:attr:`original_ids` maps one to the other).
+
+    A periodic container (``run(..., periodic=L)``, docs/periodic.md) reads the same
+    way, and its tets need their vertex offsets too: :attr:`periodic` is its period,
+    :meth:`frame_offsets` each frame's offsets (vertex j of a tet stands at
+    ``points[label] + offsets[j] * period``).
     """
 
     def __init__(self, path: PathLike):
@@ -649,6 +654,17 @@ class TetFile:
     def n_frames(self) -> int:
         """Number of frames (the container's compressed blocks of tets)."""
         return int(self._header["frames"])
+
+    @property
+    def periodic(self) -> Optional[Tuple[float, float, float]]:
+        """The period (Lx, Ly, Lz) of a periodic container; None for a plain one."""
+        p = self._header["periodic"]
+        return None if p is None else tuple(p)
+
+    def frame_offsets(self, k: int) -> np.ndarray:
+        """A periodic container's frame ``k``: each tet's vertex offsets in periods,
+        relative to its first vertex, as a (t, 4, 3) int8 array matching :meth:`frame`."""
+        return self._reader.frame_offsets(k)
 
     @property
     def header(self) -> Dict[str, Any]:

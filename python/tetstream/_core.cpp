@@ -827,7 +827,11 @@ class Reader {
  public:
   explicit Reader(const std::string& path) {
     py::gil_scoped_release release;
-    reader_ = std::make_unique<io::TetReader>(path);
+    reader_ = std::make_unique<io::TetReader>(path, io::TetReader::Periodic::kAccept);
+    if (reader_->periodic()) {
+      box_ = io::parse_periodic_box(reader_->section(io::kTagPeriodicBox), path);
+      offsets_ = std::make_unique<io::PeriodicOffsetsReader>(*reader_);
+    }
   }
 
   const io::TetReader& r() const {
@@ -844,6 +848,7 @@ class Reader {
   }
   void close() {
     py::gil_scoped_release release;
+    offsets_.reset();
     reader_.reset();
   }
   bool closed() const { return !reader_; }
@@ -866,7 +871,34 @@ class Reader {
     d["version"] = py::make_tuple(r().version_major(), r().version_minor());
     d["file_bytes"] = r().file_bytes();
     d["tet_bytes"] = r().tet_bytes();
+    d["periodic"] = offsets_ ? py::object(py::make_tuple(box_.period[0], box_.period[1], box_.period[2])) : py::none();
     return d;
+  }
+
+  // A periodic container's frame k: each tet's vertex offsets in periods relative to
+  // its first vertex (docs/periodic.md), a (t, 4, 3) int8 array (row 0 is zero).
+  py::array frame_offsets(std::uint64_t k) const {
+    const io::TetReader& rd = r();
+    if (!offsets_) throw UsageError(rd.path() + ": not a periodic container (it has no offsets)");
+    if (k >= rd.frame_count()) throw py::index_error("frame " + std::to_string(k) + " out of range");
+    std::vector<std::uint16_t> codes;
+    {
+      py::gil_scoped_release release;
+      offsets_->read(k, codes);
+    }
+    py::array_t<std::int8_t> out({codes.size(), std::size_t(4), std::size_t(3)});
+    auto o = out.mutable_unchecked<3>();
+    for (std::size_t t = 0; t < codes.size(); ++t) {
+      int vertex[3];
+      io::tet_offset_codes(codes[t], vertex);
+      for (py::ssize_t c = 0; c < 3; ++c) o(py::ssize_t(t), 0, c) = 0;
+      for (int v = 0; v < 3; ++v) {
+        int off[3];
+        io::offset_of_code(vertex[v], off);
+        for (int c = 0; c < 3; ++c) o(py::ssize_t(t), v + 1, c) = std::int8_t(off[c]);
+      }
+    }
+    return out;
   }
 
   // Points [first, first + n) by label: coordinates (n, 3) float64 and original ids.
@@ -982,6 +1014,8 @@ class Reader {
 
  private:
   std::unique_ptr<io::TetReader> reader_;
+  io::PeriodicBox box_;                                 // a periodic container's (offsets_ set)
+  std::unique_ptr<io::PeriodicOffsetsReader> offsets_;  // reads reader_'s POFS: declared after it
   mutable std::once_flag points_checked_;
 };
 
@@ -1068,5 +1102,6 @@ PYBIND11_MODULE(_core, m) {
       .def("frame", &Reader::frame, py::arg("k"), py::arg("original_ids") = false, py::arg("narrow") = false,
            py::arg("release_pages") = false)
       .def("tets", &Reader::tets, py::arg("start"), py::arg("stop"), py::arg("original_ids") = false)
-      .def("frame_index", &Reader::frame_index);
+      .def("frame_index", &Reader::frame_index)
+      .def("frame_offsets", &Reader::frame_offsets, py::arg("k"));
 }

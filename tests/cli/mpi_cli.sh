@@ -6,7 +6,8 @@
 # in to reach its range); the points are sorted by every rank together (each
 # reads, sends and writes its part); a failing rank
 # stops the job with one error line and the single process's exit code; a failed or
-# killed job resumed on the same ranks ends with the same bytes; `verify` on 1, 2 and 3
+# killed job resumed on the same ranks ends with the same bytes; `run --periodic` on 2
+# ranks, and killed and resumed, writes one process's bytes; `verify` on 1, 2 and 3
 # ranks reports what one process reports, on good and damaged containers; `info`, not
 # distributed, is refused with one line.
 #
@@ -235,9 +236,9 @@ ls progress.tets.* tetstream-run-* 2>/dev/null && fail "a progress file or work 
 
 # A rank killed with -9 mid-run (rank 2, once its checkpoint records a segment): mpirun
 # stops the others; --resume with the same ranks ends with the same bytes.
-rank_pid() {  # the pid of rank $1 of this test's job
+rank_pid() {  # the pid of rank $1 of this test's job writing $2
   local p
-  for p in $(pgrep -f -- "$T -q --threads 1 run uniform.f64 -o killed.tets" || true); do
+  for p in $(pgrep -f -- "$T -q --threads 1 run [a-z.0-9]* -o $2" || true); do
     tr '\0' '\n' <"/proc/$p/environ" 2>/dev/null | grep -qx "OMPI_COMM_WORLD_RANK=$1" && { echo "$p"; return; }
   done
 }
@@ -248,7 +249,7 @@ for _ in $(seq 600); do
     2>/dev/null && break
   sleep 0.05
 done
-pid=$(rank_pid 2)
+pid=$(rank_pid 2 killed.tets)
 [ -n "$pid" ] || fail "rank 2 not found (the job ended before it could be killed?)"
 kill -9 "$pid"
 wait "$job" && fail "the job went on after a rank was killed"
@@ -357,6 +358,29 @@ open("crc.tets", "wb").write(b)
 PY
 verify_ranks crc.tets 1
 grep -q "crc.tets" crc.tets-v3.line || fail "a bad checksum: the line does not name the file"
+
+# --periodic (docs/periodic.md): rank 0 pads, every rank runs the padded job, rank 0
+# keeps: 2 ranks write the bytes of one process; rank 1 killed with -9 inside
+# the padded job (its record in the nested checkpoint), resumed on 2 ranks: the same.
+"$T" -q gen --dist uniform --n 60000 --seed 5 -o box.f64
+"$T" -q --threads 1 run box.f64 -o box-1p.tets --periodic 1 --memory 32M --segment-points 4000 --no-checkpoint
+mpi 2 "$T" -q --threads 1 run box.f64 -o box-2.tets --periodic 1 --memory 32M --segment-points 4000
+cmp box-1p.tets box-2.tets || fail "--periodic: 2 ranks wrote other bytes than one process"
+mpi 2 "$T" -q --threads 1 run box.f64 -o boxk.tets --periodic 1 --memory 32M --segment-points 4000 2>boxk.err &
+job=$!
+for _ in $(seq 600); do
+  python3 -c "import json,sys; sys.exit(0 if json.load(open('boxk.tets.ckpt/periodic-padded.tets.ckpt/rank-1.json'))['output']['segments'] >= 2 else 1)" \
+    2>/dev/null && break
+  sleep 0.05
+done
+pid=$(rank_pid 1 boxk.tets)
+[ -n "$pid" ] || fail "--periodic: rank 1 not found (the job ended before it could be killed?)"
+kill -9 "$pid"
+wait "$job" && fail "the periodic job went on after a rank was killed"
+[ ! -e boxk.tets ] || fail "a killed periodic job left an output under its final name"
+mpi 2 "$T" -q --threads 1 run box.f64 -o boxk.tets --periodic 1 --memory 32M --segment-points 4000 --resume
+cmp box-1p.tets boxk.tets || fail "--periodic: resumed after rank 1 was killed: other bytes than one process"
+[ ! -e boxk.tets.ckpt ] || fail "--periodic: the checkpoint is left after the resumed job succeeded"
 
 # Not distributed, refused with one line and exit 2: info.
 set +e

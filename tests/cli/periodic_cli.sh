@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # `tetstream run --periodic` as a user runs it (docs/periodic.md): the periodic job, its
 # `verify`, `field` (DTFE with no NaN, sums), `convert` (images marked), the same bytes
-# on 1 and 2 threads, a point outside the box wrapped or refused, a plain reader's
-# refusal, bad options.
+# on 1 and 2 threads, a point outside the box wrapped or refused, `info` and `cat` of
+# it, a stream reader's refusal, bad options.
 # Usage: bash periodic_cli.sh /path/to/tetstream
 set -euo pipefail
 T=$(realpath "${1:?usage: periodic_cli.sh /path/to/tetstream}")
@@ -59,11 +59,30 @@ set -e
 [ $rc = 1 ] && grep -q "shifted.f64: byte .*: x = .* lies outside \[0, 1)" err.txt || fail "refuse: rc $rc $(cat err.txt)"
 [ ! -e r.tets ] && [ ! -e r.tets.partial ] || fail "a refused job left files"
 
-# A command that does not read periodic containers says so, in one line.
+# info and cat read a periodic container: its box, and each tet with its offsets.
+"$T" -q --json info --check one.tets > info.json
+[ "$(json "d['periodic']['period'], d['tets']" < info.json)" = "[1.0, 1.0, 1.0] $(json "d['tets']" < info.json)" ] ||
+  fail "info: $(cat info.json)"
+"$T" info one.tets | grep -q "^periodic: the flat torus \[0, 1) x \[0, 1) x \[0, 1)" || fail "info text: $("$T" info one.tets)"
+"$T" cat one.tets > cat.txt
+python3 - "$(json "d['tets']" < info.json)" <<'PY' || fail "cat of a periodic file"
+import sys
+rows = [list(map(int, l.split())) for l in open('cat.txt')]
+assert len(rows) == int(sys.argv[1]), (len(rows), sys.argv[1])
+assert all(len(r) == 13 and r[0] < min(r[1:4]) for r in rows), rows[:3]  # stored: smallest label first
+assert all(o in (-1, 0, 1) for r in rows for o in r[4:])
+assert any(o != 0 for r in rows for o in r[4:])  # some tets cross a face
+assert len({tuple(r) for r in rows}) == len(rows)
+PY
 set +e
-"$T" -q cat one.tets > /dev/null 2> err.txt; rc=$?
+"$T" -q cat --format u32 one.tets > /dev/null 2> err.txt; rc=$?
 set -e
-[ $rc = 1 ] && grep -q "periodic triangulation" err.txt || fail "cat of a periodic file: rc $rc $(cat err.txt)"
+[ $rc = 2 ] && grep -q "periodic" err.txt || fail "cat --format u32 of a periodic file: rc $rc $(cat err.txt)"
+# A reader that does not know periodic containers (a stream, `cat -`) refuses in one line.
+set +e
+"$T" -q cat - < one.tets > /dev/null 2> err.txt; rc=$?
+set -e
+[ $rc = 1 ] && grep -q "critical section PBOX" err.txt || fail "cat - of a periodic file: rc $rc $(cat err.txt)"
 
 # Bad options: exit 2.
 set +e

@@ -9,6 +9,7 @@
 # Usage: bash resume_cli.sh /path/to/tetstream
 set -euo pipefail
 T=$(realpath "${1:?usage: resume_cli.sh /path/to/tetstream}")
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 cd "$dir"
@@ -29,21 +30,8 @@ opts=(-q run points.f64 -o out.tets --memory 64M --sort-run-points 25000 --zone-
 mv out.tets reference.tets
 "$T" -q verify reference.tets >/dev/null || fail "reference output invalid"
 
-# Starts the job (resuming), waits until CONDITION holds (a shell command), then
-# SIGKILLs it and counts the kill. The job may finish first on a fast machine: that
-# is fine (the final comparison still holds).
 kills=0
-kill_when() {
-  local condition=$1 threads=$2
-  "$T" --threads "$threads" "${opts[@]}" --resume 2>/dev/null &
-  local pid=$!
-  for _ in $(seq 1 3000); do
-    if ! kill -0 $pid 2>/dev/null; then break; fi
-    if eval "$condition"; then kill -9 $pid 2>/dev/null && kills=$((kills + 1)); break; fi
-    sleep 0.01
-  done
-  wait $pid 2>/dev/null || true
-}
+source "$here/lib/kill_when.sh"
 # At random moments first (seeded, so a failure can be replayed), then at chosen ones.
 RANDOM=20261121
 for _ in 1 2 3 4; do

@@ -70,3 +70,29 @@ def test_periodic_auto_reads_the_snapshots_box(tmp_path):
     d = tetstream._core.periodic_tets(out)
     v = pts.astype(np.float64)[d["simplices"]] + d["offsets"] * 50.0
     assert abs(np.linalg.det(v[:, 1:] - v[:, :1]).sum() / 6 - 50.0**3) < 1e-6 * 50.0**3
+
+
+def test_tetfile_reads_a_periodic_container(tmp_path):
+    # TetFile's frames and frame_offsets give the tets run() wrote, each whole when
+    # its vertices stand at points + offsets * period: positive volumes summing to the box.
+    pts = dyadic(2000, 3)
+    out = str(tmp_path / "p.tets")
+    tetstream.run(pts, out, memory="256M", progress=False, checkpoint=False, periodic=1.0)
+    plain = str(tmp_path / "plain.tets")
+    tetstream.run(pts, plain, memory="256M", progress=False, checkpoint=False)
+    with tetstream.open(plain) as f:
+        assert f.periodic is None
+        with pytest.raises(Exception, match="not a periodic container"):
+            f.frame_offsets(0)
+    with tetstream.open(out) as f:
+        assert f.periodic == (1.0, 1.0, 1.0)
+        tets = np.concatenate(list(f.frames()))
+        offsets = np.concatenate([f.frame_offsets(k) for k in range(f.n_frames)])
+        assert tets.shape == (f.n_tets, 4) and offsets.shape == (f.n_tets, 4, 3)
+        assert not offsets[:, 0].any() and offsets[:, 1:].any()
+        x = f.points[tets] + offsets * 1.0
+        vol = np.einsum("ij,ij->i", x[:, 1] - x[:, 0], np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 0])) / 6
+        assert (vol > 0).all() and abs(vol.sum() - 1.0) < 1e-12
+        a = tetstream._core.periodic_tets(out)
+        ids = f.original_ids
+        assert np.array_equal(ids[tets], a["simplices"]) and np.array_equal(offsets, a["offsets"])

@@ -41,6 +41,33 @@ TEST(MemoryBudget, PhasesNeverExceedTheCeiling) {
   }
 }
 
+// The keep step of a periodic job: its phase fits the ceiling whenever it is planned,
+// and a label map that cannot fit is refused with the --memory that would do.
+TEST(MemoryBudget, TheKeepPhaseFitsOrIsRefused) {
+  for (std::uint64_t ceiling : {32 * kMiB, 64 * kMiB, 1024 * kMiB}) {
+    for (std::uint64_t map : {std::uint64_t(0), 4 * kMiB, 400 * kMiB, 2048 * kMiB}) {
+      for (std::uint64_t frames : {kMiB, 40 * kMiB}) {
+        SCOPED_TRACE("ceiling " + std::to_string(ceiling >> 20) + " MiB, map " + std::to_string(map >> 20) +
+                     " MiB, frames " + std::to_string(frames >> 20) + " MiB");
+        MemoryBudget budget(ceiling, 1000, 2, 2);
+        if (budget.runtime_bytes() + map + frames + 4 * kMiB > ceiling) {
+          try {
+            budget.plan_keep(map, frames);
+            ADD_FAILURE() << "not refused";
+          } catch (const UsageError& e) {
+            EXPECT_NE(std::string(e.what()).find("at least --memory"), std::string::npos) << e.what();
+          }
+          continue;
+        }
+        const KeepShares k = budget.plan_keep(map, frames);
+        EXPECT_GE(k.sort_bytes, 4 * kMiB);
+        EXPECT_LE(k.sort_bytes, std::max(ceiling / 4, 4 * kMiB));
+        EXPECT_LE(budget.phase_total("keep"), ceiling);
+      }
+    }
+  }
+}
+
 TEST(MemoryBudget, SmallInputsTakeLittleOfALargeBudget) {
   for (std::uint64_t ceiling : {1024 * kMiB, kMiB << 20}) {
     MemoryBudget budget(ceiling, 1000, 2, 16);

@@ -1,0 +1,108 @@
+#!/usr/bin/env bash
+# `run --periodic` killed with SIGKILL and resumed (docs/periodic.md, "Resume and
+# mpirun"): at random moments, inside the padded job (its checkpoint nested in the
+# periodic job's), during the keep step (the padded job recorded as complete), each
+# resumed with --resume, ends with the bytes of an uninterrupted run; a checkpoint is
+# refused without --resume or --force, and with other periodic options; --force starts
+# over; another --memory resumes (its frames are the first budget's); a job that needs a
+# second margin resumes too; `clean --checkpoints` removes both checkpoints; nothing is
+# left behind.
+# Usage: bash periodic_resume_cli.sh /path/to/tetstream
+set -euo pipefail
+T=$(realpath "${1:?usage: periodic_resume_cli.sh /path/to/tetstream}")
+here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+cd "$dir"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+ckpt=out.tets.ckpt
+nested=$ckpt/periodic-padded.tets.ckpt
+segments_done() { python3 -c "import json,sys
+try: print(json.load(open('$nested/state.json'))['output']['segments'])
+except Exception: print(-1)"; }
+
+# 2*10^4 points (and about as many images at this size), 50 segments of the padded job.
+"$T" -q gen --dist uniform --n 20000 --seed 7 -o u.f64
+opts=(-q run u.f64 -o out.tets --periodic 1 --memory 64M --segment-points 800)
+"$T" --threads 1 "${opts[@]}" --no-checkpoint
+mv out.tets reference.tets
+
+kills=0
+source "$here/lib/kill_when.sh"
+RANDOM=20261128
+for _ in 1 2 3; do
+  kill_when "sleep $(printf '0.%02d' $((RANDOM % 40 + 2))); true" 2
+done
+for target in 5 23 41; do  # inside the padded job, between its segments
+  kill_when "[ \"\$(segments_done)\" -ge $target ]" $((1 + target % 2))
+done
+before=$kills
+kill_when 'grep -q "\"padded\"" $ckpt/state.json 2>/dev/null' 2  # the keep step
+if [ $kills -gt $before ]; then
+  # Killed in the keep step: the padded job is complete and kept, only the keep redone.
+  grep -q '"padded"' $ckpt/state.json || fail "killed in the keep step, but no padded job recorded"
+  "$T" --threads 2 "${opts[@]:1}" --resume 2>resumed.err
+  grep -q "its padded job had finished" resumed.err || fail "the padded job was not kept: $(cat resumed.err)"
+  rm resumed.err
+fi
+[ $kills -ge 4 ] || fail "only $kills of 7 kills landed before the job ended"
+if [ -e $ckpt ]; then "$T" "${opts[@]}" --resume; fi
+cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills kills"
+[ ! -e $ckpt ] || fail "checkpoint left after the job finished: $(ls -R $ckpt)"
+[ "$(ls -A | sort | tr '\n' ' ')" = "out.tets reference.tets u.f64 " ] || fail "files left: $(ls -A)"
+echo "kill -9 at $kills moments: resumed output identical"
+rm out.tets
+
+# A checkpoint is refused without --resume (exit 2), and with other periodic options.
+kill_when '[ "$(segments_done)" -ge 5 ]' 1
+[ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
+set +e
+"$T" "${opts[@]}" 2>err.txt; rc=$?
+set -e
+[ $rc = 2 ] && grep -q -- "--resume" err.txt || fail "an existing checkpoint was not refused: rc $rc $(cat err.txt)"
+set +e
+"$T" -q run u.f64 -o out.tets --periodic 2 --memory 64M --segment-points 800 --resume 2>err.txt; rc=$?
+set -e
+[ $rc = 2 ] && grep -q "periodic options" err.txt || fail "other periodic options resumed: rc $rc $(cat err.txt)"
+# --force discards both checkpoints and starts over: the same bytes.
+"$T" "${opts[@]}" --force
+cmp reference.tets out.tets || fail "--force: output differs"
+[ ! -e $ckpt ] || fail "checkpoint left after --force"
+rm out.tets
+
+# Another --memory may resume the job (the header and the frames keep the first's).
+kill_when '[ "$(segments_done)" -ge 5 ]' 2
+[ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
+"$T" -q run u.f64 -o out.tets --periodic 1 --memory 256M --segment-points 800 --resume
+cmp reference.tets out.tets || fail "resumed with another --memory: output differs"
+rm out.tets
+
+# A job that needs a second margin (the first, 0.5 spacings, leaves balls outside the
+# padded box), killed in its second attempt and resumed: the same bytes.
+mopts=(-q run u.f64 -o out.tets --periodic 1 --memory 64M --segment-points 800 --periodic-margin 0.5)
+"$T" "${mopts[@]}" --no-checkpoint --json > m.json
+python3 -c "import json; a = json.load(open('m.json'))['periodic']['attempts']; assert a >= 2, a" ||
+  fail "the small margin did not need a second attempt: $(cat m.json)"
+cmp reference.tets out.tets || fail "a second attempt's output differs"
+rm out.tets
+"$T" "${mopts[@]}" 2>/dev/null &
+pid=$!
+for _ in $(seq 1 3000); do
+  if ! kill -0 $pid 2>/dev/null; then break; fi
+  if python3 -c "import json,sys; sys.exit(0 if json.load(open('$ckpt/state.json'))['attempts'] >= 2 and json.load(open('$nested/state.json'))['output']['segments'] >= 3 else 1)" 2>/dev/null; then
+    kill -9 $pid && kills=$((kills + 1)); break
+  fi
+  sleep 0.005
+done
+wait $pid 2>/dev/null || true
+[ -e $ckpt ] && "$T" "${mopts[@]}" --resume
+cmp reference.tets out.tets || fail "resumed in the second attempt: output differs"
+[ ! -e $ckpt ] || fail "checkpoint left"
+# `clean --checkpoints` removes a killed periodic job's checkpoint, the nested one in it,
+# and its partial output (still empty: the keep step writes it).
+rm out.tets
+kill_when '[ "$(segments_done)" -ge 5 ]' 1
+[ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
+"$T" -q clean --checkpoints .
+[ ! -e $ckpt ] && [ ! -e out.tets.partial ] || fail "clean --checkpoints left: $(ls -A . $ckpt 2>&1)"
+echo "periodic_resume_cli: ok ($kills kills)"
