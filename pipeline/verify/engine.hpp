@@ -17,6 +17,7 @@
 #include "pipeline/verify/exact_sum.hpp"
 #include "pipeline/verify/split.hpp"
 
+#include "core/compiler.hpp"
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "io/tet_reader.hpp"
@@ -32,6 +33,7 @@
 #include <atomic>
 #include <bit>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -244,9 +246,16 @@ class PointCoords {
     else
       std::copy(xyz, xyz + 3 * n, d_.begin() + std::ptrdiff_t(3 * first));
   }
-  Point operator()(std::uint64_t l) const {
+  TS_FORCE_INLINE Point operator()(std::uint64_t l) const {
     if (floats_) return {{f_[3 * l], f_[3 * l + 1], f_[3 * l + 2]}};
     return {{d_[3 * l], d_[3 * l + 1], d_[3 * l + 2]}};
+  }
+  // Asks for point l's coordinates ahead of their use (the tets' labels jump about).
+  TS_FORCE_INLINE void prefetch(std::uint64_t l) const {
+    if (floats_)
+      TS_PREFETCH(f_.data() + 3 * l);
+    else
+      TS_PREFETCH(d_.data() + 3 * l);
   }
 
  private:
@@ -305,6 +314,20 @@ void for_group_chunks(std::size_t n, IsStart&& is_start, F&& f, std::vector<std:
   for (int p = 0; p < parts; ++p) f(std::size_t(p), bounds[std::size_t(p)], bounds[std::size_t(p) + 1]);
 }
 
+// Runs f(r) for each r in [0, n): on the threads of a parallel region of its own, or
+// one after another when called inside one (verify's pass: its other threads are busy
+// preparing frames).
+template <class F>
+void for_each_range(std::size_t n, F&& f) {
+  if (n <= 1 || omp_in_parallel()) {
+    for (std::size_t r = 0; r < n; ++r) f(r);
+    return;
+  }
+  auto* fp = &f;
+#pragma omp parallel for num_threads(int(n)) schedule(static, 1)
+  for (std::int64_t r = 0; r < std::int64_t(n); ++r) (*fp)(std::size_t(r));
+}
+
 // Stable k-way merge of sorted ranges into out (ties: the earlier range first).
 template <class T, class Less>
 void multiway_merge(std::vector<std::pair<const T*, const T*>>& rs, T* out, const Less& less) {
@@ -346,7 +369,8 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
     out.reserve(total);  // exactly: no doubling of the biggest buffer
   }
   out.resize(total);
-  const std::size_t ranges = total < (1u << 15) ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
+  const std::size_t ranges =
+      total < (1u << 15) || omp_in_parallel() ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
   const std::size_t k = in.size();
   // bounds[i * (ranges + 1) + r]: where range r starts in input i; splitters are
   // evenly spaced keys of the biggest input.
@@ -362,16 +386,14 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
     }
   }
   kept.assign(ranges, 0);
-#pragma omp parallel for num_threads(int(ranges)) schedule(static, 1) if (ranges > 1)
-  for (std::int64_t rr = 0; rr < std::int64_t(ranges); ++rr) {
-    const std::size_t r = std::size_t(rr);
+  for_each_range(ranges, [&](std::size_t r) {
     std::vector<std::pair<const T*, const T*>> rs(k);
     for (std::size_t i = 0; i < k; ++i)
       rs[i] = {in[i].data() + bounds[i * (ranges + 1) + r], in[i].data() + bounds[i * (ranges + 1) + r + 1]};
     T* first = out.data() + offset[r];
     multiway_merge(rs, first, less);
     kept[r] = finish(r, first, offset[r + 1] - offset[r]);
-  }
+  });
   std::size_t w = 0;
   for (std::size_t r = 0; r < ranges; ++r) {
     if (w != offset[r] && kept[r])
@@ -428,7 +450,6 @@ class Engine {
         used_(n_),
         hull_used_(n_) {
     sampled_ = opt.sample < 1.0;
-    label_bits_ = std::max(1, int(std::bit_width(n_ > 0 ? n_ - 1 : 0)));
     if (sampled_) sample_cut_ = std::uint64_t(std::ldexp(opt.sample, 64));  // sample < 1: below 2^64
   }
 
@@ -455,21 +476,22 @@ class Engine {
   std::string facet_text(const Facet& f) const { return "facet " + labels_text({f.v[0], f.v[1], f.v[2]}); }
 
   // Stable radix sorts into FacetLess / edge order (records of one key keep their
-  // order, which is ordinal order for freshly generated records).
-  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const;
-  void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const;
+  // order, which is ordinal order for freshly generated records). Every label of v is
+  // in [base, base + 2^bits): the keys are taken relative to base, in fewer digits.
+  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::uint64_t base, int bits) const;
+  void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp, std::uint64_t base, int bits) const;
   std::string make_tmpdir();
   void plan_memory();
   void load_points();
-  void process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min);
   // Checks a decoded frame (its count, every good tet's labels within the frame's
   // declared [min_label, max_label]: InputError otherwise) and puts each tet in
   // canonical form (labels sorted; flags bit 0: odd permutation, bit 1: broken, i.e. a
   // storage violation, logged when log_storage). on_good(i, ordinal, g) for each good
   // tet, g its labels as stored; called from several threads.
+  // parallel: on the threads of a parallel region of its own (false inside a task).
   template <class OnGood>
   void canonicalize(std::size_t k, std::vector<L>& labels, std::vector<std::uint8_t>& flags, bool log_storage,
-                    OnGood&& on_good);
+                    bool parallel, OnGood&& on_good);
   // The facet records of a canonical tet s (flags: its parity bit), emit(facet, through
   // s[0]), and its six edges.
   template <class Emit>
@@ -485,15 +507,37 @@ class Engine {
   void hand_over_hull_edges();
   std::string partial_totals();
   void merge_totals(const std::vector<std::string>& parts);
-  // Per-thread buffers of a step's slice of tets.
-  struct Part {
-    std::vector<Facet> a, b, f, tmp;  // A and B facets, merged
-    std::vector<Edge> ea, eb, e, etmp;
+  // The pass over the frames is a pipeline on every thread (engine_run.ipp, run()):
+  // prepare_frame() decodes a frame, checks its tets and builds each step's sorted
+  // records into a Slot, on any thread, several frames at once; consume_frame() merges
+  // the steps' records with the open sets, frame after frame in order, on one thread
+  // at a time. A frame's slot is reused `slots_` frames later, once consumed, so at
+  // most slots_ frames are in flight.
+  struct StepRecords {
+    std::vector<Facet> f;  // sorted (FacetLess), unfolded
+    std::vector<Edge> e;   // sorted, unique
+    std::uint64_t threshold = 0;  // keys below it are final after this step
   };
-  void process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
-                    bool sorted_by_min, std::uint64_t threshold);
-  void build_part(Part& part, const L* canon, const std::uint8_t* flags, std::size_t lo, std::size_t hi,
-                  std::uint64_t first_ordinal, bool sorted_by_min);
+  // The buffers for building a step's records (A: the facets and edges through a
+  // tet's smallest label, B: the others), and a frame's labels and flags.
+  struct Scratch {
+    std::vector<Facet> a, b, tmp;
+    std::vector<Edge> ea, eb, etmp;
+    std::vector<L> labels;
+    std::vector<std::uint8_t> flags;
+  };
+  struct Slot {
+    Scratch w;
+    std::vector<StepRecords> steps;
+    std::size_t step_count = 0, tets = 0;
+    std::uint64_t good = 0, checked = 0;
+    ExactSum volume6, error6;  // the frame's tets' (exact: any cut gives the same bits)
+    std::exception_ptr error;
+  };
+  void prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot);
+  void consume_frame(Slot& slot);
+  void build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,
+                  std::size_t hi, std::uint64_t first_ordinal, bool sorted_by_min);
   // Folds runs of equal keys in place (returns the new size); new pairs go to chunk_checks_.
   std::size_t fold(Facet* first, Facet* last);
   void combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks);
@@ -539,9 +583,9 @@ class Engine {
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
   std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
 
-  int label_bits_ = 1;         // bits of the largest label
   std::size_t step_tets_ = 1;  // tets a step (plan_memory())
-  std::vector<Part> parts_;
+  std::size_t slots_ = 1;  // frames in flight (plan_memory())
+  std::vector<Slot> slot_;  // the frames in flight, slots_ of them
   std::vector<std::vector<PairCheck>> chunk_checks_;
   std::vector<std::size_t> bounds_, chunk_sizes_;
   std::vector<HullEdge> hull_edges_batch_;
@@ -554,12 +598,11 @@ class Engine {
   ExternalSortOptions hull_sort_options_;
 
   // Totals. Volumes summed exactly (exact_sum.hpp): the same bits however the tets are
-  // cut into threads, spills and ranks. thread_volume_: one a thread (process_frame).
+  // cut into threads, spills and ranks.
   // *_error6_: the sums of each term's rounding bound (det3_bounded), so that the
   // comparison of the two volumes is a proof, not a tolerance: near-flat point sets have
   // volumes far below the rounding of their terms.
   ExactSum tet_volume6_, hull_volume6_, tet_error6_, hull_error6_;
-  std::vector<ExactSum> thread_volume_, thread_error_;
   bool wide_volume_ = false;  // volumes in long double (volume_fits_double)
   BoundedDet<long double> volume6(const double* a, const double* b, const double* c, const double* d) const {
     if (wide_volume_) return det3_bounded<long double>(a, b, c, d);
