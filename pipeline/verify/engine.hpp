@@ -462,7 +462,7 @@ class Engine {
     std::uint64_t tpos, tneg;
   };
 
-  PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
+  TS_FORCE_INLINE PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
   bool tet_sampled(std::uint64_t ordinal) const {
     return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_;
   }
@@ -477,8 +477,10 @@ class Engine {
 
   // Stable radix sorts into FacetLess / edge order (records of one key keep their
   // order, which is ordinal order for freshly generated records). Every label of v is
-  // in [base, base + 2^bits): the keys are taken relative to base, in fewer digits.
-  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::uint64_t base, int bits) const;
+  // in [base, base + 2^bits): the keys are taken relative to base, in fewer digits;
+  // most facets' labels in [base, base + 2^near) (far: a buffer for the others).
+  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::vector<Facet>& far, std::uint64_t base,
+                   int bits, int near) const;
   void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp, std::uint64_t base, int bits) const;
   std::string make_tmpdir();
   void plan_memory();
@@ -521,7 +523,7 @@ class Engine {
   // The buffers for building a step's records (A: the facets and edges through a
   // tet's smallest label, B: the others), and a frame's labels and flags.
   struct Scratch {
-    std::vector<Facet> a, b, tmp;
+    std::vector<Facet> a, b, tmp, far;
     std::vector<Edge> ea, eb, etmp;
     std::vector<L> labels;
     std::vector<std::uint8_t> flags;

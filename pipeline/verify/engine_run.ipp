@@ -2,8 +2,34 @@
 // compiled in engine.cpp). Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
 
 template <class L>
-void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::uint64_t base, int b) const {
-  if (3 * b <= 64) {
+void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::vector<Facet>& far, std::uint64_t base,
+                            int b, int near) const {
+  auto passes = [](int bits) { return (bits + 10) / 11; };  // radix_sort's 11-bit digits
+  const int full = 3 * b <= 64 ? passes(3 * b) : 3 * passes(b);
+  if (near < b && 3 * near <= 64 && passes(3 * near) < full) {
+    // Most records lie within 2^near labels of base (a step's tets are a few slabs
+    // thick); the few that reach further (long tets on the hull or across a hollow)
+    // are sorted apart and merged back: FacetLess orders records of equal labels by
+    // their ordinals, as the stable radix sort leaves them.
+    far.clear();
+    std::size_t kept = 0;
+    for (const Facet& f : v)
+      if ((std::uint64_t(f.v[2]) - base) >> near)
+        far.push_back(f);
+      else
+        v[kept++] = f;
+    v.resize(kept);
+    radix_sort(v.data(), v.size(), tmp, 3 * near, [near, base](const Facet& f) {
+      return (std::uint64_t(f.v[0]) - base) << (2 * near) | (std::uint64_t(f.v[1]) - base) << near |
+             (std::uint64_t(f.v[2]) - base);
+    });
+    if (far.empty()) return;
+    const FacetLess<L> less;
+    std::sort(far.begin(), far.end(), less);
+    tmp.resize(v.size() + far.size());
+    std::merge(v.begin(), v.end(), far.begin(), far.end(), tmp.begin(), less);
+    std::swap(v, tmp);
+  } else if (3 * b <= 64) {
     radix_sort(v.data(), v.size(), tmp, 3 * b, [b, base](const Facet& f) {
       return (std::uint64_t(f.v[0]) - base) << (2 * b) | (std::uint64_t(f.v[1]) - base) << b |
              (std::uint64_t(f.v[2]) - base);

@@ -178,18 +178,26 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
   auto& b = w.b;
   a.clear(), b.clear();
   a.reserve(3 * n), b.reserve(n);
-  // The labels' range: keys relative to its bottom sort in fewer radix digits.
+  // The labels' range: keys relative to its bottom sort in fewer radix digits; and
+  // the reach of most tets (width[w]: tets whose labels lie within 2^w of it).
   std::uint64_t base = ~0ull, top = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!(flags[i] & 2)) base = std::min<std::uint64_t>(base, canon[4 * i]);
+  std::array<std::size_t, 65> width{};
+  std::size_t good = 0;
   // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
   for (std::size_t i = 0; i < n; ++i) {
     if (flags[i] & 2) continue;  // broken: no facets
     const L* s = canon + 4 * i;
-    base = std::min<std::uint64_t>(base, s[0]), top = std::max<std::uint64_t>(top, s[3]);
+    top = std::max<std::uint64_t>(top, s[3]);
+    ++width[std::size_t(std::bit_width(std::uint64_t(s[3]) - base))], ++good;
     tet_facets(s, first_ordinal + lo + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
       if (std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2])) (through_min ? a : b).push_back(f);
     });
   }
   const int bits = base <= top ? std::max(1, int(std::bit_width(top - base))) : 1;
+  int near = 1;
+  for (std::size_t within = width[0] + width[1]; near < bits && within < good - good / 128;) within += width[std::size_t(++near)];
   const FacetLess<L> less;
   if (sorted_by_min) {
     // A is grouped by smallest label already: sort each group (a lower star).
@@ -200,9 +208,9 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
       g = e;
     }
   } else {
-    sort_facets(a, w.tmp, base, bits);
+    sort_facets(a, w.tmp, w.far, base, bits, near);
   }
-  sort_facets(b, w.tmp, base, bits);
+  sort_facets(b, w.tmp, w.far, base, bits, near);
   out.f.resize(a.size() + b.size());
   std::merge(a.begin(), a.end(), b.begin(), b.end(), out.f.begin(), less);
 
