@@ -55,8 +55,9 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // ---------------------------------------------------------------------------------
-// Violations: every one counted, the first max_listed of each kind (by ordinal) kept.
-// Thread-safe; violations are rare, so a mutex is fine.
+// Violations: every one counted, the first max_listed of each kind (by ordinal, then
+// by text: the order in which threads find them does not matter) kept. Thread-safe;
+// violations are rare, so a mutex is fine.
 class ViolationLog {
  public:
   explicit ViolationLog(std::size_t max_listed) : max_(max_listed) {}
@@ -68,28 +69,17 @@ class ViolationLog {
     if (max_ == 0) return;
     std::lock_guard<std::mutex> lock(mutex_);
     auto& list = listed_[k];
-    if (list.size() == max_ && list.back().where <= where) return;
-    VerifyReport::Listed l{kind, where, describe()};
-    auto at = std::upper_bound(list.begin(), list.end(), where,
-                               [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
-    list.insert(at, std::move(l));
-    if (list.size() > max_) list.pop_back();
+    if (list.size() == max_ && list.back().where < where) return;
+    keep(list, VerifyReport::Listed{kind, where, describe()});
   }
 
-  // Another log's counts and listed violations (a rank's, on rank 0; ranks in order, so
-  // equal ordinals keep the order of the ranks).
+  // Another log's counts and listed violations (a rank's, on rank 0).
   void merge(const std::array<std::uint64_t, kViolationKinds>& counts,
              const std::vector<VerifyReport::Listed>& listed) {
     for (std::size_t k = 0; k < std::size_t(kViolationKinds); ++k) counts_[k].fetch_add(counts[k]);
     std::lock_guard<std::mutex> lock(mutex_);
-    for (const auto& l : listed) {
-      auto& list = listed_[std::size_t(l.kind)];
-      if (max_ == 0 || (list.size() == max_ && list.back().where <= l.where)) continue;
-      auto at = std::upper_bound(list.begin(), list.end(), l.where,
-                                 [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
-      list.insert(at, l);
-      if (list.size() > max_) list.pop_back();
-    }
+    for (const auto& l : listed)
+      if (max_ > 0) keep(listed_[std::size_t(l.kind)], l);
   }
 
   void into(VerifyReport& r) const {
@@ -100,6 +90,15 @@ class ViolationLog {
   }
 
  private:
+  void keep(std::vector<VerifyReport::Listed>& list, VerifyReport::Listed l) {
+    auto before = [](const VerifyReport::Listed& a, const VerifyReport::Listed& b) {
+      return a.where != b.where ? a.where < b.where : a.text < b.text;
+    };
+    if (list.size() == max_ && !before(l, list.back())) return;
+    list.insert(std::upper_bound(list.begin(), list.end(), l, before), std::move(l));
+    if (list.size() > max_) list.pop_back();
+  }
+
   std::size_t max_;
   std::mutex mutex_;
   std::array<std::atomic<std::uint64_t>, kViolationKinds> counts_{};
@@ -513,15 +512,17 @@ class Engine {
   // prepare_frame() decodes a frame, checks its tets and builds each step's sorted
   // records into a Slot, on any thread, several frames at once; consume_frame() merges
   // the steps' records with the open sets, frame after frame in order, on one thread
-  // at a time. A frame's slot is reused `slots_` frames later, once consumed, so at
-  // most slots_ frames are in flight.
+  // at a time, and leaves the pairs it formed in the slot; check_pairs() tests them on
+  // any thread. A frame's slot is reused `slots_` frames later, once consumed and its
+  // pairs tested, so at most slots_ frames are in flight.
   struct StepRecords {
     std::vector<Facet> f;  // sorted (FacetLess), unfolded
     std::vector<Edge> e;   // sorted, unique
     std::uint64_t threshold = 0;  // keys below it are final after this step
   };
   // The buffers for building a step's records (A: the facets and edges through a
-  // tet's smallest label, B: the others), and a frame's labels and flags.
+  // tet's smallest label, B: the others), and a frame's labels and flags: one for each
+  // frame being prepared.
   struct Scratch {
     std::vector<Facet> a, b, tmp, far;
     std::vector<Edge> ea, eb, etmp;
@@ -529,14 +530,14 @@ class Engine {
     std::vector<std::uint8_t> flags;
   };
   struct Slot {
-    Scratch w;
     std::vector<StepRecords> steps;
     std::size_t step_count = 0, tets = 0;
     std::uint64_t good = 0, checked = 0;
     ExactSum volume6, error6;  // the frame's tets' (exact: any cut gives the same bits)
+    std::vector<PairCheck> pairs;  // formed by consume_frame(), for check_pairs()
     std::exception_ptr error;
   };
-  void prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot);
+  void prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w);
   void consume_frame(Slot& slot);
   void build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,
                   std::size_t hi, std::uint64_t first_ordinal, bool sorted_by_min);
@@ -588,6 +589,7 @@ class Engine {
   std::size_t step_tets_ = 1;  // tets a step (plan_memory())
   std::size_t slots_ = 1;  // frames in flight (plan_memory())
   std::vector<Slot> slot_;  // the frames in flight, slots_ of them
+  std::vector<Scratch> scratch_;  // min(threads, slots_): the frames being prepared
   std::vector<std::vector<PairCheck>> chunk_checks_;
   std::vector<std::size_t> bounds_, chunk_sizes_;
   std::vector<HullEdge> hull_edges_batch_;

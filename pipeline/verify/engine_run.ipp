@@ -82,16 +82,17 @@ void Engine<L>::plan_memory() {
   step_tets_ = std::max<std::size_t>(1, std::min<std::size_t>(max_frame, opt_.batch_tets));
   const std::size_t floor_step = std::min<std::size_t>(step_tets_, std::size_t(1) << 14);
   while (step_tets_ / 2 >= floor_step && points + 2 * scratch_of(step_tets_) > opt_.memory_bytes) step_tets_ /= 2;
-  // The pass's frames in flight (run()): each slot holds a frame's labels and flags,
-  // one step's building buffers (7 facets and 9 edges a tet) and the frame's records
-  // (4 facets, at most 6 edges a tet); the ordered merge, the merged copy and the pair
-  // checks of one step. As many slots as threads and one, while the scratch takes at
-  // most half of what the points leave (the open sets the rest); at least one.
+  // The pass's frames in flight (run()): each slot holds a frame's records (4 facets,
+  // at most 6 edges a tet) and its pairs (at most 2 a tet); each frame being prepared
+  // (one a thread, at most one a slot) its labels and flags and one step's building
+  // buffers (7 facets and 9 edges a tet); the ordered merge, the merged copy of one
+  // step. As many slots as threads and one, while the scratch takes at most half of
+  // what the points leave (the open sets the rest); at least one.
   const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
   auto pass_scratch = [&](std::size_t slots) {
-    const std::size_t slot = max_frame * (4 * sizeof(L) + 1 + 4 * sizeof(Facet) + 6 * sizeof(Edge)) +
-                             step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge));
-    return slots * slot + step_tets_ * (4 * sizeof(Facet) + 6 * sizeof(Edge) + 2 * sizeof(PairCheck));
+    const std::size_t slot = max_frame * (4 * sizeof(Facet) + 6 * sizeof(Edge) + 2 * sizeof(PairCheck));
+    const std::size_t preparing = max_frame * (4 * sizeof(L) + 1) + step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge));
+    return slots * slot + std::min(slots, threads) * preparing + step_tets_ * (4 * sizeof(Facet) + 6 * sizeof(Edge));
   };
   slots_ = threads + 1;
   while (slots_ > 1 && points + 2 * pass_scratch(slots_) > opt_.memory_bytes) --slots_;
@@ -217,57 +218,79 @@ void Engine<L>::run() {
   // Pass over this rank's frames: a pipeline on every thread (engine.hpp, Slot). A
   // thread takes, in this order of preference: the consumption of the next frame in
   // order when it is prepared (the merges with the open sets; one thread at a time),
-  // else the preparation of the next frame when a slot is free (decode, the tets'
-  // checks, the steps' sorted records: several threads at once), else it waits. Frame
-  // j's slot is frame j - slots_'s, free once that one is consumed. A failure stops the
-  // pass at the first failing frame in that order, as a loop over the frames would.
+  // else the insphere tests of a consumed frame's pairs, else the preparation of the
+  // next frame when a slot and a scratch are free (decode, the tets' checks, the steps'
+  // sorted records: several threads at once), else it waits. Frame j's slot is frame
+  // j - slots_'s, free once that one is consumed and its pairs tested. A failure stops
+  // the pass at the first failing frame in that order, as a loop over the frames would.
   together(comm_, [&] {
     const auto t1 = Clock::now();
     std::uint64_t my_tets = 0;
     for (std::size_t j = first; j < last; ++j) my_tets += src_.batch(order[j]).tet_count;
     Progress progress("verifying", "tets", my_tets, opt_.progress);
     slot_.resize(slots_);
-    std::vector<char> ready(slots_, 0);
+    scratch_.resize(std::min<std::size_t>(slots_, std::size_t(std::max(1, omp_get_max_threads()))));
+    std::vector<std::size_t> free_scratch(scratch_.size());
+    std::iota(free_scratch.begin(), free_scratch.end(), std::size_t(0));
+    std::vector<char> ready(slots_, 0), testing(slots_, 0);  // prepared; consumed, pairs not yet tested
+    std::vector<std::size_t> to_test;                        // slots whose pairs wait
     std::size_t next_prepare = first, next_consume = first;
     bool consuming = false;
     std::exception_ptr error;
     std::mutex mutex;
     std::condition_variable changed;
+    auto slot_of = [&](std::size_t j) { return (j - first) % slots_; };
 #pragma omp parallel
     {
       std::unique_lock<std::mutex> lock(mutex);
-      while (!error && next_consume < last) {
-        const std::size_t cs = (next_consume - first) % slots_;
-        if (!consuming && ready[cs]) {
+      while (!error && (next_consume < last || !to_test.empty())) {
+        std::exception_ptr failed;
+        if (!consuming && next_consume < last && ready[slot_of(next_consume)]) {
+          const std::size_t s = slot_of(next_consume);
           consuming = true;
           lock.unlock();
-          std::exception_ptr failed;
           try {
-            consume_frame(slot_[cs]);
-            progress.add(slot_[cs].tets);
+            consume_frame(slot_[s]);
+            progress.add(slot_[s].tets);
             check_interrupted();
           } catch (...) {
             failed = std::current_exception();
           }
           lock.lock();
-          consuming = false, ready[cs] = 0, ++next_consume;
-          if (failed) error = failed;
-          changed.notify_all();
-        } else if (next_prepare < last && next_prepare < next_consume + slots_) {
-          const std::size_t j = next_prepare++;
+          consuming = false, ready[s] = 0, ++next_consume;
+          testing[s] = 1, to_test.push_back(s);
+        } else if (!to_test.empty()) {
+          const std::size_t s = to_test.back();
+          to_test.pop_back();
           lock.unlock();
-          prepare_frame(order[j], later_min[j + 1], slot_[(j - first) % slots_]);  // keeps its failure
+          try {
+            check_pairs(slot_[s].pairs);
+          } catch (...) {
+            failed = std::current_exception();
+          }
           lock.lock();
-          ready[(j - first) % slots_] = 1;
-          changed.notify_all();
+          testing[s] = 0;
+        } else if (next_prepare < last && next_prepare < next_consume + slots_ && !testing[slot_of(next_prepare)] &&
+                   !free_scratch.empty()) {
+          const std::size_t j = next_prepare++, w = free_scratch.back();
+          free_scratch.pop_back();
+          lock.unlock();
+          prepare_frame(order[j], later_min[j + 1], slot_[slot_of(j)], scratch_[w]);  // keeps its failure
+          lock.lock();
+          free_scratch.push_back(w);
+          ready[slot_of(j)] = 1;
         } else {
           changed.wait(lock);
+          continue;
         }
+        if (failed && !error) error = failed;
+        changed.notify_all();
       }
+      changed.notify_all();
     }
     if (error) std::rethrow_exception(error);
     progress.finish();
-    slot_ = {};
+    slot_ = {}, scratch_ = {};
     if (front_error_) std::rethrow_exception(front_error_);  // the pass did not meet it again
     seconds_tets_ = since(t1);
 

@@ -59,16 +59,15 @@ void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<
                      ": a label above the frame's declared largest label " + std::to_string(b.max_label));
 }
 
-// One frame, off the ordered path (a task of the pass, several at once): decoded into
-// the slot's scratch, storage, orientation and volume of every tet (volumes into the
+// One frame, off the ordered path (several at once): decoded into a scratch of the
+// pass, storage, orientation and volume of every tet (volumes into the
 // slot's sums), then each step's sorted facet and edge records into the slot. future_min: the smallest label of the frames after this one. A failure is kept
 // in the slot for consume_frame(), which meets the frames in order.
 template <class L>
-void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot) {
+void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w) {
   slot.step_count = 0, slot.tets = 0, slot.good = 0, slot.checked = 0;
   slot.volume6 = ExactSum(), slot.error6 = ExactSum();
   slot.error = nullptr;
-  Scratch& w = slot.w;
   try {
     src_.read_batch(k, w.labels);
     std::vector<L>& labels = w.labels;
@@ -118,8 +117,9 @@ void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slo
 }
 
 // One prepared frame, in order: each step's records merged with the open sets (open
-// first on equal keys), one key range a thread, folded, the insphere tests of the pairs
-// formed run there; then what no later tet can touch retires.
+// first on equal keys) and folded, the pairs formed kept in the slot for their insphere
+// tests (check_pairs(), on any thread: they are independent); then what no later tet
+// can touch retires.
 template <class L>
 void Engine<L>::consume_frame(Slot& slot) {
   if (slot.error) std::rethrow_exception(slot.error);
@@ -127,8 +127,7 @@ void Engine<L>::consume_frame(Slot& slot) {
   good_tets_ += slot.good;
   tet_volume6_.add(slot.volume6);
   tet_error6_.add(slot.error6);
-  if (chunk_checks_.size() < std::size_t(std::max(1, omp_get_max_threads())))
-    chunk_checks_.resize(std::size_t(std::max(1, omp_get_max_threads())));
+  slot.pairs.clear();
   const FacetLess<L> less;
   auto key_less = [](const Facet& a, const Facet& b) {
     if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
@@ -140,14 +139,12 @@ void Engine<L>::consume_frame(Slot& slot) {
     facets_checked_ += step.f.size();
     {
       const std::vector<std::span<const Facet>> in{live_.records(), step.f};
-      const std::size_t n =
-          merge_ranges(in, merged_, less, key_less, chunk_sizes_, [&](std::size_t r, Facet* first, std::size_t m) {
-            auto& cc = chunk_checks_[r];
-            cc.clear();
-            const std::size_t w = fold_equal_keys(first, m, cc);
-            check_pairs(cc);
-            return w;
-          });
+      // Inside the pass's parallel region, merge_ranges() merges one range: the pairs
+      // of this step go to the slot in key order.
+      const std::size_t n = merge_ranges(in, merged_, less, key_less, chunk_sizes_,
+                                         [&](std::size_t, Facet* first, std::size_t m) {
+                                           return fold_equal_keys(first, m, slot.pairs);
+                                         });
       merged_.resize(n);
       live_.replace(merged_);
       retire_facets(step.threshold);
