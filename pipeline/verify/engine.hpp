@@ -525,7 +525,7 @@ class Engine {
   // frame being prepared.
   struct Scratch {
     std::vector<Facet> a, b, tmp, far;
-    std::vector<Edge> ea, eb, etmp;
+    std::vector<Edge> ea, eb, etmp, seen;  // seen: 2^kSeenBits edges
     std::vector<L> labels;
     std::vector<std::uint8_t> flags;
   };
@@ -537,6 +537,7 @@ class Engine {
     std::vector<PairCheck> pairs;  // formed by consume_frame(), for check_pairs()
     std::exception_ptr error;
   };
+  static constexpr int kSeenBits = 14;  // the B edges' table of repeats (build_step)
   void prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w);
   void consume_frame(Slot& slot);
   void build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,

@@ -77,9 +77,15 @@ void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slo
       ++good;
       for (int j = 0; j < 4; ++j) used_.set(g[j]);
       const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
-      const BoundedDet<long double> v = volume6(p0, p1, p2, p3);
-      slot.volume6.add(std::fabs(v.value));
-      slot.error6.add(v.error);
+      if (wide_volume_) {
+        const BoundedDet<long double> v = volume6(p0, p1, p2, p3);
+        slot.volume6.add(std::fabs(v.value));
+        slot.error6.add(v.error);
+      } else {  // the same terms, without a round trip through long double
+        const BoundedDet<double> v = det3_bounded<double>(p0, p1, p2, p3);
+        slot.volume6.add(std::fabs(v.value));
+        slot.error6.add(v.error);
+      }
       if (tet_sampled(ordinal)) {
         ++checked;
         const int o = core::orient3d(p0, p1, p2, p3);
@@ -217,10 +223,25 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
   auto& eb = w.eb;
   ea.clear(), eb.clear();
   ea.reserve(3 * n), eb.reserve(3 * n);
+  // The B edges repeat (an edge is in several tets of a step): a direct-mapped table of
+  // the last ones emitted drops most repeats before the sort, which makes them unique
+  // anyway. Cleared every step, so the step's records do not depend on what the table
+  // saw before (and the step's union is the same with or without it).
+  w.seen.assign(std::size_t(1) << kSeenBits, make_edge(L(0), L(0)));  // no edge has u == v
+  Edge* seen = w.seen.data();
   for (std::size_t i = 0; i < n; ++i) {
     if (flags[i] & 2) continue;
     tet_edges(canon + 4 * i, [&](L u, L v, bool through_min) {
-      if (std::uint64_t(u) < upper_) (through_min ? ea : eb).push_back(make_edge(u, v));
+      if (std::uint64_t(u) >= upper_) return;
+      const Edge e = make_edge(u, v);
+      if (through_min) {
+        ea.push_back(e);
+        return;
+      }
+      Edge& slot = seen[((std::uint64_t(u) * 0x9E3779B97F4A7C15ull) ^ std::uint64_t(v)) * 0xBF58476D1CE4E5B9ull >> (64 - kSeenBits)];
+      if (slot == e) return;
+      slot = e;
+      eb.push_back(e);
     });
   }
   if (sorted_by_min) {
