@@ -151,7 +151,8 @@ class Accumulator {
     std::sort(sample_.begin(), sample_.end());
     for (int r = 1; r < parts; ++r)
       cut_[std::size_t(r)] =
-          std::max(cut_[std::size_t(r) - 1], sample_.empty() ? 0 : sample_[sample_.size() * std::size_t(r) / std::size_t(parts)]);
+          std::max(cut_[std::size_t(r) - 1],
+                   sample_.empty() ? 0 : sample_[sample_.size() * std::size_t(r) / std::size_t(parts)]);
   }
 
   // The batch's edges, radix-sorted and made unique, then both directions as (label,
@@ -370,10 +371,10 @@ class Accumulator {
   // over the window, so nearly every slot is a cache miss, and the loops would
   // otherwise wait for each in turn.
   static constexpr std::int64_t kAhead = 8;
-  static constexpr std::size_t kBlock = 4096;  // tets a block of the edge packing
+  static constexpr std::size_t kBlock = 4096;         // tets a block of the edge packing
   static constexpr std::size_t kParallelTets = 1024;  // fewer tets: combine() on one thread
-  std::vector<std::uint64_t> cut_, sample_;  // combine()'s label ranges, and the labels they are cut from
-  static constexpr int kSeenBits = 14;         // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
+  std::vector<std::uint64_t> cut_, sample_;           // combine()'s label ranges, and the labels they are cut from
+  static constexpr int kSeenBits = 14;  // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;
   std::vector<std::uint64_t> seen_;  // the threads' tables of emitted edges
   std::vector<std::size_t> block_short_, block_long_;

@@ -516,8 +516,8 @@ class Engine {
   // any thread. A frame's slot is reused `slots_` frames later, once consumed and its
   // pairs tested, so at most slots_ frames are in flight.
   struct StepRecords {
-    std::vector<Facet> f;  // sorted (FacetLess), unfolded
-    std::vector<Edge> e;   // sorted, unique
+    std::vector<Facet> f;         // sorted (FacetLess), unfolded
+    std::vector<Edge> e;          // sorted, unique
     std::uint64_t threshold = 0;  // keys below it are final after this step
   };
   // The buffers for building a step's records (A: the facets and edges through a
@@ -533,7 +533,7 @@ class Engine {
     std::vector<StepRecords> steps;
     std::size_t step_count = 0, tets = 0;
     std::uint64_t good = 0, checked = 0;
-    ExactSum volume6, error6;  // the frame's tets' (exact: any cut gives the same bits)
+    ExactSum volume6, error6;      // the frame's tets' (exact: any cut gives the same bits)
     std::vector<PairCheck> pairs;  // formed by consume_frame(), for check_pairs()
     std::exception_ptr error;
   };
@@ -587,9 +587,9 @@ class Engine {
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
   std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
 
-  std::size_t step_tets_ = 1;  // tets a step (plan_memory())
-  std::size_t slots_ = 1;  // frames in flight (plan_memory())
-  std::vector<Slot> slot_;  // the frames in flight, slots_ of them
+  std::size_t step_tets_ = 1;     // tets a step (plan_memory())
+  std::size_t slots_ = 1;         // frames in flight (plan_memory())
+  std::vector<Slot> slot_;        // the frames in flight, slots_ of them
   std::vector<Scratch> scratch_;  // min(threads, slots_): the frames being prepared
   std::vector<std::vector<PairCheck>> chunk_checks_;
   std::vector<std::size_t> bounds_, chunk_sizes_;

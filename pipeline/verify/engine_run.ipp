@@ -91,7 +91,8 @@ void Engine<L>::plan_memory() {
   const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
   auto pass_scratch = [&](std::size_t slots) {
     const std::size_t slot = max_frame * (4 * sizeof(Facet) + 6 * sizeof(Edge) + 2 * sizeof(PairCheck));
-    const std::size_t preparing = max_frame * (4 * sizeof(L) + 1) + step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge)) +
+    const std::size_t preparing = max_frame * (4 * sizeof(L) + 1) +
+                                  step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge)) +
                                   (std::size_t(1) << kSeenBits) * sizeof(Edge);
     return slots * slot + std::min(slots, threads) * preparing + step_tets_ * (4 * sizeof(Facet) + 6 * sizeof(Edge));
   };
@@ -121,8 +122,8 @@ void Engine<L>::plan_memory() {
       "verify: memory: points {}, scratch {} (steps of {} tets, {} frames in flight), open facets {}, open edges {}, "
       "sorts {}",
       human_bytes(double(points)), human_bytes(double(scratch)), step_tets_, slots_,
-                human_bytes(double(live_facet_budget_)), human_bytes(double(live_edge_budget_)),
-                human_bytes(double(sorter_budget_)));
+      human_bytes(double(live_facet_budget_)), human_bytes(double(live_edge_budget_)),
+      human_bytes(double(sorter_budget_)));
 }
 
 template <class L>

@@ -61,8 +61,8 @@ void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<
 
 // One frame, off the ordered path (several at once): decoded into a scratch of the
 // pass, storage, orientation and volume of every tet (volumes into the
-// slot's sums), then each step's sorted facet and edge records into the slot. future_min: the smallest label of the frames after this one. A failure is kept
-// in the slot for consume_frame(), which meets the frames in order.
+// slot's sums), then each step's sorted facet and edge records into the slot. future_min: the smallest label of the
+// frames after this one. A failure is kept in the slot for consume_frame(), which meets the frames in order.
 template <class L>
 void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w) {
   slot.step_count = 0, slot.tets = 0, slot.good = 0, slot.checked = 0;
@@ -147,10 +147,9 @@ void Engine<L>::consume_frame(Slot& slot) {
       const std::vector<std::span<const Facet>> in{live_.records(), step.f};
       // Inside the pass's parallel region, merge_ranges() merges one range: the pairs
       // of this step go to the slot in key order.
-      const std::size_t n = merge_ranges(in, merged_, less, key_less, chunk_sizes_,
-                                         [&](std::size_t, Facet* first, std::size_t m) {
-                                           return fold_equal_keys(first, m, slot.pairs);
-                                         });
+      const std::size_t n =
+          merge_ranges(in, merged_, less, key_less, chunk_sizes_,
+                       [&](std::size_t, Facet* first, std::size_t m) { return fold_equal_keys(first, m, slot.pairs); });
       merged_.resize(n);
       live_.replace(merged_);
       retire_facets(step.threshold);
@@ -158,9 +157,9 @@ void Engine<L>::consume_frame(Slot& slot) {
     if (!sampled_) {
       const std::vector<std::span<const Edge>> in{live_e_.records(), step.e};
       const std::less<Edge> el;
-      const std::size_t n = merge_ranges(in, merged_e_, el, el, chunk_sizes_, [](std::size_t, Edge* first, std::size_t m) {
-        return std::size_t(std::unique(first, first + m) - first);
-      });
+      const std::size_t n = merge_ranges(
+          in, merged_e_, el, el, chunk_sizes_,
+          [](std::size_t, Edge* first, std::size_t m) { return std::size_t(std::unique(first, first + m) - first); });
       merged_e_.resize(n);
       live_e_.replace(merged_e_);
       merge_edges(step.threshold);
@@ -200,7 +199,8 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
   }
   const int bits = base <= top ? std::max(1, int(std::bit_width(top - base))) : 1;
   int near = 1;
-  for (std::size_t within = width[0] + width[1]; near < bits && within < good - good / 128;) within += width[std::size_t(++near)];
+  for (std::size_t within = width[0] + width[1]; near < bits && within < good - good / 128;)
+    within += width[std::size_t(++near)];
   const FacetLess<L> less;
   if (sorted_by_min) {
     // A is grouped by smallest label already: sort each group (a lower star).
@@ -238,7 +238,8 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
         ea.push_back(e);
         return;
       }
-      Edge& slot = seen[((std::uint64_t(u) * 0x9E3779B97F4A7C15ull) ^ std::uint64_t(v)) * 0xBF58476D1CE4E5B9ull >> (64 - kSeenBits)];
+      Edge& slot = seen[((std::uint64_t(u) * 0x9E3779B97F4A7C15ull) ^ std::uint64_t(v)) * 0xBF58476D1CE4E5B9ull >>
+                        (64 - kSeenBits)];
       if (slot == e) return;
       slot = e;
       eb.push_back(e);

@@ -105,7 +105,8 @@ std::string fingerprint(const VerifyReport& r) {
     put(bits);
   }
   for (std::uint64_t c : r.counts) put(c);
-  for (const auto& l : r.listed) s += std::string(violation_name(l.kind)) + ' ' + std::to_string(l.where) + ' ' + l.text + '\n';
+  for (const auto& l : r.listed)
+    s += std::string(violation_name(l.kind)) + ' ' + std::to_string(l.where) + ' ' + l.text + '\n';
   return s;
 }
 
@@ -133,8 +134,8 @@ const Output& uniform() {
 }
 
 TEST(VerifyThreads, ValidOutputsGiveOneReport) {
-  for (const auto& [name, pts] : {std::pair<const char*, test::Points>{"clusters", test::clusters(1200, 22)},
-                                  {"grid", test::grid(8)}}) {
+  for (const auto& [name, pts] :
+       {std::pair<const char*, test::Points>{"clusters", test::clusters(1200, 22)}, {"grid", test::grid(8)}}) {
     SCOPED_TRACE(name);
     const Output o = triangulate(pts);
     // Frames of 300 tets in steps of 128; then one step a frame, the open sets spilled.
@@ -155,7 +156,8 @@ TEST(VerifyThreads, BrokenOutputsGiveOneReport) {
   // A flipped tet, a repeated tet, a tet removed, and a tet moved far from its frame
   // (its facets meet their partners many steps later).
   std::swap(o.tets[4 * (t / 3) + 1], o.tets[4 * (t / 3) + 2]);
-  o.tets.insert(o.tets.end(), o.tets.begin() + std::ptrdiff_t(4 * (t / 2)), o.tets.begin() + std::ptrdiff_t(4 * (t / 2) + 4));
+  o.tets.insert(o.tets.end(), o.tets.begin() + std::ptrdiff_t(4 * (t / 2)),
+                o.tets.begin() + std::ptrdiff_t(4 * (t / 2) + 4));
   o.tets.erase(o.tets.begin() + std::ptrdiff_t(4 * (t / 4)), o.tets.begin() + std::ptrdiff_t(4 * (t / 4) + 4));
   std::rotate(o.tets.begin() + 40, o.tets.begin() + 44, o.tets.begin() + std::ptrdiff_t(4 * (t / 5)));
   const VerifyReport r = same_on_every_count(o, 250, options(100, 0));
