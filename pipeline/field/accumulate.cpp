@@ -90,37 +90,69 @@ class Accumulator {
     }
   }
 
-  // One thread, fixed order: the bits of every sum do not depend on the threads.
+  // The tets' terms into their vertices' sums, on every thread: each thread owns a
+  // range of the dense labels and goes through all the batch's tets in their order,
+  // adding only to its own labels (the far ones, in their map: the last thread's), so
+  // every label's terms are added in the tets' order whatever the threads: the bits of
+  // every sum do not depend on them.
   void combine() {
-    std::size_t t = 0;
-    if (!terms_) {
+    const std::size_t n = batch_.tets();
+    const int parts = n < kParallelTets ? 1 : std::max(1, omp_get_max_threads());
+    split_ranges(parts);
+#pragma omp parallel num_threads(parts) if (parts > 1)
+    {
+      const int r = omp_get_thread_num(), nr = omp_get_num_threads();
+      const std::uint64_t own_lo = cut_[std::size_t(r)], own_hi = cut_[std::size_t(r) + 1];
+      const bool far_here = r == nr - 1;
+      std::size_t t = 0;
       for (std::size_t f = 0; f < batch_.frames(); ++f) {
         const std::vector<std::uint64_t>& labels = batch_.frame(f);
-        for (std::size_t i = 0; i < labels.size(); i += 4, ++t)
+        for (std::size_t i = 0; i < labels.size(); i += 4, ++t) {
+          if (terms_)
+            for (std::size_t v = i + 4 * kAhead; v < std::min(labels.size(), i + 4 * kAhead + 4); ++v)
+              if (labels[v] >= own_lo && labels[v] < own_hi) TS_PREFETCH(&acc_[labels[v]]);
           for (int v = 0; v < 4; ++v) {
             const std::uint64_t l = labels[i + std::size_t(v)];
-            Accum& a = points_.dense(l) ? acc_[l] : far_acc_[l];
-            a.volume += volumes_[t];
-            ++a.tets;
+            Accum* a;
+            if (points_.dense(l)) {
+              if (l < own_lo || l >= own_hi) continue;
+              a = &acc_[l];
+            } else {
+              if (!far_here) continue;
+              a = &far_acc_[l];
+            }
+            if (!terms_) {
+              a->volume += volumes_[t];
+              ++a->tets;
+              continue;
+            }
+            const TetTerms& c = contrib_[t];
+            a->volume += c.geometry.volume;
+            a->voronoi += c.geometry.voronoi[std::size_t(v)];
+            a->hull += c.hull[v];  // mod 2^64: the order does not matter, only the sum
           }
-      }
-      return;
-    }
-    for (std::size_t f = 0; f < batch_.frames(); ++f) {
-      const std::vector<std::uint64_t>& labels = batch_.frame(f);
-      for (std::size_t i = 0; i < labels.size(); i += 4, ++t) {
-        for (std::size_t v = i + 4 * kAhead; v < std::min(labels.size(), i + 4 * kAhead + 4); ++v)
-          if (points_.dense(labels[v])) TS_PREFETCH(&acc_[labels[v]]);
-        const TetTerms& c = contrib_[t];
-        for (int v = 0; v < 4; ++v) {
-          const std::uint64_t l = labels[i + std::size_t(v)];
-          Accum& a = points_.dense(l) ? acc_[l] : far_acc_[l];
-          a.volume += c.geometry.volume;
-          a.voronoi += c.geometry.voronoi[v];
-          a.hull += c.hull[v];  // mod 2^64: the order does not matter, only the sum
         }
       }
     }
+  }
+
+  // The dense labels' ranges of combine()'s threads, cut_[0] = 0 < cut_[1] < ... <
+  // cut_[parts] = the dense end: about as many of the batch's vertex slots in each
+  // (from a sample of the batch's labels; any cut gives the same sums).
+  void split_ranges(int parts) {
+    cut_.assign(std::size_t(parts) + 1, 0);
+    cut_[std::size_t(parts)] = ~0ull;
+    if (parts == 1) return;
+    sample_.clear();
+    for (std::size_t f = 0; f < batch_.frames(); ++f) {
+      const std::vector<std::uint64_t>& labels = batch_.frame(f);
+      for (std::size_t i = 0; i < labels.size(); i += 61) sample_.push_back(labels[i]);
+    }
+    std::sort(sample_.begin(), sample_.end());
+    for (int r = 1; r < parts; ++r)
+      cut_[std::size_t(r)] =
+          std::max(cut_[std::size_t(r) - 1],
+                   sample_.empty() ? 0 : sample_[sample_.size() * std::size_t(r) / std::size_t(parts)]);
   }
 
   // The batch's edges, radix-sorted and made unique, then both directions as (label,
@@ -339,8 +371,10 @@ class Accumulator {
   // over the window, so nearly every slot is a cache miss, and the loops would
   // otherwise wait for each in turn.
   static constexpr std::int64_t kAhead = 8;
-  static constexpr std::size_t kBlock = 4096;  // tets a block of the edge packing
-  static constexpr int kSeenBits = 14;         // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
+  static constexpr std::size_t kBlock = 4096;         // tets a block of the edge packing
+  static constexpr std::size_t kParallelTets = 1024;  // fewer tets: combine() on one thread
+  std::vector<std::uint64_t> cut_, sample_;           // combine()'s label ranges, and the labels they are cut from
+  static constexpr int kSeenBits = 14;  // 16384 entries, 128 KiB a thread (docs/fields.md: the sizes tried)
   static constexpr std::size_t kSeen = std::size_t(1) << kSeenBits;
   std::vector<std::uint64_t> seen_;  // the threads' tables of emitted edges
   std::vector<std::size_t> block_short_, block_long_;

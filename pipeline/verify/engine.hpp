@@ -17,6 +17,7 @@
 #include "pipeline/verify/exact_sum.hpp"
 #include "pipeline/verify/split.hpp"
 
+#include "core/compiler.hpp"
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "io/tet_reader.hpp"
@@ -32,6 +33,7 @@
 #include <atomic>
 #include <bit>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -53,8 +55,9 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // ---------------------------------------------------------------------------------
-// Violations: every one counted, the first max_listed of each kind (by ordinal) kept.
-// Thread-safe; violations are rare, so a mutex is fine.
+// Violations: every one counted, the first max_listed of each kind (by ordinal, then
+// by text: the order in which threads find them does not matter) kept. Thread-safe;
+// violations are rare, so a mutex is fine.
 class ViolationLog {
  public:
   explicit ViolationLog(std::size_t max_listed) : max_(max_listed) {}
@@ -66,28 +69,17 @@ class ViolationLog {
     if (max_ == 0) return;
     std::lock_guard<std::mutex> lock(mutex_);
     auto& list = listed_[k];
-    if (list.size() == max_ && list.back().where <= where) return;
-    VerifyReport::Listed l{kind, where, describe()};
-    auto at = std::upper_bound(list.begin(), list.end(), where,
-                               [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
-    list.insert(at, std::move(l));
-    if (list.size() > max_) list.pop_back();
+    if (list.size() == max_ && list.back().where < where) return;
+    keep(list, VerifyReport::Listed{kind, where, describe()});
   }
 
-  // Another log's counts and listed violations (a rank's, on rank 0; ranks in order, so
-  // equal ordinals keep the order of the ranks).
+  // Another log's counts and listed violations (a rank's, on rank 0).
   void merge(const std::array<std::uint64_t, kViolationKinds>& counts,
              const std::vector<VerifyReport::Listed>& listed) {
     for (std::size_t k = 0; k < std::size_t(kViolationKinds); ++k) counts_[k].fetch_add(counts[k]);
     std::lock_guard<std::mutex> lock(mutex_);
-    for (const auto& l : listed) {
-      auto& list = listed_[std::size_t(l.kind)];
-      if (max_ == 0 || (list.size() == max_ && list.back().where <= l.where)) continue;
-      auto at = std::upper_bound(list.begin(), list.end(), l.where,
-                                 [](std::uint64_t w, const VerifyReport::Listed& x) { return w < x.where; });
-      list.insert(at, l);
-      if (list.size() > max_) list.pop_back();
-    }
+    for (const auto& l : listed)
+      if (max_ > 0) keep(listed_[std::size_t(l.kind)], l);
   }
 
   void into(VerifyReport& r) const {
@@ -98,6 +90,15 @@ class ViolationLog {
   }
 
  private:
+  void keep(std::vector<VerifyReport::Listed>& list, VerifyReport::Listed l) {
+    auto before = [](const VerifyReport::Listed& a, const VerifyReport::Listed& b) {
+      return a.where != b.where ? a.where < b.where : a.text < b.text;
+    };
+    if (list.size() == max_ && !before(l, list.back())) return;
+    list.insert(std::upper_bound(list.begin(), list.end(), l, before), std::move(l));
+    if (list.size() > max_) list.pop_back();
+  }
+
   std::size_t max_;
   std::mutex mutex_;
   std::array<std::atomic<std::uint64_t>, kViolationKinds> counts_{};
@@ -244,9 +245,16 @@ class PointCoords {
     else
       std::copy(xyz, xyz + 3 * n, d_.begin() + std::ptrdiff_t(3 * first));
   }
-  Point operator()(std::uint64_t l) const {
+  TS_FORCE_INLINE Point operator()(std::uint64_t l) const {
     if (floats_) return {{f_[3 * l], f_[3 * l + 1], f_[3 * l + 2]}};
     return {{d_[3 * l], d_[3 * l + 1], d_[3 * l + 2]}};
+  }
+  // Asks for point l's coordinates ahead of their use (the tets' labels jump about).
+  TS_FORCE_INLINE void prefetch(std::uint64_t l) const {
+    if (floats_)
+      TS_PREFETCH(f_.data() + 3 * l);
+    else
+      TS_PREFETCH(d_.data() + 3 * l);
   }
 
  private:
@@ -305,6 +313,20 @@ void for_group_chunks(std::size_t n, IsStart&& is_start, F&& f, std::vector<std:
   for (int p = 0; p < parts; ++p) f(std::size_t(p), bounds[std::size_t(p)], bounds[std::size_t(p) + 1]);
 }
 
+// Runs f(r) for each r in [0, n): on the threads of a parallel region of its own, or
+// one after another when called inside one (verify's pass: its other threads are busy
+// preparing frames).
+template <class F>
+void for_each_range(std::size_t n, F&& f) {
+  if (n <= 1 || omp_in_parallel()) {
+    for (std::size_t r = 0; r < n; ++r) f(r);
+    return;
+  }
+  auto* fp = &f;
+#pragma omp parallel for num_threads(int(n)) schedule(static, 1)
+  for (std::int64_t r = 0; r < std::int64_t(n); ++r) (*fp)(std::size_t(r));
+}
+
 // Stable k-way merge of sorted ranges into out (ties: the earlier range first).
 template <class T, class Less>
 void multiway_merge(std::vector<std::pair<const T*, const T*>>& rs, T* out, const Less& less) {
@@ -346,7 +368,8 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
     out.reserve(total);  // exactly: no doubling of the biggest buffer
   }
   out.resize(total);
-  const std::size_t ranges = total < (1u << 15) ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
+  const std::size_t ranges =
+      total < (1u << 15) || omp_in_parallel() ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
   const std::size_t k = in.size();
   // bounds[i * (ranges + 1) + r]: where range r starts in input i; splitters are
   // evenly spaced keys of the biggest input.
@@ -362,16 +385,14 @@ std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<
     }
   }
   kept.assign(ranges, 0);
-#pragma omp parallel for num_threads(int(ranges)) schedule(static, 1) if (ranges > 1)
-  for (std::int64_t rr = 0; rr < std::int64_t(ranges); ++rr) {
-    const std::size_t r = std::size_t(rr);
+  for_each_range(ranges, [&](std::size_t r) {
     std::vector<std::pair<const T*, const T*>> rs(k);
     for (std::size_t i = 0; i < k; ++i)
       rs[i] = {in[i].data() + bounds[i * (ranges + 1) + r], in[i].data() + bounds[i * (ranges + 1) + r + 1]};
     T* first = out.data() + offset[r];
     multiway_merge(rs, first, less);
     kept[r] = finish(r, first, offset[r + 1] - offset[r]);
-  }
+  });
   std::size_t w = 0;
   for (std::size_t r = 0; r < ranges; ++r) {
     if (w != offset[r] && kept[r])
@@ -428,7 +449,6 @@ class Engine {
         used_(n_),
         hull_used_(n_) {
     sampled_ = opt.sample < 1.0;
-    label_bits_ = std::max(1, int(std::bit_width(n_ > 0 ? n_ - 1 : 0)));
     if (sampled_) sample_cut_ = std::uint64_t(std::ldexp(opt.sample, 64));  // sample < 1: below 2^64
   }
 
@@ -441,7 +461,7 @@ class Engine {
     std::uint64_t tpos, tneg;
   };
 
-  PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
+  TS_FORCE_INLINE PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
   bool tet_sampled(std::uint64_t ordinal) const {
     return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_;
   }
@@ -455,21 +475,24 @@ class Engine {
   std::string facet_text(const Facet& f) const { return "facet " + labels_text({f.v[0], f.v[1], f.v[2]}); }
 
   // Stable radix sorts into FacetLess / edge order (records of one key keep their
-  // order, which is ordinal order for freshly generated records).
-  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const;
-  void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const;
+  // order, which is ordinal order for freshly generated records). Every label of v is
+  // in [base, base + 2^bits): the keys are taken relative to base, in fewer digits;
+  // most facets' labels in [base, base + 2^near) (far: a buffer for the others).
+  void sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::vector<Facet>& far, std::uint64_t base,
+                   int bits, int near) const;
+  void sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp, std::uint64_t base, int bits) const;
   std::string make_tmpdir();
   void plan_memory();
   void load_points();
-  void process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min);
   // Checks a decoded frame (its count, every good tet's labels within the frame's
   // declared [min_label, max_label]: InputError otherwise) and puts each tet in
   // canonical form (labels sorted; flags bit 0: odd permutation, bit 1: broken, i.e. a
   // storage violation, logged when log_storage). on_good(i, ordinal, g) for each good
   // tet, g its labels as stored; called from several threads.
+  // parallel: on the threads of a parallel region of its own (false inside a task).
   template <class OnGood>
   void canonicalize(std::size_t k, std::vector<L>& labels, std::vector<std::uint8_t>& flags, bool log_storage,
-                    OnGood&& on_good);
+                    bool parallel, OnGood&& on_good);
   // The facet records of a canonical tet s (flags: its parity bit), emit(facet, through
   // s[0]), and its six edges.
   template <class Emit>
@@ -485,15 +508,40 @@ class Engine {
   void hand_over_hull_edges();
   std::string partial_totals();
   void merge_totals(const std::vector<std::string>& parts);
-  // Per-thread buffers of a step's slice of tets.
-  struct Part {
-    std::vector<Facet> a, b, f, tmp;  // A and B facets, merged
-    std::vector<Edge> ea, eb, e, etmp;
+  // The pass over the frames is a pipeline on every thread (engine_run.ipp, run()):
+  // prepare_frame() decodes a frame, checks its tets and builds each step's sorted
+  // records into a Slot, on any thread, several frames at once; consume_frame() merges
+  // the steps' records with the open sets, frame after frame in order, on one thread
+  // at a time, and leaves the pairs it formed in the slot; check_pairs() tests them on
+  // any thread. A frame's slot is reused `slots_` frames later, once consumed and its
+  // pairs tested, so at most slots_ frames are in flight.
+  struct StepRecords {
+    std::vector<Facet> f;         // sorted (FacetLess), unfolded
+    std::vector<Edge> e;          // sorted, unique
+    std::uint64_t threshold = 0;  // keys below it are final after this step
   };
-  void process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
-                    bool sorted_by_min, std::uint64_t threshold);
-  void build_part(Part& part, const L* canon, const std::uint8_t* flags, std::size_t lo, std::size_t hi,
-                  std::uint64_t first_ordinal, bool sorted_by_min);
+  // The buffers for building a step's records (A: the facets and edges through a
+  // tet's smallest label, B: the others), and a frame's labels and flags: one for each
+  // frame being prepared.
+  struct Scratch {
+    std::vector<Facet> a, b, tmp, far;
+    std::vector<Edge> ea, eb, etmp, seen;  // seen: 2^kSeenBits edges
+    std::vector<L> labels;
+    std::vector<std::uint8_t> flags;
+  };
+  struct Slot {
+    std::vector<StepRecords> steps;
+    std::size_t step_count = 0, tets = 0;
+    std::uint64_t good = 0, checked = 0;
+    ExactSum volume6, error6;      // the frame's tets' (exact: any cut gives the same bits)
+    std::vector<PairCheck> pairs;  // formed by consume_frame(), for check_pairs()
+    std::exception_ptr error;
+  };
+  static constexpr int kSeenBits = 14;  // the B edges' table of repeats (build_step)
+  void prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w);
+  void consume_frame(Slot& slot);
+  void build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,
+                  std::size_t hi, std::uint64_t first_ordinal, bool sorted_by_min);
   // Folds runs of equal keys in place (returns the new size); new pairs go to chunk_checks_.
   std::size_t fold(Facet* first, Facet* last);
   void combine(Facet& s, const Facet& r, std::vector<PairCheck>& checks);
@@ -539,9 +587,10 @@ class Engine {
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;
   std::uint64_t facet_spill_min_ = ~0ull, edge_spill_min_ = ~0ull;
 
-  int label_bits_ = 1;         // bits of the largest label
-  std::size_t step_tets_ = 1;  // tets a step (plan_memory())
-  std::vector<Part> parts_;
+  std::size_t step_tets_ = 1;     // tets a step (plan_memory())
+  std::size_t slots_ = 1;         // frames in flight (plan_memory())
+  std::vector<Slot> slot_;        // the frames in flight, slots_ of them
+  std::vector<Scratch> scratch_;  // min(threads, slots_): the frames being prepared
   std::vector<std::vector<PairCheck>> chunk_checks_;
   std::vector<std::size_t> bounds_, chunk_sizes_;
   std::vector<HullEdge> hull_edges_batch_;
@@ -554,12 +603,11 @@ class Engine {
   ExternalSortOptions hull_sort_options_;
 
   // Totals. Volumes summed exactly (exact_sum.hpp): the same bits however the tets are
-  // cut into threads, spills and ranks. thread_volume_: one a thread (process_frame).
+  // cut into threads, spills and ranks.
   // *_error6_: the sums of each term's rounding bound (det3_bounded), so that the
   // comparison of the two volumes is a proof, not a tolerance: near-flat point sets have
   // volumes far below the rounding of their terms.
   ExactSum tet_volume6_, hull_volume6_, tet_error6_, hull_error6_;
-  std::vector<ExactSum> thread_volume_, thread_error_;
   bool wide_volume_ = false;  // volumes in long double (volume_fits_double)
   BoundedDet<long double> volume6(const double* a, const double* b, const double* c, const double* d) const {
     if (wide_volume_) return det3_bounded<long double>(a, b, c, d);

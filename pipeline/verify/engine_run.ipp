@@ -2,28 +2,54 @@
 // compiled in engine.cpp). Included once, by engine.cpp, inside namespace tetstream::pipeline::verify_engine.
 
 template <class L>
-void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp) const {
-  const int b = label_bits_;
-  if (3 * b <= 64) {
-    radix_sort(v.data(), v.size(), tmp, 3 * b, [b](const Facet& f) {
-      return std::uint64_t(f.v[0]) << (2 * b) | std::uint64_t(f.v[1]) << b | std::uint64_t(f.v[2]);
+void Engine<L>::sort_facets(std::vector<Facet>& v, std::vector<Facet>& tmp, std::vector<Facet>& far, std::uint64_t base,
+                            int b, int near) const {
+  auto passes = [](int bits) { return (bits + 10) / 11; };  // radix_sort's 11-bit digits
+  const int full = 3 * b <= 64 ? passes(3 * b) : 3 * passes(b);
+  if (near < b && 3 * near <= 64 && passes(3 * near) < full) {
+    // Most records lie within 2^near labels of base (a step's tets are a few slabs
+    // thick); the few that reach further (long tets on the hull or across a hollow)
+    // are sorted apart and merged back: FacetLess orders records of equal labels by
+    // their ordinals, as the stable radix sort leaves them.
+    far.clear();
+    std::size_t kept = 0;
+    for (const Facet& f : v)
+      if ((std::uint64_t(f.v[2]) - base) >> near)
+        far.push_back(f);
+      else
+        v[kept++] = f;
+    v.resize(kept);
+    radix_sort(v.data(), v.size(), tmp, 3 * near, [near, base](const Facet& f) {
+      return (std::uint64_t(f.v[0]) - base) << (2 * near) | (std::uint64_t(f.v[1]) - base) << near |
+             (std::uint64_t(f.v[2]) - base);
+    });
+    if (far.empty()) return;
+    const FacetLess<L> less;
+    std::sort(far.begin(), far.end(), less);
+    tmp.resize(v.size() + far.size());
+    std::merge(v.begin(), v.end(), far.begin(), far.end(), tmp.begin(), less);
+    std::swap(v, tmp);
+  } else if (3 * b <= 64) {
+    radix_sort(v.data(), v.size(), tmp, 3 * b, [b, base](const Facet& f) {
+      return (std::uint64_t(f.v[0]) - base) << (2 * b) | (std::uint64_t(f.v[1]) - base) << b |
+             (std::uint64_t(f.v[2]) - base);
     });
   } else {
     for (int j = 2; j >= 0; --j)
-      radix_sort(v.data(), v.size(), tmp, b, [j](const Facet& f) { return std::uint64_t(f.v[j]); });
+      radix_sort(v.data(), v.size(), tmp, b, [j, base](const Facet& f) { return std::uint64_t(f.v[j]) - base; });
   }
 }
 
 template <class L>
-void Engine<L>::sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp) const {
-  const int b = label_bits_;
+void Engine<L>::sort_edges(std::vector<Edge>& v, std::vector<Edge>& tmp, std::uint64_t base, int b) const {
   if constexpr (sizeof(L) == 4) {
-    radix_sort(v.data(), v.size(), tmp, 2 * b, [b](std::uint64_t e) { return (e >> 32) << b | (e & 0xFFFFFFFFu); });
+    radix_sort(v.data(), v.size(), tmp, 2 * b,
+               [b, base](std::uint64_t e) { return ((e >> 32) - base) << b | ((e & 0xFFFFFFFFu) - base); });
   } else if (2 * b <= 64) {
-    radix_sort(v.data(), v.size(), tmp, 2 * b, [b](const Edge& e) { return e.u << b | e.v; });
+    radix_sort(v.data(), v.size(), tmp, 2 * b, [b, base](const Edge& e) { return (e.u - base) << b | (e.v - base); });
   } else {
-    radix_sort(v.data(), v.size(), tmp, b, [](const Edge& e) { return e.v; });
-    radix_sort(v.data(), v.size(), tmp, b, [](const Edge& e) { return e.u; });
+    radix_sort(v.data(), v.size(), tmp, b, [base](const Edge& e) { return e.v - base; });
+    radix_sort(v.data(), v.size(), tmp, b, [base](const Edge& e) { return e.u - base; });
   }
 }
 
@@ -56,7 +82,23 @@ void Engine<L>::plan_memory() {
   step_tets_ = std::max<std::size_t>(1, std::min<std::size_t>(max_frame, opt_.batch_tets));
   const std::size_t floor_step = std::min<std::size_t>(step_tets_, std::size_t(1) << 14);
   while (step_tets_ / 2 >= floor_step && points + 2 * scratch_of(step_tets_) > opt_.memory_bytes) step_tets_ /= 2;
-  const std::size_t scratch = scratch_of(step_tets_);
+  // The pass's frames in flight (run()): each slot holds a frame's records (4 facets,
+  // at most 6 edges a tet) and its pairs (at most 2 a tet); each frame being prepared
+  // (one a thread, at most one a slot) its labels and flags and one step's building
+  // buffers (7 facets and 9 edges a tet, and a table of edges); the ordered merge, the merged copy of one
+  // step. As many slots as threads and one, while the scratch takes at most half of
+  // what the points leave (the open sets the rest); at least one.
+  const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
+  auto pass_scratch = [&](std::size_t slots) {
+    const std::size_t slot = max_frame * (4 * sizeof(Facet) + 6 * sizeof(Edge) + 2 * sizeof(PairCheck));
+    const std::size_t preparing = max_frame * (4 * sizeof(L) + 1) +
+                                  step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge)) +
+                                  (std::size_t(1) << kSeenBits) * sizeof(Edge);
+    return slots * slot + std::min(slots, threads) * preparing + step_tets_ * (4 * sizeof(Facet) + 6 * sizeof(Edge));
+  };
+  slots_ = threads + 1;
+  while (slots_ > 1 && points + 2 * pass_scratch(slots_) > opt_.memory_bytes) --slots_;
+  const std::size_t scratch = pass_scratch(slots_);
   const std::size_t fixed = points + scratch;
   std::size_t rest = opt_.memory_bytes > fixed ? std::size_t(opt_.memory_bytes - fixed) : 0;
   if (rest < (std::size_t(16) << 20)) {
@@ -76,10 +118,12 @@ void Engine<L>::plan_memory() {
   sorter_budget_ = rest * 5 / 8;
   rep_.memory_planned = fixed + rest;
   rep_.step_tets = step_tets_;
-  spdlog::debug("verify: memory: points {}, scratch {} (steps of {} tets), open facets {}, open edges {}, sorts {}",
-                human_bytes(double(points)), human_bytes(double(scratch)), step_tets_,
-                human_bytes(double(live_facet_budget_)), human_bytes(double(live_edge_budget_)),
-                human_bytes(double(sorter_budget_)));
+  spdlog::debug(
+      "verify: memory: points {}, scratch {} (steps of {} tets, {} frames in flight), open facets {}, open edges {}, "
+      "sorts {}",
+      human_bytes(double(points)), human_bytes(double(scratch)), step_tets_, slots_,
+      human_bytes(double(live_facet_budget_)), human_bytes(double(live_edge_budget_)),
+      human_bytes(double(sorter_budget_)));
 }
 
 template <class L>
@@ -173,30 +217,82 @@ void Engine<L>::run() {
   // this rank's keys, folded here first (a collective step: every rank takes part).
   if (comm_.size() > 1) hand_over_front(order, position);
 
-  // Pass over this rank's frames; the next frame decodes while this one is checked.
+  // Pass over this rank's frames: a pipeline on every thread (engine.hpp, Slot). A
+  // thread takes, in this order of preference: the consumption of the next frame in
+  // order when it is prepared (the merges with the open sets; one thread at a time),
+  // else the insphere tests of a consumed frame's pairs, else the preparation of the
+  // next frame when a slot and a scratch are free (decode, the tets' checks, the steps'
+  // sorted records: several threads at once), else it waits. Frame j's slot is frame
+  // j - slots_'s, free once that one is consumed and its pairs tested. A failure stops
+  // the pass at the first failing frame in that order, as a loop over the frames would.
   together(comm_, [&] {
     const auto t1 = Clock::now();
     std::uint64_t my_tets = 0;
     for (std::size_t j = first; j < last; ++j) my_tets += src_.batch(order[j]).tet_count;
     Progress progress("verifying", "tets", my_tets, opt_.progress);
-    std::vector<L> current, next;
-    std::future<void> pending;
-    if (first < last) pending = std::async(std::launch::async, [&] { src_.read_batch(order[first], next); });
-    for (std::size_t j = first; j < last; ++j) {
-      pending.get();
-      std::swap(current, next);
-      if (j + 1 < last) pending = std::async(std::launch::async, [&, j] { src_.read_batch(order[j + 1], next); });
-      try {
-        process_frame(order[j], current, later_min[j + 1]);
-      } catch (...) {
-        if (pending.valid()) pending.wait();
-        throw;
+    slot_.resize(slots_);
+    scratch_.resize(std::min<std::size_t>(slots_, std::size_t(std::max(1, omp_get_max_threads()))));
+    std::vector<std::size_t> free_scratch(scratch_.size());
+    std::iota(free_scratch.begin(), free_scratch.end(), std::size_t(0));
+    std::vector<char> ready(slots_, 0), testing(slots_, 0);  // prepared; consumed, pairs not yet tested
+    std::vector<std::size_t> to_test;                        // slots whose pairs wait
+    std::size_t next_prepare = first, next_consume = first;
+    bool consuming = false;
+    std::exception_ptr error;
+    std::mutex mutex;
+    std::condition_variable changed;
+    auto slot_of = [&](std::size_t j) { return (j - first) % slots_; };
+#pragma omp parallel
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      while (!error && (next_consume < last || !to_test.empty())) {
+        std::exception_ptr failed;
+        if (!consuming && next_consume < last && ready[slot_of(next_consume)]) {
+          const std::size_t s = slot_of(next_consume);
+          consuming = true;
+          lock.unlock();
+          try {
+            consume_frame(slot_[s]);
+            progress.add(slot_[s].tets);
+            check_interrupted();
+          } catch (...) {
+            failed = std::current_exception();
+          }
+          lock.lock();
+          consuming = false, ready[s] = 0, ++next_consume;
+          testing[s] = 1, to_test.push_back(s);
+        } else if (!to_test.empty()) {
+          const std::size_t s = to_test.back();
+          to_test.pop_back();
+          lock.unlock();
+          try {
+            check_pairs(slot_[s].pairs);
+          } catch (...) {
+            failed = std::current_exception();
+          }
+          lock.lock();
+          testing[s] = 0;
+        } else if (next_prepare < last && next_prepare < next_consume + slots_ && !testing[slot_of(next_prepare)] &&
+                   !free_scratch.empty()) {
+          const std::size_t j = next_prepare++, w = free_scratch.back();
+          free_scratch.pop_back();
+          lock.unlock();
+          prepare_frame(order[j], later_min[j + 1], slot_[slot_of(j)], scratch_[w]);  // keeps its failure
+          lock.lock();
+          free_scratch.push_back(w);
+          ready[slot_of(j)] = 1;
+        } else {
+          changed.wait(lock);
+          continue;
+        }
+        if (failed && !error) error = failed;
+        changed.notify_all();
       }
-      progress.add(current.size() / 4);
-      check_interrupted();
+      changed.notify_all();
     }
+    if (error) std::rethrow_exception(error);
     progress.finish();
-    current = {}, next = {};
+    slot_ = {}, scratch_ = {};
     if (front_error_) std::rethrow_exception(front_error_);  // the pass did not meet it again
     seconds_tets_ = since(t1);
 
@@ -206,7 +302,7 @@ void Engine<L>::run() {
     if (!sampled_) merge_edges(~0ull);
     live_e_.release(), merged_e_ = {};
     retire_facets(~0ull);
-    live_.release(), merged_ = {}, parts_ = {};
+    live_.release(), merged_ = {};
     finish_facets();
     if (!sampled_) finish_edges();
     seconds_final_ = since(t2);

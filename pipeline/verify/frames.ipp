@@ -5,7 +5,7 @@
 template <class L>
 template <class OnGood>
 void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<std::uint8_t>& flags, bool log_storage,
-                             OnGood&& on_good) {
+                             bool parallel, OnGood&& on_good) {
   const VerifySource::Batch b = src_.batch(k);
   const std::size_t t = labels.size() / 4;
   if (labels.size() % 4 != 0 || t != b.tet_count)
@@ -17,11 +17,13 @@ void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<
   constexpr std::size_t kChunk = 4096;
   const std::int64_t chunks = std::int64_t((t + kChunk - 1) / kChunk);
   bool below_min = false, above_max = false;
-#pragma omp parallel for schedule(dynamic, 4) reduction(|| : below_min, above_max)
+#pragma omp parallel for schedule(dynamic, 4) reduction(|| : below_min, above_max) if (parallel)
   for (std::int64_t c = 0; c < chunks; ++c) {
     const std::size_t lo = std::size_t(c) * kChunk, hi = std::min(t, lo + kChunk);
     for (std::size_t i = lo; i < hi; ++i) {
       L* v = labels.data() + 4 * i;
+      if (i + 8 < hi)  // the coordinates of a tet ahead: on_good reads them
+        for (int j = 0; j < 4; ++j) xyz_.prefetch(std::min<std::uint64_t>(v[32 + j], n_ ? n_ - 1 : 0));
       const std::uint64_t ordinal = b.first_tet + i;
       const L g[4] = {v[0], v[1], v[2], v[3]};
       bool ok = g[0] < n_ && g[1] < n_ && g[2] < n_ && g[3] < n_;
@@ -57,135 +59,148 @@ void Engine<L>::canonicalize(std::size_t k, std::vector<L>& labels, std::vector<
                      ": a label above the frame's declared largest label " + std::to_string(b.max_label));
 }
 
+// One frame, off the ordered path (several at once): decoded into a scratch of the
+// pass, storage, orientation and volume of every tet (volumes into the
+// slot's sums), then each step's sorted facet and edge records into the slot. future_min: the smallest label of the
+// frames after this one. A failure is kept in the slot for consume_frame(), which meets the frames in order.
 template <class L>
-void Engine<L>::process_frame(std::size_t k, std::vector<L>& labels, std::uint64_t future_min) {
-  const VerifySource::Batch b = src_.batch(k);
-  const std::size_t t = labels.size() / 4;
-  std::vector<std::uint8_t> flags;
-  const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
-  std::vector<std::uint64_t> checked(threads, 0), good(threads, 0);
-  if (thread_volume_.size() < threads) thread_volume_.resize(threads);
-  if (thread_error_.size() < threads) thread_error_.resize(threads);
-  canonicalize(k, labels, flags, true, [&](std::size_t, std::uint64_t ordinal, const L* g) {
-    const std::size_t me = std::size_t(omp_get_thread_num());
-    ++good[me];
-    for (int j = 0; j < 4; ++j) used_.set(g[j]);
-    const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
-    const BoundedDet<long double> v = volume6(p0, p1, p2, p3);
-    thread_volume_[me].add(std::fabs(v.value));
-    thread_error_[me].add(v.error);
-    if (tet_sampled(ordinal)) {
-      ++checked[me];
-      const int o = core::orient3d(p0, p1, p2, p3);
-      if (o <= 0)
-        log_.add(Violation::kOrientation, ordinal, [&] {
-          return tet_text(ordinal, g[0], g[1], g[2], g[3]) +
-                 (o == 0 ? ": flat (orient3d = 0)" : ": negatively oriented (orient3d = -1)");
-        });
-    }
-  });
-  for (std::size_t i = 0; i < threads; ++i) {
-    tets_checked_ += checked[i], orient_tests_ += checked[i];
-    good_tets_ += good[i];
-  }
+void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w) {
+  slot.step_count = 0, slot.tets = 0, slot.good = 0, slot.checked = 0;
+  slot.volume6 = ExactSum(), slot.error6 = ExactSum();
+  slot.error = nullptr;
+  try {
+    src_.read_batch(k, w.labels);
+    std::vector<L>& labels = w.labels;
+    const VerifySource::Batch b = src_.batch(k);
+    std::uint64_t good = 0, checked = 0;
+    canonicalize(k, labels, w.flags, true, false, [&](std::size_t, std::uint64_t ordinal, const L* g) {
+      ++good;
+      for (int j = 0; j < 4; ++j) used_.set(g[j]);
+      const PointCoords::Point p0 = P(g[0]), p1 = P(g[1]), p2 = P(g[2]), p3 = P(g[3]);
+      if (wide_volume_) {
+        const BoundedDet<long double> v = volume6(p0, p1, p2, p3);
+        slot.volume6.add(std::fabs(v.value));
+        slot.error6.add(v.error);
+      } else {  // the same terms, without a round trip through long double
+        const BoundedDet<double> v = det3_bounded<double>(p0, p1, p2, p3);
+        slot.volume6.add(std::fabs(v.value));
+        slot.error6.add(v.error);
+      }
+      if (tet_sampled(ordinal)) {
+        ++checked;
+        const int o = core::orient3d(p0, p1, p2, p3);
+        if (o <= 0)
+          log_.add(Violation::kOrientation, ordinal, [&] {
+            return tet_text(ordinal, g[0], g[1], g[2], g[3]) +
+                   (o == 0 ? ": flat (orient3d = 0)" : ": negatively oriented (orient3d = -1)");
+          });
+      }
+    });
+    slot.good = good, slot.checked = checked;
+    const std::vector<std::uint8_t>& flags = w.flags;
 
-  // Steps: after each, keys below the smallest label still to come (in later steps
-  // of this frame or in later frames) are final.
-  const std::size_t step = step_tets_;
-  const std::size_t steps = (t + step - 1) / step;
-  std::vector<std::uint64_t> later_min(steps + 1, future_min);
-  for (std::size_t s = steps; s-- > 0;) {
-    std::uint64_t m = later_min[s + 1];
-    for (std::size_t i = s * step, hi = std::min(t, (s + 1) * step); i < hi; ++i)
-      if (!(flags[i] & 2)) m = std::min<std::uint64_t>(m, labels[4 * i]);
-    later_min[s] = m;
-  }
-  for (std::size_t s = 0; s < steps; ++s) {
-    const std::size_t lo = s * step, hi = std::min(t, lo + step);
-    bool sorted = true;
-    for (std::size_t i = lo + 1; i < hi && sorted; ++i) sorted = labels[4 * i] >= labels[4 * (i - 1)];
-    process_step(labels.data() + 4 * lo, flags.data() + lo, hi - lo, b.first_tet + lo, sorted, later_min[s + 1]);
+    // Steps: after each, keys below the smallest label still to come (in later steps
+    // of this frame or in later frames) are final.
+    const std::size_t t = labels.size() / 4, step = step_tets_;
+    const std::size_t steps = (t + step - 1) / step;
+    if (slot.steps.size() < steps) slot.steps.resize(steps);
+    std::uint64_t m = future_min;
+    for (std::size_t s = steps; s-- > 0;) {
+      slot.steps[s].threshold = m;
+      for (std::size_t i = s * step, hi = std::min(t, (s + 1) * step); i < hi; ++i)
+        if (!(flags[i] & 2)) m = std::min<std::uint64_t>(m, labels[4 * i]);
+    }
+    for (std::size_t s = 0; s < steps; ++s) {
+      const std::size_t lo = s * step, hi = std::min(t, lo + step);
+      bool sorted = true;
+      for (std::size_t i = lo + 1; i < hi && sorted; ++i) sorted = labels[4 * i] >= labels[4 * (i - 1)];
+      build_step(w, slot.steps[s], labels.data() + 4 * lo, flags.data() + lo, lo, hi, b.first_tet, sorted);
+    }
+    slot.step_count = steps, slot.tets = t;
+  } catch (...) {
+    slot.error = std::current_exception();
   }
 }
 
-// Facets and edges of `count` canonical tets; then retire what no later tet can touch.
-// Two parallel regions: each thread builds the sorted records of a slice of the tets;
-// then each thread merges one key range of all slices and the open set, folds it and
-// runs the insphere tests of the pairs it formed.
+// One prepared frame, in order: each step's records merged with the open sets (open
+// first on equal keys) and folded, the pairs formed kept in the slot for their insphere
+// tests (check_pairs(), on any thread: they are independent); then what no later tet
+// can touch retires.
 template <class L>
-void Engine<L>::process_step(const L* canon, const std::uint8_t* flags, std::size_t count, std::uint64_t first_ordinal,
-                             bool sorted_by_min, std::uint64_t threshold) {
-  const int threads = count >= 8192 ? std::max(1, omp_get_max_threads()) : 1;
-  if (parts_.size() < std::size_t(threads)) parts_.resize(std::size_t(threads));
-#pragma omp parallel for num_threads(threads) schedule(static, 1) if (threads > 1)
-  for (int p = 0; p < threads; ++p) {
-    const std::size_t lo = count * std::size_t(p) / std::size_t(threads);
-    const std::size_t hi = count * (std::size_t(p) + 1) / std::size_t(threads);
-    build_part(parts_[std::size_t(p)], canon, flags, lo, hi, first_ordinal, sorted_by_min);
-  }
-
-  // ---- facets: merge the slices with the open set (open first on equal keys), fold.
-  if (chunk_checks_.size() < std::size_t(std::max(1, omp_get_max_threads())))
-    chunk_checks_.resize(std::size_t(std::max(1, omp_get_max_threads())));
-  {
-    std::vector<std::span<const Facet>> in;
-    in.emplace_back(live_.records());
-    for (int p = 0; p < threads; ++p) {
-      in.emplace_back(parts_[std::size_t(p)].f);
-      facets_checked_ += parts_[std::size_t(p)].f.size();
+void Engine<L>::consume_frame(Slot& slot) {
+  if (slot.error) std::rethrow_exception(slot.error);
+  tets_checked_ += slot.checked, orient_tests_ += slot.checked;
+  good_tets_ += slot.good;
+  tet_volume6_.add(slot.volume6);
+  tet_error6_.add(slot.error6);
+  slot.pairs.clear();
+  const FacetLess<L> less;
+  auto key_less = [](const Facet& a, const Facet& b) {
+    if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
+    if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
+    return a.v[2] < b.v[2];
+  };
+  for (std::size_t s = 0; s < slot.step_count; ++s) {
+    StepRecords& step = slot.steps[s];
+    facets_checked_ += step.f.size();
+    {
+      const std::vector<std::span<const Facet>> in{live_.records(), step.f};
+      // Inside the pass's parallel region, merge_ranges() merges one range: the pairs
+      // of this step go to the slot in key order.
+      const std::size_t n =
+          merge_ranges(in, merged_, less, key_less, chunk_sizes_,
+                       [&](std::size_t, Facet* first, std::size_t m) { return fold_equal_keys(first, m, slot.pairs); });
+      merged_.resize(n);
+      live_.replace(merged_);
+      retire_facets(step.threshold);
     }
-    const FacetLess<L> less;
-    auto key_less = [](const Facet& a, const Facet& b) {
-      if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
-      if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
-      return a.v[2] < b.v[2];
-    };
-    const std::size_t n =
-        merge_ranges(in, merged_, less, key_less, chunk_sizes_, [&](std::size_t r, Facet* first, std::size_t m) {
-          auto& cc = chunk_checks_[r];
-          cc.clear();
-          const std::size_t w = fold_equal_keys(first, m, cc);
-          check_pairs(cc);
-          return w;
-        });
-    merged_.resize(n);
-    live_.replace(merged_);
-    retire_facets(threshold);
-  }
-
-  // ---- edges (not in a sample): union of the slices and the open set.
-  if (!sampled_) {
-    std::vector<std::span<const Edge>> in;
-    in.emplace_back(live_e_.records());
-    for (int p = 0; p < threads; ++p) in.emplace_back(parts_[std::size_t(p)].e);
-    const std::less<Edge> less;
-    const std::size_t n = merge_ranges(
-        in, merged_e_, less, less, chunk_sizes_,
-        [](std::size_t, Edge* first, std::size_t m) { return std::size_t(std::unique(first, first + m) - first); });
-    merged_e_.resize(n);
-    live_e_.replace(merged_e_);
-    merge_edges(threshold);
+    if (!sampled_) {
+      const std::vector<std::span<const Edge>> in{live_e_.records(), step.e};
+      const std::less<Edge> el;
+      const std::size_t n = merge_ranges(
+          in, merged_e_, el, el, chunk_sizes_,
+          [](std::size_t, Edge* first, std::size_t m) { return std::size_t(std::unique(first, first + m) - first); });
+      merged_e_.resize(n);
+      live_e_.replace(merged_e_);
+      merge_edges(step.threshold);
+    }
   }
 }
 
-// The sorted facet and edge records of tets [lo, hi) of a step, on one thread.
+// The sorted facet and edge records of tets [lo, hi) of a frame (canon, flags: from
+// tet lo on), on one thread.
 // A = the three facets (edges) through the tet's smallest label, B = the rest. Facet
 // opposite s_i, written (others sorted, s_i), has the orientation of (s0..s3) times
 // (-1)^(3-i), and (s0..s3) has the tet's times (-1)^parity.
 template <class L>
-void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags, std::size_t lo, std::size_t hi,
-                           std::uint64_t first_ordinal, bool sorted_by_min) {
-  auto& a = part.a;
-  auto& b = part.b;
+void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,
+                           std::size_t hi, std::uint64_t first_ordinal, bool sorted_by_min) {
+  const std::size_t n = hi - lo;
+  auto& a = w.a;
+  auto& b = w.b;
   a.clear(), b.clear();
-  a.reserve(3 * (hi - lo)), b.reserve(hi - lo);
+  a.reserve(3 * n), b.reserve(n);
+  // The labels' range: keys relative to its bottom sort in fewer radix digits; and
+  // the reach of most tets (width[w]: tets whose labels lie within 2^w of it).
+  std::uint64_t base = ~0ull, top = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!(flags[i] & 2)) base = std::min<std::uint64_t>(base, canon[4 * i]);
+  std::array<std::size_t, 65> width{};
+  std::size_t good = 0;
   // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
-  for (std::size_t i = lo; i < hi; ++i) {
+  for (std::size_t i = 0; i < n; ++i) {
     if (flags[i] & 2) continue;  // broken: no facets
-    tet_facets(canon + 4 * i, first_ordinal + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
+    const L* s = canon + 4 * i;
+    top = std::max<std::uint64_t>(top, s[3]);
+    ++width[std::size_t(std::bit_width(std::uint64_t(s[3]) - base))], ++good;
+    tet_facets(s, first_ordinal + lo + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
       if (std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2])) (through_min ? a : b).push_back(f);
     });
   }
+  const int bits = base <= top ? std::max(1, int(std::bit_width(top - base))) : 1;
+  int near = 1;
+  for (std::size_t within = width[0] + width[1]; near < bits && within < good - good / 128;)
+    within += width[std::size_t(++near)];
   const FacetLess<L> less;
   if (sorted_by_min) {
     // A is grouped by smallest label already: sort each group (a lower star).
@@ -196,21 +211,38 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
       g = e;
     }
   } else {
-    sort_facets(a, part.tmp);
+    sort_facets(a, w.tmp, w.far, base, bits, near);
   }
-  sort_facets(b, part.tmp);
-  part.f.resize(a.size() + b.size());
-  std::merge(a.begin(), a.end(), b.begin(), b.end(), part.f.begin(), less);
+  sort_facets(b, w.tmp, w.far, base, bits, near);
+  out.f.resize(a.size() + b.size());
+  std::merge(a.begin(), a.end(), b.begin(), b.end(), out.f.begin(), less);
 
+  out.e.clear();
   if (sampled_) return;
-  auto& ea = part.ea;
-  auto& eb = part.eb;
+  auto& ea = w.ea;
+  auto& eb = w.eb;
   ea.clear(), eb.clear();
-  ea.reserve(3 * (hi - lo)), eb.reserve(3 * (hi - lo));
-  for (std::size_t i = lo; i < hi; ++i) {
+  ea.reserve(3 * n), eb.reserve(3 * n);
+  // The B edges repeat (an edge is in several tets of a step): a direct-mapped table of
+  // the last ones emitted drops most repeats before the sort, which makes them unique
+  // anyway. Cleared every step, so the step's records do not depend on what the table
+  // saw before (and the step's union is the same with or without it).
+  w.seen.assign(std::size_t(1) << kSeenBits, make_edge(L(0), L(0)));  // no edge has u == v
+  Edge* seen = w.seen.data();
+  for (std::size_t i = 0; i < n; ++i) {
     if (flags[i] & 2) continue;
     tet_edges(canon + 4 * i, [&](L u, L v, bool through_min) {
-      if (std::uint64_t(u) < upper_) (through_min ? ea : eb).push_back(make_edge(u, v));
+      if (std::uint64_t(u) >= upper_) return;
+      const Edge e = make_edge(u, v);
+      if (through_min) {
+        ea.push_back(e);
+        return;
+      }
+      Edge& slot = seen[((std::uint64_t(u) * 0x9E3779B97F4A7C15ull) ^ std::uint64_t(v)) * 0xBF58476D1CE4E5B9ull >>
+                        (64 - kSeenBits)];
+      if (slot == e) return;
+      slot = e;
+      eb.push_back(e);
     });
   }
   if (sorted_by_min) {
@@ -221,13 +253,13 @@ void Engine<L>::build_part(Part& part, const L* canon, const std::uint8_t* flags
       g = e;
     }
   } else {
-    sort_edges(ea, part.etmp);
+    sort_edges(ea, w.etmp, base, bits);
   }
-  sort_edges(eb, part.etmp);
+  sort_edges(eb, w.etmp, base, bits);
   ea.erase(std::unique(ea.begin(), ea.end()), ea.end());
   eb.erase(std::unique(eb.begin(), eb.end()), eb.end());
-  part.e.resize(ea.size() + eb.size());
-  part.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), part.e.begin()), part.e.end());
+  out.e.resize(ea.size() + eb.size());
+  out.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), out.e.begin()), out.e.end());
 }
 
 // A = the three facets through s[0], B = the fourth. Facet opposite s_i, written

@@ -85,10 +85,6 @@ void Engine<L>::finish() {
                  std::to_string(p[2]) + ") is in no tet";
         });
   }
-  for (const ExactSum& s : thread_volume_) tet_volume6_.add(s);
-  thread_volume_.clear();
-  for (const ExactSum& s : thread_error_) tet_error6_.add(s);
-  thread_error_.clear();
   const std::vector<std::string> parts = comm_.gather(partial_totals(), 0);
   if (comm_.rank() == 0) {
     merge_totals(parts);

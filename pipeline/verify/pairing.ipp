@@ -118,7 +118,14 @@ void Engine<L>::check_pairs() {
 
 template <class L>
 void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
-  for (const PairCheck& c : checks) {
+  constexpr std::size_t kAhead = 8;  // pairs whose points are asked for ahead of their test
+  for (std::size_t i = 0; i < checks.size(); ++i) {
+    if (i + kAhead < checks.size()) {
+      const PairCheck& a = checks[i + kAhead];
+      xyz_.prefetch(a.v[0]), xyz_.prefetch(a.v[1]), xyz_.prefetch(a.v[2]);
+      xyz_.prefetch(a.dpos), xyz_.prefetch(a.dneg);
+    }
+    const PairCheck& c = checks[i];
     const int s = core::insphere_sos(P(c.v[0]), P(c.v[1]), P(c.v[2]), P(c.dpos), P(c.dneg), c.v[0], c.v[1], c.v[2],
                                      c.dpos, c.dneg);
     if (s > 0)

@@ -7,7 +7,7 @@
 // late frame reaching into later ranks' labels: the front). Those records are made
 // before the pass, by a pre-pass over the frames that can reach them (max_label >=
 // upper_), and sent to their owners, which fold them before their own pass; the pass
-// itself skips them (build_part). So every key is folded on one rank, from all its
+// itself skips them (build_step). So every key is folded on one rank, from all its
 // records, in the order one process folds them (replay_front), before any later tet
 // touches it, and finalized when one process would.
 //
@@ -37,7 +37,7 @@ void Engine<L>::hand_over_front(const std::vector<std::size_t>& order, const std
         if (src_.batch(k).max_label < upper_) continue;
         src_.read_batch(k, labels);
         ++decoded;
-        canonicalize(k, labels, flags, false, [](std::size_t, std::uint64_t, const L*) {});
+        canonicalize(k, labels, flags, false, true, [](std::size_t, std::uint64_t, const L*) {});
         const std::uint64_t first_tet = src_.batch(k).first_tet;
         for (std::size_t i = 0; i < flags.size(); ++i) {
           const L* s = labels.data() + 4 * i;
