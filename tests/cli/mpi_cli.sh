@@ -242,19 +242,28 @@ rank_pid() {  # the pid of rank $1 of this test's job writing $2
     tr '\0' '\n' <"/proc/$p/environ" 2>/dev/null | grep -qx "OMPI_COMM_WORLD_RANK=$1" && { echo "$p"; return; }
   done
 }
-mpi 3 "$T" -q --threads 1 run uniform.f64 -o killed.tets --memory 32M --segment-points 4000 2>killed.err &
-job=$!
-for _ in $(seq 600); do
-  python3 -c "import json,sys; sys.exit(0 if json.load(open('killed.tets.ckpt/rank-2.json'))['output']['segments'] >= 2 else 1)" \
-    2>/dev/null && break
-  sleep 0.05
-done
-pid=$(rank_pid 2 killed.tets)
-[ -n "$pid" ] || fail "rank 2 not found (the job ended before it could be killed?)"
-kill -9 "$pid"
-wait "$job" && fail "the job went on after a rank was killed"
-[ ! -e killed.tets ] || fail "a killed job left an output under its final name"
-mpi 3 "$T" -q --threads 1 run uniform.f64 -o killed.tets --memory 32M --segment-points 4000 --resume
+# kill_rank_and_resume RANKS RANK OUT RANK_JSON INPUT ARGS...: runs `run INPUT -o OUT ARGS` on RANKS
+# ranks, SIGKILLs rank RANK once RANK_JSON (its checkpoint record) counts 2 segments,
+# checks that the job stopped without an output, and resumes it on the same ranks.
+kill_rank_and_resume() {
+  local ranks=$1 rank=$2 out=$3 record=$4
+  shift 4
+  mpi "$ranks" "$T" -q --threads 1 run "$1" -o "$out" "${@:2}" 2>"$out.err" &
+  local job=$!
+  for _ in $(seq 600); do
+    python3 -c "import json,sys; sys.exit(0 if json.load(open('$record'))['output']['segments'] >= 2 else 1)" \
+      2>/dev/null && break
+    sleep 0.05
+  done
+  local pid
+  pid=$(rank_pid "$rank" "$out")
+  [ -n "$pid" ] || fail "$out: rank $rank not found (the job ended before it could be killed?)"
+  kill -9 "$pid"
+  wait "$job" && fail "$out: the job went on after a rank was killed"
+  [ ! -e "$out" ] || fail "$out: a killed job left an output under its final name"
+  mpi "$ranks" "$T" -q --threads 1 run "$1" -o "$out" "${@:2}" --resume
+}
+kill_rank_and_resume 3 2 killed.tets killed.tets.ckpt/rank-2.json uniform.f64 --memory 32M --segment-points 4000
 cmp uniform-f64-1p.tets killed.tets || fail "resumed after rank 2 was killed: other bytes than one process"
 [ ! -e killed.tets.ckpt ] || fail "the checkpoint is left after the resumed job succeeded"
 ls | grep -q '^tetstream-run-' && fail "a work directory was left behind"
@@ -366,19 +375,8 @@ grep -q "crc.tets" crc.tets-v3.line || fail "a bad checksum: the line does not n
 "$T" -q --threads 1 run box.f64 -o box-1p.tets --periodic 1 --memory 32M --segment-points 4000 --no-checkpoint
 mpi 2 "$T" -q --threads 1 run box.f64 -o box-2.tets --periodic 1 --memory 32M --segment-points 4000
 cmp box-1p.tets box-2.tets || fail "--periodic: 2 ranks wrote other bytes than one process"
-mpi 2 "$T" -q --threads 1 run box.f64 -o boxk.tets --periodic 1 --memory 32M --segment-points 4000 2>boxk.err &
-job=$!
-for _ in $(seq 600); do
-  python3 -c "import json,sys; sys.exit(0 if json.load(open('boxk.tets.ckpt/periodic-padded.tets.ckpt/rank-1.json'))['output']['segments'] >= 2 else 1)" \
-    2>/dev/null && break
-  sleep 0.05
-done
-pid=$(rank_pid 1 boxk.tets)
-[ -n "$pid" ] || fail "--periodic: rank 1 not found (the job ended before it could be killed?)"
-kill -9 "$pid"
-wait "$job" && fail "the periodic job went on after a rank was killed"
-[ ! -e boxk.tets ] || fail "a killed periodic job left an output under its final name"
-mpi 2 "$T" -q --threads 1 run box.f64 -o boxk.tets --periodic 1 --memory 32M --segment-points 4000 --resume
+kill_rank_and_resume 2 1 boxk.tets boxk.tets.ckpt/periodic-padded.tets.ckpt/rank-1.json box.f64 --periodic 1 \
+  --memory 32M --segment-points 4000
 cmp box-1p.tets boxk.tets || fail "--periodic: resumed after rank 1 was killed: other bytes than one process"
 [ ! -e boxk.tets.ckpt ] || fail "--periodic: the checkpoint is left after the resumed job succeeded"
 
