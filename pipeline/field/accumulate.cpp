@@ -90,47 +90,54 @@ class Accumulator {
     }
   }
 
-  // The tets' terms into their vertices' sums, on every thread: each thread owns a
-  // range of the dense labels and goes through all the batch's tets in their order,
-  // adding only to its own labels (the far ones, in their map: the last thread's), so
-  // every label's terms are added in the tets' order whatever the threads: the bits of
-  // every sum do not depend on them.
+  // The tets' terms into their vertices' sums, on every thread: the dense labels are
+  // cut into ranges, each range's sums are added by one thread going through all the
+  // batch's tets in their order, adding only to its own labels (the far ones, in their
+  // map: the last range's), so every label's terms are added in the tets' order
+  // whatever the threads: the bits of every sum do not depend on them. OpenMP may give
+  // fewer threads than asked (OMP_THREAD_LIMIT, a nested region): a thread then takes
+  // every team-size-th range, and every range is still added once.
   void combine() {
     const std::size_t n = batch_.tets();
     const int parts = n < kParallelTets ? 1 : std::max(1, omp_get_max_threads());
     split_ranges(parts);
 #pragma omp parallel num_threads(parts) if (parts > 1)
     {
-      const int r = omp_get_thread_num(), nr = omp_get_num_threads();
-      const std::uint64_t own_lo = cut_[std::size_t(r)], own_hi = cut_[std::size_t(r) + 1];
-      const bool far_here = r == nr - 1;
-      std::size_t t = 0;
-      for (std::size_t f = 0; f < batch_.frames(); ++f) {
-        const std::vector<std::uint64_t>& labels = batch_.frame(f);
-        for (std::size_t i = 0; i < labels.size(); i += 4, ++t) {
-          if (terms_)
-            for (std::size_t v = i + 4 * kAhead; v < std::min(labels.size(), i + 4 * kAhead + 4); ++v)
-              if (labels[v] >= own_lo && labels[v] < own_hi) TS_PREFETCH(&acc_[labels[v]]);
-          for (int v = 0; v < 4; ++v) {
-            const std::uint64_t l = labels[i + std::size_t(v)];
-            Accum* a;
-            if (points_.dense(l)) {
-              if (l < own_lo || l >= own_hi) continue;
-              a = &acc_[l];
-            } else {
-              if (!far_here) continue;
-              a = &far_acc_[l];
-            }
-            if (!terms_) {
-              a->volume += volumes_[t];
-              ++a->tets;
-              continue;
-            }
-            const TetTerms& c = contrib_[t];
-            a->volume += c.geometry.volume;
-            a->voronoi += c.geometry.voronoi[std::size_t(v)];
-            a->hull += c.hull[v];  // mod 2^64: the order does not matter, only the sum
+      const int team = omp_get_num_threads();
+      for (int r = omp_get_thread_num(); r < parts; r += team) add_range(r, r == parts - 1);
+    }
+  }
+
+  // combine()'s r-th range of dense labels, [cut_[r], cut_[r + 1]), and the far labels
+  // when far_here.
+  void add_range(int r, bool far_here) {
+    const std::uint64_t own_lo = cut_[std::size_t(r)], own_hi = cut_[std::size_t(r) + 1];
+    std::size_t t = 0;
+    for (std::size_t f = 0; f < batch_.frames(); ++f) {
+      const std::vector<std::uint64_t>& labels = batch_.frame(f);
+      for (std::size_t i = 0; i < labels.size(); i += 4, ++t) {
+        if (terms_)
+          for (std::size_t v = i + 4 * kAhead; v < std::min(labels.size(), i + 4 * kAhead + 4); ++v)
+            if (labels[v] >= own_lo && labels[v] < own_hi) TS_PREFETCH(&acc_[labels[v]]);
+        for (int v = 0; v < 4; ++v) {
+          const std::uint64_t l = labels[i + std::size_t(v)];
+          Accum* a;
+          if (points_.dense(l)) {
+            if (l < own_lo || l >= own_hi) continue;
+            a = &acc_[l];
+          } else {
+            if (!far_here) continue;
+            a = &far_acc_[l];
           }
+          if (!terms_) {
+            a->volume += volumes_[t];
+            ++a->tets;
+            continue;
+          }
+          const TetTerms& c = contrib_[t];
+          a->volume += c.geometry.volume;
+          a->voronoi += c.geometry.voronoi[std::size_t(v)];
+          a->hull += c.hull[v];  // mod 2^64: the order does not matter, only the sum
         }
       }
     }

@@ -127,5 +127,34 @@ TEST_F(FieldThreadsTest, SameBytesOnEveryThreadCount) {
   omp_set_num_threads(saved);
 }
 
+// OpenMP may give fewer threads than asked (OMP_THREAD_LIMIT, or here a nested region
+// with nesting off, which runs on one thread while omp_get_max_threads() says 3): every
+// label's sums are still added, the same bytes as on one thread.
+TEST_F(FieldThreadsTest, FewerThreadsThanAskedLoseNoTerm) {
+  const std::string in = container(test::clusters(2500, 32));
+  const int saved = omp_get_max_threads();
+  const int saved_levels = omp_get_max_active_levels();
+  omp_set_num_threads(1);
+  const pipeline::FieldSummary one = fields(in, "t1", false);
+  omp_set_max_active_levels(1);
+  pipeline::FieldSummary nested;
+  int asked = 0;
+#pragma omp parallel num_threads(2)
+  {
+#pragma omp single
+    {
+      omp_set_num_threads(3);
+      asked = omp_get_max_threads();
+      nested = fields(in, "tn", false);
+    }
+  }
+  omp_set_max_active_levels(saved_levels);
+  omp_set_num_threads(saved);
+  EXPECT_EQ(asked, 3);
+  EXPECT_EQ(sums(nested), sums(one));
+  for (const char* what : {"density", "voronoi", "neighbours.offsets", "neighbours.indices"})
+    EXPECT_TRUE(bytes("tn." + std::string(what) + ".npy") == bytes("t1." + std::string(what) + ".npy")) << what;
+}
+
 }  // namespace
 }  // namespace tetstream
