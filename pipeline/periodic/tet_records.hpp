@@ -54,16 +54,29 @@ struct KeptTetLess {
   }
 };
 
-// The same order by a stable LSD radix sort (labels below 2^32, `label_bits` bits
-// each): (lo, hi), then (m, a); several times faster than the comparison sort on the
-// kept tets of a large box. The kept tets of a certified job have distinct label sets
-// (the 1-sheeted covering is a simplicial complex), so the tie-breaks never matter.
+// The same order: a radix sort on the smallest label alone (labels below 2^32,
+// `label_bits` bits), then each group (the tets of one smallest label, about seven)
+// by insertion. Two to three passes over the records instead of eight to ten for a
+// radix sort on all four labels: the sort was a tenth of a periodic job's time.
 inline void radix_sort_kept(KeptTet* data, std::size_t n, int label_bits) {
   std::vector<KeptTet> tmp;
-  radix_sort(data, n, tmp, 2 * label_bits, [label_bits](const KeptTet& t) {
-    return std::min(t.v[2], t.v[3]) << label_bits | std::max(t.v[2], t.v[3]);
-  });
-  radix_sort(data, n, tmp, 2 * label_bits, [label_bits](const KeptTet& t) { return t.v[0] << label_bits | t.v[1]; });
+  radix_sort(data, n, tmp, label_bits, [](const KeptTet& t) { return t.v[0]; });
+  const KeptTetLess less;
+  for (std::size_t g = 0; g < n;) {
+    std::size_t e = g + 1;
+    while (e < n && data[e].v[0] == data[g].v[0]) ++e;
+    if (e - g > 32) {  // a vertex with a large lower star (a lattice's corner)
+      std::sort(data + g, data + e, less);
+    } else {
+      for (std::size_t j = g + 1; j < e; ++j) {
+        const KeptTet x = data[j];
+        std::size_t i = j;
+        for (; i > g && less(x, data[i - 1]); --i) data[i] = data[i - 1];
+        data[i] = x;
+      }
+    }
+    g = e;
+  }
 }
 
 // The twelve even permutations of (0, 1, 2, 3).
