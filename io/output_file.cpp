@@ -346,6 +346,14 @@ void OutputFile::read_at(std::uint64_t offset, void* data, std::size_t n) const 
   if (!pread_exactly(fd_, data, n, offset)) fail("read back failed", partial_);
 }
 
+void OutputFile::discard() {
+  if (stream_) throw std::logic_error("OutputFile: discard on standard output");
+  used_ = 0;
+  flushed_ = 0;
+  if (::ftruncate(fd_, 0) != 0) fail("cannot truncate", partial_);
+  keep_on_failure_ = true;
+}
+
 void OutputFile::commit(bool do_sync) {
   flush();
   if (stream_) {

@@ -168,6 +168,11 @@ class OutputFile {
   // Whether a destructor without commit() leaves PATH.partial in place (true) or
   // removes it (false, the default).
   void keep_on_failure(bool keep) { keep_on_failure_ = keep; }
+  // Drops every byte (buffered and written: PATH.partial truncated to 0) and leaves the
+  // empty file in place on destruction, for the claim that made it (which removes it
+  // empty) or a later writer under that claim. IoError when it cannot. Not on standard
+  // output.
+  void discard();
 
   const std::string& path() const { return path_; }
   const std::string& partial_path() const { return partial_; }

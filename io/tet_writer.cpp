@@ -433,6 +433,12 @@ void TetWriter::add_section(std::uint32_t tag, std::span<const std::uint8_t> pay
   sections_.push_back({tag, kSectionCritical, at, payload.size()});
 }
 
+void TetWriter::discard() {
+  if (finished_) throw std::logic_error("TetWriter: discard after finish");
+  out_->discard();
+  finished_ = true;
+}
+
 void TetWriter::finish() {
   if (finished_) throw std::logic_error("TetWriter: finish twice");
   if (fragment_) {  // frames only: the container that appends them has the index

@@ -138,6 +138,10 @@ class TetWriter {
   std::uint64_t checkpoint();
   // Writes INDX and the footer, syncs, renames PATH.partial to PATH.
   void finish();
+  // Gives up this output: PATH.partial is emptied and left to the job's claim (a later
+  // writer under it starts over; the claim removes it, empty, when the job ends), and
+  // the writer takes no more. Not on standard output.
+  void discard();
 
   std::uint64_t points_written() const { return points_; }
   std::uint64_t tets_written() const { return tets_; }

@@ -1,5 +1,6 @@
 #include "pipeline/periodic/keep.hpp"
 
+#include "core/compiler.hpp"
 #include "core/error.hpp"
 #include "core/predicates.hpp"
 #include "io/tet_container.hpp"
@@ -7,16 +8,19 @@
 #include "io/tet_writer.hpp"
 #include "pipeline/files/external_sort.hpp"
 #include "pipeline/util/memory_budget.hpp"
+#include "pipeline/periodic/kept_stream.hpp"
 #include "pipeline/periodic/tet_records.hpp"
 
+#include <omp.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <chrono>
 #include <cmath>
+#include <exception>
 #include <limits>
-#include <mutex>
 #include <stdexcept>
 
 namespace tetstream::pipeline::periodic {
@@ -25,15 +29,18 @@ namespace {
 
 constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
 constexpr std::size_t kChunk = std::size_t(1) << 16;
-constexpr std::uint8_t kCanonical = 8;  // PaddedMap::bits: the point's canonical image
+constexpr std::uint64_t kCanonical = 8;  // PaddedMap::bits: the point's canonical image
 
 // What a label of the padded container is: its point's periodic label and its offset
-// (bit k: -1 on axis k), and whether it is the point's canonical image.
+// (bit k: -1 on axis k), and whether it is the point's canonical image, in one word
+// (periodic label << 4 | bits: one cache line a vertex instead of two, read at random).
 struct PaddedMap {
-  std::vector<std::uint64_t> plabel;
-  std::vector<std::uint8_t> bits;
+  std::vector<std::uint64_t> code;
   std::vector<double> xyz;  // the padded points' coordinates (read once, not per tet)
   std::uint64_t points = 0;
+
+  std::uint64_t plabel(std::uint64_t label) const { return code[label] >> 4; }
+  std::uint64_t bits(std::uint64_t label) const { return code[label] & 15; }
 };
 
 // Pass 1 numbers the points (original index < N) in label order: the periodic labels
@@ -49,8 +56,7 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
     for (std::size_t i = 0; i < k; ++i)
       if (ids[i] < in.input_points) of_point[ids[i]] = m.points++;
   }
-  m.plabel.resize(n);
-  m.bits.resize(n);
+  m.code.resize(n);
   m.xyz.resize(3 * n);
   double threshold[3];  // a point at or past it on axis k has its canonical image at -1
   for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(in.period[k], in.margin[k]);
@@ -73,8 +79,7 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
         const double p = minus ? xyz[3 * i + a] + in.period[a] : xyz[3 * i + a];  // exact: the image was
         canonical = canonical && (minus == (p >= threshold[a]));
       }
-      m.plabel[first + i] = of_point[point];
-      m.bits[first + i] = std::uint8_t(bits | (canonical ? kCanonical : 0));
+      m.code[first + i] = of_point[point] << 4 | bits | (canonical ? kCanonical : 0);
     }
   }
   return m;
@@ -110,30 +115,33 @@ bool long_edge(const double* p[4], const KeepInput& in) {
   return false;
 }
 
-struct FrameCounts {
+struct KeptFrame {
+  std::vector<KeptTet> kept;
   std::uint64_t failures = 0, long_edges = 0;
-};
-
-struct Sorters {
-  ExternalSorter<KeptTet, KeptTetLess> tets;
-  std::mutex mutex;
 };
 
 // One frame of the padded container: every tet with a vertex at its canonical image
 // certified (its ball inside the padded box), and those whose smallest periodic label
 // sits at its canonical image kept, in stored form.
-FrameCounts keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
-                       const double lower[3], Sorters& out) {
-  std::vector<std::uint64_t> t;
+void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
+                const double lower[3], std::vector<std::uint64_t>& t, KeptFrame& out) {
   r.read_frame(f, t);
-  std::vector<KeptTet> kept;
-  FrameCounts counts;
+  out.kept.clear();
+  out.failures = out.long_edges = 0;
+  // The map's entries of a tet's vertices are read at random within the frame's slab of
+  // labels (at 10^7 points some megabytes a thread, past the caches): each tet asks for
+  // those of the tet kAhead places on, so that they arrive while this one is certified.
+  constexpr std::size_t kAhead = 8;
   for (std::size_t i = 0; i < t.size(); i += 4) {
+    for (std::size_t v = i + 4 * kAhead; v < std::min(t.size(), i + 4 * kAhead + 4); ++v) {
+      TS_PREFETCH(&m.code[t[v]]);
+      TS_PREFETCH(&m.xyz[3 * t[v]]);
+    }
     int mi = 0;
     bool any = false;
     for (int j = 0; j < 4; ++j) {
-      any = any || (m.bits[t[i + j]] & kCanonical);
-      mi = m.plabel[t[i + j]] < m.plabel[t[i + mi]] ? j : mi;
+      any = any || (m.bits(t[i + j]) & kCanonical);
+      mi = m.plabel(t[i + j]) < m.plabel(t[i + mi]) ? j : mi;
     }
     if (!any) continue;
     const double* p[4];
@@ -141,27 +149,112 @@ FrameCounts keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap&
     int off[4][3];
     for (int j = 0; j < 4; ++j) {
       p[j] = &m.xyz[3 * t[i + j]];
-      label[j] = m.plabel[t[i + j]];
-      for (int k = 0; k < 3; ++k) off[j][k] = -int(m.bits[t[i + j]] >> k & 1);
+      label[j] = m.plabel(t[i + j]);
+      for (int k = 0; k < 3; ++k) off[j][k] = -int(m.bits(t[i + j]) >> k & 1);
     }
     if (!ball_inside(p, in, lower)) {
-      ++counts.failures;
+      ++out.failures;
       continue;
     }
-    if (!(m.bits[t[i + mi]] & kCanonical)) continue;
+    if (!(m.bits(t[i + mi]) & kCanonical)) continue;
     KeptTet kt;
     if (!stored_form(label, off, kt)) {
-      ++counts.failures;
+      ++out.failures;
       continue;
     }
-    counts.long_edges += long_edge(p, in);
-    kept.push_back(kt);
+    out.long_edges += long_edge(p, in);
+    out.kept.push_back(kt);
   }
   r.release_frame_pages(f);
-  const std::lock_guard<std::mutex> lock(out.mutex);
-  out.tets.push(std::span<const KeptTet>(kept));
-  return counts;
 }
+
+// The smallest periodic label a kept tet of the frames still to come can have. Those
+// frames hold tets whose padded labels are all at least `base` (the smallest base
+// label among them), so every vertex lies at or past base's coordinate x_b on the sort
+// axis (the padded labels are the lexicographic order, the sort axis first), and so
+// does its point in the box (an image is its point minus a period or not moved on
+// that axis). The periodic labels number the points in the same order: those before
+// x_b are the F smallest, and no tet to come has a label below F.
+class Frontier {
+ public:
+  Frontier(const PaddedMap& m, int axis) : m_(m), axis_(axis) {}
+
+  // F for the points lying before coordinate x on the sort axis (non-decreasing x).
+  std::uint64_t points_before(double x) {
+    const double* xyz = m_.xyz.data();
+    const std::uint64_t n = m_.code.size();
+    // The first padded label at or past x: the sort axis' coordinates never decrease.
+    std::uint64_t lo = cursor_, hi = n;
+    while (lo < hi) {
+      const std::uint64_t mid = lo + (hi - lo) / 2;
+      if (xyz[3 * mid + std::uint64_t(axis_)] < x)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    for (; cursor_ < lo; ++cursor_) count_ += (m_.bits(cursor_) & 7) == 0;  // the box's own points
+    return count_;
+  }
+  std::uint64_t before_label(std::uint64_t base) { return points_before(m_.xyz[3 * base + std::uint64_t(axis_)]); }
+
+ private:
+  const PaddedMap& m_;
+  int axis_;
+  std::uint64_t cursor_ = 0, count_ = 0;
+};
+
+// The kept tets to the writer in stored order, cut into frames at group boundaries,
+// each frame's offsets beside it in POFS; frames go to the writer `threads` at a time,
+// encoded together (the same bytes as one at a time).
+class FrameFeeder {
+ public:
+  FrameFeeder(io::TetWriter& w, int threads, std::size_t frame_tets)
+      : w_(w), threads_(std::max(1, threads)), frame_tets_(frame_tets), labels_(1), codes_(1) {}
+
+  void add(std::span<const KeptTet> batch) {
+    for (const KeptTet& t : batch) {
+      if (codes_.back().size() >= frame_tets_ && t.v[0] != labels_.back()[labels_.back().size() - 4]) {
+        if (int(codes_.size()) >= threads_)
+          flush();
+        else
+          labels_.emplace_back(), codes_.emplace_back();
+      }
+      labels_.back().insert(labels_.back().end(), t.v, t.v + 4);
+      codes_.back().push_back(t.code);
+    }
+  }
+
+  // The last frames and the POFS section; the count of tets written.
+  std::uint64_t finish() {
+    flush();
+    const std::vector<std::uint8_t> payload = offsets_.payload();
+    w_.add_section(io::kTagPeriodicOffsets, payload);
+    return count_;
+  }
+
+ private:
+  void flush() {
+    std::vector<std::span<const std::uint64_t>> batches(labels_.begin(), labels_.end());
+    if (batches.back().empty()) batches.pop_back();
+    w_.add_tets(std::span<const std::span<const std::uint64_t>>(batches));
+    for (const auto& c : codes_) {
+      if (c.empty()) continue;
+      offsets_.add_frame(c);
+      count_ += c.size();
+    }
+    labels_.assign(1, {});
+    codes_.assign(1, {});
+  }
+
+  io::TetWriter& w_;
+  int threads_;
+  std::size_t frame_tets_;
+  std::vector<std::vector<std::uint64_t>> labels_;
+  std::vector<std::vector<std::uint16_t>> codes_;
+  io::PeriodicOffsetsWriter offsets_;
+  std::uint64_t count_ = 0;
+};
+
 
 void write_points(const io::TetReader& r, const KeepInput& in, io::TetWriter& w) {
   std::vector<std::uint64_t> ids(kChunk), out_ids;
@@ -201,51 +294,6 @@ void points_bbox(const io::TetReader& r, const KeepInput& in, io::TetFileHeader&
   }
 }
 
-// The kept tets in stored order, cut into frames at group boundaries, each frame's
-// offsets beside it in POFS. Frames go to the writer `threads` at a time, encoded
-// together (the same bytes as one at a time).
-void write_tets(ExternalSorter<KeptTet, KeptTetLess>& tets, io::TetWriter& w, int threads, std::size_t frame_tets,
-                std::uint64_t& count) {
-  const std::size_t kFrame = frame_tets;
-  std::vector<std::vector<std::uint64_t>> labels(1);
-  std::vector<std::vector<std::uint16_t>> codes(1);
-  io::PeriodicOffsetsWriter offsets;
-  const auto flush = [&] {
-    std::vector<std::span<const std::uint64_t>> batches(labels.begin(), labels.end());
-    if (batches.back().empty()) batches.pop_back();
-    w.add_tets(std::span<const std::span<const std::uint64_t>>(batches));
-    for (const auto& c : codes) {
-      if (c.empty()) continue;
-      offsets.add_frame(c);
-      count += c.size();
-    }
-    labels.assign(1, {});
-    codes.assign(1, {});
-  };
-  const auto start = std::chrono::steady_clock::now();
-  bool first = true;
-  tets.merge([&](std::span<const KeptTet> batch) {
-    if (first) {
-      spdlog::debug("periodic keep: tets sorted in {:.2f}s",
-                    std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
-      first = false;
-    }
-    for (const KeptTet& t : batch) {
-      if (codes.back().size() >= kFrame && t.v[0] != labels.back()[labels.back().size() - 4]) {
-        if (int(codes.size()) >= std::max(1, threads))
-          flush();
-        else
-          labels.emplace_back(), codes.emplace_back();
-      }
-      labels.back().insert(labels.back().end(), t.v, t.v + 4);
-      codes.back().push_back(t.code);
-    }
-  });
-  flush();
-  const std::vector<std::uint8_t> payload = offsets.payload();
-  w.add_section(io::kTagPeriodicOffsets, payload);
-}
-
 }  // namespace
 
 KeepResult keep_periodic_tets(const KeepInput& in) {
@@ -255,7 +303,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
   const io::TetReader r(in.padded);
-  // The ledger's keep phase: the label map (33 bytes a padded point, and 8 an input
+  // The ledger's keep phase: the label map (32 bytes a padded point, and 8 an input
   // point while it is built), each thread's decoded frame and kept tets (72 bytes a
   // tet) and the writer's batches (34 bytes a tet, and the encoded frame); the sort the rest.
   const int threads = std::max(1, in.threads);
@@ -263,7 +311,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   for (const auto& f : r.frames()) frame_tets = std::max<std::uint64_t>(frame_tets, f.tet_count);
   MemoryBudget budget(in.memory_bytes, r.point_count(), threads, threads);
   const KeepShares shares = budget.plan_keep(
-      r.point_count() * (sizeof(std::uint64_t) + 1 + 3 * sizeof(double)) + in.input_points * sizeof(std::uint64_t),
+      r.point_count() * (sizeof(std::uint64_t) + 3 * sizeof(double)) + in.input_points * sizeof(std::uint64_t),
       std::uint64_t(threads) * (frame_tets * 72 + in.frame_tets * 36));
   res.memory_shares = budget.shares();
   const PaddedMap m = map_labels(r, in);
@@ -274,30 +322,10 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     const double lo = (in.period[k] - in.margin[k]) - in.period[k];
     lower[k] = std::nextafter(std::nextafter(lo, 0.0), 0.0);
   }
-  Sorters s{ExternalSorter<KeptTet, KeptTetLess>(sort_options(std::size_t(shares.sort_bytes), in.dir, "periodic-tets")),
-            {}};
   const int label_bits = std::max(1, int(std::bit_width(m.points)));
-  if (label_bits <= 32)
-    s.tets.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
-  std::uint64_t failures = 0, long_edges = 0;
-  const std::int64_t frames = std::int64_t(r.frame_count());
-#pragma omp parallel for schedule(dynamic, 1) num_threads(std::max(1, in.threads)) reduction(+ : failures, long_edges)
-  for (std::int64_t f = 0; f < frames; ++f) {
-    const FrameCounts c = keep_frame(r, std::uint64_t(f), m, in, lower, s);
-    failures += c.failures;
-    long_edges += c.long_edges;
-  }
-  res.ball_failures = failures;
-  res.points = m.points;
-  spdlog::debug("periodic keep: frames certified in {:.2f}s", since());
-  if (failures != 0) return res;
-  if (long_edges != 0) {
-    throw InputError(in.input + ": " + std::to_string(long_edges) +
-                     " Delaunay tets have an edge of sqrt(0.166) periods or longer: the 1-sheeted covering is not "
-                     "a triangulation of the torus by CGAL's criterion (too few points for the box; "
-                     "docs/periodic.md, \"When it refuses\")");
-  }
 
+  // The writer first (the points come before the tets): a failing certificate
+  // discards what it wrote.
   io::TetFileHeader h;
   h.point_count = m.points;
   h.input_count = in.input_points;
@@ -307,14 +335,85 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   points_bbox(r, in, h);
   io::TetWriterOptions wo;
   wo.claim = in.claim;
-  wo.threads = std::max(1, in.threads);
+  wo.threads = threads;
   io::TetWriter w(in.output, h, wo);
   write_points(r, in, w);
   r.release_point_pages(0, r.point_count());
   spdlog::debug("periodic keep: points written in {:.2f}s", since());
   io::PeriodicBox box{in.period, in.sort_axis};
   w.add_section(io::kTagPeriodicBox, io::serialize_periodic_box(box));
-  write_tets(s.tets, w, in.threads, in.frame_tets, res.tets);
+
+  // The sort's share: half for the tets waiting for the frontier, half for the
+  // external sort of those written last.
+  ExternalSorter<KeptTet, KeptTetLess> sorter(sort_options(std::size_t(shares.sort_bytes / 2), in.dir, "periodic-tets"));
+  sorter.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
+  FrameFeeder feeder(w, threads, in.frame_tets);
+  Frontier frontier(m, in.sort_axis);
+  const std::uint64_t deferred_from = Frontier(m, in.sort_axis)
+                                          .points_before(canonical_threshold(in.period[std::size_t(in.sort_axis)],
+                                                                             in.margin[std::size_t(in.sort_axis)]));
+  KeptStream stream([&feeder](std::span<const KeptTet> tets) { feeder.add(tets); }, deferred_from,
+                    std::size_t(shares.sort_bytes / 2), sorter, label_bits);
+
+  // Every thread certifies a frame and keeps its tets, then hands them to the stream
+  // in the frames' order (an ordered region: the bytes do not depend on the threads),
+  // while the others certify the next frames.
+  const std::uint64_t frames = r.frame_count();
+  std::vector<std::uint64_t> suffix_base(frames + 1, ~std::uint64_t(0));
+  for (std::uint64_t f = frames; f-- > 0;) suffix_base[f] = std::min(suffix_base[f + 1], r.frames()[f].base_label);
+  std::vector<KeptFrame> kept(static_cast<std::size_t>(threads));
+  std::vector<std::vector<std::uint64_t>> decoded(static_cast<std::size_t>(threads));
+  std::uint64_t failures = 0, long_edges = 0;
+  // A failing ball (the margin doubles) or an error stops the pass: the frames left
+  // are not certified. An exception leaves the region only as this pointer.
+  std::atomic<bool> stop{false};
+  std::exception_ptr error;
+#pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads)
+  for (std::uint64_t f = 0; f < frames; ++f) {
+    const std::size_t me = std::size_t(omp_get_thread_num());
+    std::exception_ptr frame_error;
+    if (!stop.load(std::memory_order_relaxed)) {
+      try {
+        keep_frame(r, f, m, in, lower, decoded[me], kept[me]);
+      } catch (...) {
+        frame_error = std::current_exception();
+      }
+    }
+#pragma omp ordered
+    {
+      // Once stopped, every frame after is skipped here (its slot may hold an older frame's).
+      if (!stop.load(std::memory_order_relaxed)) {
+        try {
+          if (frame_error) std::rethrow_exception(frame_error);
+          failures += kept[me].failures;
+          long_edges += kept[me].long_edges;
+          if (failures != 0)
+            stop.store(true);
+          else
+            stream.add(kept[me].kept, f + 1 < frames ? frontier.before_label(suffix_base[f + 1]) : m.points);
+        } catch (...) {
+          error = std::current_exception();
+          stop.store(true);
+        }
+      }
+    }
+  }
+  if (error) std::rethrow_exception(error);
+  res.ball_failures = failures;
+  res.points = m.points;
+  spdlog::debug("periodic keep: frames certified in {:.2f}s", since());
+  if (failures != 0) {
+    w.discard();  // the next margin's writer starts the claimed file over
+    return res;
+  }
+  if (long_edges != 0) {
+    throw InputError(in.input + ": " + std::to_string(long_edges) +
+                     " Delaunay tets have an edge of sqrt(0.166) periods or longer: the 1-sheeted covering is not "
+                     "a triangulation of the torus by CGAL's criterion (too few points for the box; "
+                     "docs/periodic.md, \"When it refuses\")");
+  }
+  stream.finish();
+  res.tets = feeder.finish();
   w.finish();
   spdlog::debug("periodic keep: written in {:.2f}s", since());
   res.output_bytes = w.bytes_written();

@@ -214,6 +214,43 @@ TEST_F(KeepPartial, OutputFileRemovesThePartialFileUnlessKept) {
   EXPECT_FALSE(fs::exists(path + ".partial"));
 }
 
+// discard() under a claim (the periodic keep step when a margin doubles): the claimed
+// file is emptied and stays for the next writer, which starts it over and commits; a
+// claim whose job ends after a discard removes the empty file it made.
+TEST_F(KeepPartial, DiscardEmptiesTheClaimedFileForTheNextWriter) {
+  const std::string path = this->path("claimed.bin");
+  {
+    io::OutputClaim claim(path);
+    {
+      io::OutputFile f(path, std::size_t(1) << 16, &claim);
+      f.write("first attempt");
+      f.flush();
+      f.write("buffered");
+      f.discard();
+    }
+    ASSERT_TRUE(fs::exists(path + ".partial"));
+    EXPECT_EQ(fs::file_size(path + ".partial"), 0u);
+    {
+      io::OutputFile f(path, std::size_t(1) << 16, &claim);
+      f.write("second");
+      f.commit(false);
+    }
+  }
+  EXPECT_EQ(slurp(path), "second");
+  EXPECT_FALSE(fs::exists(path + ".partial"));
+
+  const std::string gone = this->path("refused.bin");
+  {
+    io::OutputClaim claim(gone);
+    io::OutputFile f(gone, std::size_t(1) << 16, &claim);
+    f.write("points");
+    f.flush();
+    f.discard();
+  }
+  EXPECT_FALSE(fs::exists(gone + ".partial"));
+  EXPECT_FALSE(fs::exists(gone));
+}
+
 TEST_F(KeepPartial, TetWriterKeepsThePartialFileForAResume) {
   const Job job = make_job(2000, {700, 500, 900, 400}, 1);
   const std::string whole = this->path("whole.tets"), path = this->path("job.tets");
