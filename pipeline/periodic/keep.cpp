@@ -123,8 +123,8 @@ struct KeptFrame {
 // One frame of the padded container: every tet with a vertex at its canonical image
 // certified (its ball inside the padded box), and those whose smallest periodic label
 // sits at its canonical image kept, in stored form.
-void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
-                const double lower[3], std::vector<std::uint64_t>& t, KeptFrame& out) {
+void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in, const double lower[3],
+                std::vector<std::uint64_t>& t, KeptFrame& out) {
   r.read_frame(f, t);
   out.kept.clear();
   out.failures = out.long_edges = 0;
@@ -255,7 +255,6 @@ class FrameFeeder {
   std::uint64_t count_ = 0;
 };
 
-
 void write_points(const io::TetReader& r, const KeepInput& in, io::TetWriter& w) {
   std::vector<std::uint64_t> ids(kChunk), out_ids;
   std::vector<double> xyz(3 * kChunk), out_xyz;
@@ -345,7 +344,8 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
 
   // The sort's share: half for the tets waiting for the frontier, half for the
   // external sort of those written last.
-  ExternalSorter<KeptTet, KeptTetLess> sorter(sort_options(std::size_t(shares.sort_bytes / 2), in.dir, "periodic-tets"));
+  ExternalSorter<KeptTet, KeptTetLess> sorter(
+      sort_options(std::size_t(shares.sort_bytes / 2), in.dir, "periodic-tets"));
   sorter.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
   FrameFeeder feeder(w, threads, in.frame_tets);
   Frontier frontier(m, in.sort_axis);

@@ -55,9 +55,9 @@ struct KeptTetLess {
   }
 };
 
-// The same order: a radix sort on the smallest label alone (`label_bits` bits), then each group (the tets of one smallest label, about seven)
-// by insertion. Two to three passes over the records instead of eight to ten for a
-// radix sort on all four labels: the sort was a tenth of a periodic job's time.
+// The same order: a radix sort on the smallest label alone (`label_bits` bits), then each group (the tets of one
+// smallest label, about seven) by insertion. Two to three passes over the records instead of eight to ten for a radix
+// sort on all four labels: the sort was a tenth of a periodic job's time.
 inline void radix_sort_kept(KeptTet* data, std::size_t n, int label_bits) {
   if (n < 2) return;
   // On the labels' span alone: the keep step's batches span a few slabs of labels.

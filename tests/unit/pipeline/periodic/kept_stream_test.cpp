@@ -132,8 +132,8 @@ TEST_F(KeptStreamTest, RefusesATetAWrongFrontierLetPass) {
   std::sort(all.begin(), all.end(), KeptTetLess{});
   ExternalSorter<KeptTet, KeptTetLess> sorter(sort_options(std::size_t(1) << 16, dir_.string(), "kept-wrong"));
   std::size_t written = 0;
-  KeptStream s([&written](std::span<const KeptTet> t) { written += t.size(); }, ~0ull, std::size_t(64) << 20,
-               sorter, label_bits);
+  KeptStream s([&written](std::span<const KeptTet> t) { written += t.size(); }, ~0ull, std::size_t(64) << 20, sorter,
+               label_bits);
   const std::size_t half = all.size() / 2;
   // The second half first, with a frontier past all of it: then the first half.
   s.add(std::span<const KeptTet>(all).subspan(half), ~0ull);
