@@ -38,13 +38,15 @@ inline constexpr double kIndexBytesPerPoint = 7.5;
 // queries read the blocks of its label range and of its neighbours, three 2 MiB regions
 // a block). It goes to disk, unless told otherwise, when in memory it would take more
 // than an eighth of the budget: at 10^9 points, 7.5 GB, which left 8G no room for the
-// windows.
+// windows. Not when the index is smaller than that share (budgets under 512M): its
+// pages would all stay resident, the same memory with a file beside it.
 inline constexpr std::uint64_t kIndexDiskShareFloor = std::uint64_t(32) << 20;
 inline std::uint64_t index_disk_share(std::uint64_t memory_bytes) {
   return memory_bytes / 16 > kIndexDiskShareFloor ? memory_bytes / 16 : kIndexDiskShareFloor;
 }
 inline bool index_crowds_budget(std::uint64_t points, std::uint64_t memory_bytes) {
-  return kIndexBytesPerPoint * double(points) > double(memory_bytes) / 8;
+  const double in_memory = kIndexBytesPerPoint * double(points);
+  return in_memory > double(memory_bytes) / 8 && in_memory > double(index_disk_share(memory_bytes));
 }
 
 // Tets per frame, about: a frame is cut at the first change of minimum label after

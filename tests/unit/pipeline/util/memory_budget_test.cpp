@@ -132,6 +132,27 @@ TEST(MemoryBudget, FramesAndTheFileBufferShrinkWithTheBudget) {
 }
 
 // --memory as people write it: every unit binary, any case, with or without B / iB.
+// `run --index auto`: the index goes to disk when in memory it would take more than
+// an eighth of the budget, and only when the share its file keeps resident is smaller
+// than it (under 512M the share's 32 MiB floor is the larger one).
+TEST(MemoryBudget, TheIndexGoesToDiskOnlyWhereItWouldHoldLess) {
+  constexpr std::uint64_t M = std::uint64_t(1) << 20, G = std::uint64_t(1) << 30;
+  EXPECT_EQ(index_disk_share(100 * M), 32 * M);
+  EXPECT_EQ(index_disk_share(8 * G), G / 2);
+  // 10^9 points at 8G: 7.5 GB in memory, half a gigabyte on disk.
+  EXPECT_TRUE(index_crowds_budget(1000000000, 8 * G));
+  EXPECT_FALSE(index_crowds_budget(1000000000, 64 * G));  // an eighth of 64G holds it
+  // 3 M points at 100M: 22.5 MB in memory, over an eighth but under the 32 MiB share.
+  EXPECT_FALSE(index_crowds_budget(3000000, 100 * M));
+  // 10^7 points at 210M: 75 MB, over both.
+  EXPECT_TRUE(index_crowds_budget(10000000, 210 * M));
+  RunOptions o;
+  o.memory_bytes = 100 * M;
+  EXPECT_FALSE(o.index_on_disk(3000000));
+  o.index = RunOptions::IndexPlacement::kDisk;
+  EXPECT_TRUE(o.index_on_disk(3000000));  // asked for: as asked
+}
+
 TEST(MemorySize, ParsedAsPeopleWriteIt) {
   EXPECT_EQ(parse_memory_size("512M"), 512 * kMiB);
   EXPECT_EQ(parse_memory_size("512m"), 512 * kMiB);
