@@ -15,6 +15,8 @@
 #include "pipeline/util/communicator.hpp"
 #include "pipeline/util/interrupt.hpp"
 #include "pipeline/verify/exact_sum.hpp"
+#include "pipeline/verify/lower_stars.hpp"
+#include "pipeline/verify/records.hpp"
 #include "pipeline/verify/split.hpp"
 
 #include "core/compiler.hpp"
@@ -104,77 +106,6 @@ class ViolationLog {
   std::array<std::atomic<std::uint64_t>, kViolationKinds> counts_{};
   std::array<std::vector<VerifyReport::Listed>, kViolationKinds> listed_;
 };
-
-// ---------------------------------------------------------------------------------
-// Records.
-//
-// FacetRec: one facet (triangle) as seen so far. v: its labels, sorted. x: flags in
-// the top byte, a payload in the low 56 bits:
-//   single  (no flag)  one tet: d is its fourth vertex, payload its ordinal; kSide set
-//                      when that tet, if positively oriented, is (v0, v1, v2, d) in this
-//                      order, i.e. d lies on the positive side of (v0, v1, v2);
-//   kPair              two tets on opposite sides, already checked: d is the vertex on
-//                      the positive side, the payload the one on the negative side;
-//   kBad               already reported (repeated or overused); payload: an ordinal.
-constexpr std::uint64_t kPayload = (std::uint64_t(1) << 56) - 1;
-constexpr std::uint64_t kSide = std::uint64_t(1) << 56;
-constexpr std::uint64_t kPair = std::uint64_t(1) << 57;
-constexpr std::uint64_t kBad = std::uint64_t(1) << 58;
-
-template <class L>
-struct FacetRec {
-  L v[3];
-  L d;
-  std::uint64_t x;
-};
-static_assert(sizeof(FacetRec<std::uint32_t>) == 24);
-
-template <class L>
-struct FacetLess {
-  bool operator()(const FacetRec<L>& a, const FacetRec<L>& b) const {
-    if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
-    if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
-    if (a.v[2] != b.v[2]) return a.v[2] < b.v[2];
-    const std::uint64_t pa = a.x & kPayload, pb = b.x & kPayload;
-    if (pa != pb) return pa < pb;
-    return a.x < b.x;
-  }
-};
-
-template <class L>
-bool same_key(const FacetRec<L>& a, const FacetRec<L>& b) {
-  return a.v[0] == b.v[0] && a.v[1] == b.v[1] && a.v[2] == b.v[2];
-}
-
-// A boundary edge of a boundary facet: u < v, w the facet's third vertex, x: kSide when
-// the facet, oriented outwards, runs u -> v; payload the tet's ordinal.
-template <class L>
-struct HullEdgeRec {
-  L u, v, w;
-  std::uint64_t x;
-};
-
-template <class L>
-struct HullEdgeLess {
-  bool operator()(const HullEdgeRec<L>& a, const HullEdgeRec<L>& b) const {
-    if (a.u != b.u) return a.u < b.u;
-    if (a.v != b.v) return a.v < b.v;
-    return a.x < b.x;
-  }
-};
-
-// Edge keys: (u, v), u < v, ordered by u then v. 32-bit labels pack into one integer.
-struct Edge64 {
-  std::uint64_t u, v;
-  bool operator<(const Edge64& o) const { return u != o.u ? u < o.u : v < o.v; }
-  bool operator==(const Edge64& o) const = default;
-};
-template <class L>
-using EdgeKey = std::conditional_t<sizeof(L) == 4, std::uint64_t, Edge64>;
-inline std::uint64_t make_edge(std::uint32_t u, std::uint32_t v) { return std::uint64_t(u) << 32 | v; }
-inline Edge64 make_edge(std::uint64_t u, std::uint64_t v) { return {u, v}; }
-inline std::uint64_t edge_u(std::uint64_t e) { return e >> 32; }
-inline std::uint64_t edge_u(const Edge64& e) { return e.u; }
 
 // Counter-based hash for the sample (splitmix64's mixer).
 inline std::uint64_t mix(std::uint64_t z) {
@@ -493,12 +424,6 @@ class Engine {
   template <class OnGood>
   void canonicalize(std::size_t k, std::vector<L>& labels, std::vector<std::uint8_t>& flags, bool log_storage,
                     bool parallel, OnGood&& on_good);
-  // The facet records of a canonical tet s (flags: its parity bit), emit(facet, through
-  // s[0]), and its six edges.
-  template <class Emit>
-  static void tet_facets(const L* s, std::uint64_t ordinal, int parity, Emit&& emit);
-  template <class Emit>
-  static void tet_edges(const L* s, Emit&& emit);
   // ranks.ipp: the records this rank's tets make for keys later ranks own (a front),
   // sent to their owners and folded here in the order one process folds them.
   void hand_over_front(const std::vector<std::size_t>& order, const std::vector<std::uint64_t>& position);
@@ -520,12 +445,13 @@ class Engine {
     std::vector<Edge> e;          // sorted, unique
     std::uint64_t threshold = 0;  // keys below it are final after this step
   };
-  // The buffers for building a step's records (A: the facets and edges through a
-  // tet's smallest label, B: the others), and a frame's labels and flags: one for each
-  // frame being prepared.
+  // The buffers for building a step's records (stars: by lower stars; the others for
+  // sorting them all, A: the facets and edges through a tet's smallest label, B: the
+  // others), and a frame's labels and flags: one for each frame being prepared.
   struct Scratch {
     std::vector<Facet> a, b, tmp, far;
     std::vector<Edge> ea, eb, etmp, seen;  // seen: 2^kSeenBits edges
+    LowerStarScratch<L> stars;
     std::vector<L> labels;
     std::vector<std::uint8_t> flags;
   };
@@ -537,7 +463,6 @@ class Engine {
     std::vector<PairCheck> pairs;  // formed by consume_frame(), for check_pairs()
     std::exception_ptr error;
   };
-  static constexpr int kSeenBits = 14;  // the B edges' table of repeats (build_step)
   void prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slot, Scratch& w);
   void consume_frame(Slot& slot);
   void build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,

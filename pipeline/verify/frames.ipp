@@ -168,39 +168,58 @@ void Engine<L>::consume_frame(Slot& slot) {
 }
 
 // The sorted facet and edge records of tets [lo, hi) of a frame (canon, flags: from
-// tet lo on), on one thread.
-// A = the three facets (edges) through the tet's smallest label, B = the rest. Facet
-// opposite s_i, written (others sorted, s_i), has the orientation of (s0..s3) times
-// (-1)^(3-i), and (s0..s3) has the tet's times (-1)^parity.
+// tet lo on), on one thread: by lower stars (lower_stars.hpp) when the tets come in
+// order of their smallest labels and their keys span few labels, as in every frame of
+// `tetstream run`; else by sorting them all. A = the three facets (edges) through the
+// tet's smallest label, B = the rest (records.hpp).
 template <class L>
 void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,
                            std::size_t hi, std::uint64_t first_ordinal, bool sorted_by_min) {
   const std::size_t n = hi - lo;
-  auto& a = w.a;
-  auto& b = w.b;
-  a.clear(), b.clear();
-  a.reserve(3 * n), b.reserve(n);
   // The labels' range: keys relative to its bottom sort in fewer radix digits; and
   // the reach of most tets (width[w]: tets whose labels lie within 2^w of it).
-  std::uint64_t base = ~0ull, top = 0;
+  std::uint64_t base = ~0ull, top = 0, last_min = 0;
   for (std::size_t i = 0; i < n; ++i)
     if (!(flags[i] & 2)) base = std::min<std::uint64_t>(base, canon[4 * i]);
   std::array<std::size_t, 65> width{};
   std::size_t good = 0;
-  // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
   for (std::size_t i = 0; i < n; ++i) {
-    if (flags[i] & 2) continue;  // broken: no facets
+    if (flags[i] & 2) continue;  // broken: no records
     const L* s = canon + 4 * i;
     top = std::max<std::uint64_t>(top, s[3]);
+    last_min = std::max<std::uint64_t>(last_min, s[0]);
     ++width[std::size_t(std::bit_width(std::uint64_t(s[3]) - base))], ++good;
-    tet_facets(s, first_ordinal + lo + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
-      if (std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2])) (through_min ? a : b).push_back(f);
-    });
   }
   const int bits = base <= top ? std::max(1, int(std::bit_width(top - base))) : 1;
   int near = 1;
   for (std::size_t within = width[0] + width[1]; near < bits && within < good - good / 128;)
     within += width[std::size_t(++near)];
+  // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
+  auto keep_facet = [&](const Facet& f) {
+    return std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2]);
+  };
+  if (sorted_by_min && good > 0 && near < 40) {
+    // The keys of all but the long tets' records, and every smallest label.
+    const std::uint64_t span = std::max(std::uint64_t(1) << near, last_min - base + 1);
+    if (span <= lower_star_span_cap(step_tets_)) {
+      if (w.a.capacity()) w.a = {}, w.b = {}, w.tmp = {}, w.far = {}, w.ea = {}, w.eb = {}, w.etmp = {}, w.seen = {};
+      lower_star_records(
+          canon, flags, n, first_ordinal + lo, base, std::size_t(span), keep_facet,
+          [&](L u) { return std::uint64_t(u) < upper_; }, !sampled_, w.stars, out.f, out.e);
+      return;
+    }
+  }
+  w.stars = {};  // the plan holds one way's buffers at a time (plan_memory())
+  auto& a = w.a;
+  auto& b = w.b;
+  a.clear(), b.clear();
+  a.reserve(3 * n), b.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (flags[i] & 2) continue;
+    tet_facets(canon + 4 * i, first_ordinal + lo + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
+      if (keep_facet(f)) (through_min ? a : b).push_back(f);
+    });
+  }
   const FacetLess<L> less;
   if (sorted_by_min) {
     // A is grouped by smallest label already: sort each group (a lower star).
@@ -238,8 +257,7 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
         ea.push_back(e);
         return;
       }
-      Edge& slot = seen[((std::uint64_t(u) * 0x9E3779B97F4A7C15ull) ^ std::uint64_t(v)) * 0xBF58476D1CE4E5B9ull >>
-                        (64 - kSeenBits)];
+      Edge& slot = seen[edge_slot(u, v, kSeenBits)];
       if (slot == e) return;
       slot = e;
       eb.push_back(e);
@@ -260,24 +278,4 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
   eb.erase(std::unique(eb.begin(), eb.end()), eb.end());
   out.e.resize(ea.size() + eb.size());
   out.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), out.e.begin()), out.e.end());
-}
-
-// A = the three facets through s[0], B = the fourth. Facet opposite s_i, written
-// (others sorted, s_i), has the orientation of (s0..s3) times (-1)^(3-i), and
-// (s0..s3) has the tet's times (-1)^parity; kSide when that is positive.
-template <class L>
-template <class Emit>
-void Engine<L>::tet_facets(const L* s, std::uint64_t ordinal, int parity, Emit&& emit) {
-  auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
-  emit(Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)}, true);
-  emit(Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)}, true);
-  emit(Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)}, true);
-  emit(Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)}, false);
-}
-
-template <class L>
-template <class Emit>
-void Engine<L>::tet_edges(const L* s, Emit&& emit) {
-  emit(s[0], s[1], true), emit(s[0], s[2], true), emit(s[0], s[3], true);
-  emit(s[1], s[2], false), emit(s[1], s[3], false), emit(s[2], s[3], false);
 }
