@@ -244,93 +244,13 @@ void for_group_chunks(std::size_t n, IsStart&& is_start, F&& f, std::vector<std:
   for (int p = 0; p < parts; ++p) f(std::size_t(p), bounds[std::size_t(p)], bounds[std::size_t(p) + 1]);
 }
 
-// Runs f(r) for each r in [0, n): on the threads of a parallel region of its own, or
-// one after another when called inside one (verify's pass: its other threads are busy
-// preparing frames).
-template <class F>
-void for_each_range(std::size_t n, F&& f) {
-  if (n <= 1 || omp_in_parallel()) {
-    for (std::size_t r = 0; r < n; ++r) f(r);
-    return;
-  }
-  auto* fp = &f;
-#pragma omp parallel for num_threads(int(n)) schedule(static, 1)
-  for (std::int64_t r = 0; r < std::int64_t(n); ++r) (*fp)(std::size_t(r));
-}
-
-// Stable k-way merge of sorted ranges into out (ties: the earlier range first).
-template <class T, class Less>
-void multiway_merge(std::vector<std::pair<const T*, const T*>>& rs, T* out, const Less& less) {
-  std::erase_if(rs, [](const auto& r) { return r.first == r.second; });
-  if (rs.empty()) return;
-  if (rs.size() == 1) {
-    std::copy(rs[0].first, rs[0].second, out);
-    return;
-  }
-  if (rs.size() == 2) {
-    std::merge(rs[0].first, rs[0].second, rs[1].first, rs[1].second, out, less);
-    return;
-  }
-  detail::MergeHeap heap([&](std::size_t a, std::size_t b) { return less(*rs[a].first, *rs[b].first); }, rs.size());
-  for (std::size_t i = 0; i < rs.size(); ++i) heap.push(i);
-  heap.build();
-  while (!heap.empty()) {
-    auto& r = rs[heap.top()];
-    *out++ = *r.first++;
-    heap.advance_top(r.first == r.second);
-  }
-}
-
-// Merges sorted inputs into `out`, one key range per thread (ties: the earlier input
-// first). Ranges are cut between keys (key_less), so the records of one key meet in
-// one range. finish(r, first, m) post-processes range r in place on its thread and
-// returns how many records it kept at the front; the kept records are then packed.
-// Returns their number.
-template <class T, class Less, class KeyLess, class Finish>
-std::size_t merge_ranges(const std::vector<std::span<const T>>& in, std::vector<T>& out, const Less& less,
-                         const KeyLess& key_less, std::vector<std::size_t>& kept, Finish&& finish) {
-  std::size_t total = 0, biggest = 0;
-  for (std::size_t i = 0; i < in.size(); ++i) {
-    total += in[i].size();
-    if (in[i].size() > in[biggest].size()) biggest = i;
-  }
-  if (out.capacity() < total) {
-    out = {};
-    out.reserve(total);  // exactly: no doubling of the biggest buffer
-  }
-  out.resize(total);
-  const std::size_t ranges =
-      total < (1u << 15) || omp_in_parallel() ? 1 : std::size_t(std::max(1, omp_get_max_threads()));
-  const std::size_t k = in.size();
-  // bounds[i * (ranges + 1) + r]: where range r starts in input i; splitters are
-  // evenly spaced keys of the biggest input.
-  std::vector<std::size_t> bounds(k * (ranges + 1)), offset(ranges + 1, 0);
-  for (std::size_t r = 0; r <= ranges; ++r) {
-    const bool inner = r > 0 && r < ranges;
-    const T* split = inner ? &in[biggest][in[biggest].size() * r / ranges] : nullptr;
-    for (std::size_t i = 0; i < k; ++i) {
-      std::size_t b = r == 0 ? 0 : in[i].size();
-      if (inner) b = std::size_t(std::lower_bound(in[i].begin(), in[i].end(), *split, key_less) - in[i].begin());
-      bounds[i * (ranges + 1) + r] = b;
-      offset[r] += b;
-    }
-  }
-  kept.assign(ranges, 0);
-  for_each_range(ranges, [&](std::size_t r) {
-    std::vector<std::pair<const T*, const T*>> rs(k);
-    for (std::size_t i = 0; i < k; ++i)
-      rs[i] = {in[i].data() + bounds[i * (ranges + 1) + r], in[i].data() + bounds[i * (ranges + 1) + r + 1]};
-    T* first = out.data() + offset[r];
-    multiway_merge(rs, first, less);
-    kept[r] = finish(r, first, offset[r + 1] - offset[r]);
-  });
-  std::size_t w = 0;
-  for (std::size_t r = 0; r < ranges; ++r) {
-    if (w != offset[r] && kept[r])
-      std::memmove(static_cast<void*>(out.data() + w), out.data() + offset[r], kept[r] * sizeof(T));
-    w += kept[r];
-  }
-  return w;
+// Visits the records of two sorted runs in their merged order (ties: a's first).
+template <class T, class Less, class Visit>
+void merge_visit(std::span<const T> a, std::span<const T> b, const Less& less, Visit&& visit) {
+  const T *p = a.data(), *pe = p + a.size(), *q = b.data(), *qe = q + b.size();
+  while (p != pe && q != qe) visit(less(*q, *p) ? *q++ : *p++);
+  for (; p != pe; ++p) visit(*p);
+  for (; q != qe; ++q) visit(*q);
 }
 
 // ---------------------------------------------------------------------------------
@@ -505,8 +425,8 @@ class Engine {
   // Open facets and edges, sorted; spills.
   OpenSet<Facet> live_;
   OpenSet<Edge> live_e_;
-  std::vector<Facet> merged_;
-  std::vector<Edge> merged_e_;
+  std::vector<Facet> merged_, spill_run_;  // the keys still open after a step; those to the spill
+  std::vector<Edge> merged_e_, spill_run_e_;
   std::unique_ptr<ExternalSorter<Facet, FacetLess<L>>> facet_spill_;
   std::unique_ptr<ExternalSorter<Edge, std::less<Edge>>> edge_spill_;
   std::unique_ptr<ExternalSorter<HullEdge, HullEdgeLess<L>>> hull_sorter_;

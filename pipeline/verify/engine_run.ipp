@@ -304,9 +304,9 @@ void Engine<L>::run() {
     // sets before the spills merge.
     const auto t2 = Clock::now();
     if (!sampled_) merge_edges(~0ull);
-    live_e_.release(), merged_e_ = {};
+    live_e_.release(), merged_e_ = {}, spill_run_e_ = {};
     retire_facets(~0ull);
-    live_.release(), merged_ = {};
+    live_.release(), merged_ = {}, spill_run_ = {};
     finish_facets();
     if (!sampled_) finish_edges();
     seconds_final_ = since(t2);

@@ -123,9 +123,11 @@ void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slo
 }
 
 // One prepared frame, in order: each step's records merged with the open sets (open
-// first on equal keys) and folded, the pairs formed kept in the slot for their insphere
-// tests (check_pairs(), on any thread: they are independent); then what no later tet
-// can touch retires.
+// first on equal keys) and each key's run folded in that order, the pairs formed kept
+// in the slot for their insphere tests (check_pairs(), on any thread: they are
+// independent). In one pass: a key no later tet can touch (below the step's threshold)
+// is final at once (or goes to the spill), and only the keys still open are copied,
+// into the other buffer; the step's records are not written again.
 template <class L>
 void Engine<L>::consume_frame(Slot& slot) {
   if (slot.error) std::rethrow_exception(slot.error);
@@ -135,35 +137,47 @@ void Engine<L>::consume_frame(Slot& slot) {
   tet_error6_.add(slot.error6);
   slot.pairs.clear();
   const FacetLess<L> less;
-  auto key_less = [](const Facet& a, const Facet& b) {
-    if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
-    if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
-    return a.v[2] < b.v[2];
-  };
   for (std::size_t s = 0; s < slot.step_count; ++s) {
-    StepRecords& step = slot.steps[s];
+    const StepRecords& step = slot.steps[s];
+    const std::uint64_t threshold = step.threshold;
     facets_checked_ += step.f.size();
-    {
-      const std::vector<std::span<const Facet>> in{live_.records(), step.f};
-      // Inside the pass's parallel region, merge_ranges() merges one range: the pairs
-      // of this step go to the slot in key order.
-      const std::size_t n =
-          merge_ranges(in, merged_, less, key_less, chunk_sizes_,
-                       [&](std::size_t, Facet* first, std::size_t m) { return fold_equal_keys(first, m, slot.pairs); });
-      merged_.resize(n);
-      live_.replace(merged_);
-      retire_facets(step.threshold);
-    }
-    if (!sampled_) {
-      const std::vector<std::span<const Edge>> in{live_e_.records(), step.e};
-      const std::less<Edge> el;
-      const std::size_t n = merge_ranges(
-          in, merged_e_, el, el, chunk_sizes_,
-          [](std::size_t, Edge* first, std::size_t m) { return std::size_t(std::unique(first, first + m) - first); });
-      merged_e_.resize(n);
-      live_e_.replace(merged_e_);
-      merge_edges(step.threshold);
-    }
+    merged_.clear(), spill_run_.clear();
+    auto settle = [&](const Facet& f) {  // a key with all this step's records folded
+      if (std::uint64_t(f.v[0]) >= threshold)
+        merged_.push_back(f);
+      else if (std::uint64_t(f.v[0]) < facet_spill_min_)
+        final_facet(f);
+      else
+        spill_run_.push_back(f);  // a spilled run may hold the same key
+    };
+    Facet key{};
+    bool any = false;
+    merge_visit<Facet>(live_.records(), step.f, less, [&](const Facet& r) {
+      if (any && same_key(key, r)) return combine(key, r, slot.pairs);
+      if (any) settle(key);
+      key = r, any = true;
+    });
+    if (any) settle(key);
+    if (!spill_run_.empty()) facet_spill_->push_sorted_run(std::span<Facet>(spill_run_));
+    live_.replace(merged_);
+    retire_facets(threshold);  // nothing below it is left: the peak, the budget, the hull edges
+    if (sampled_) continue;
+    merged_e_.clear(), spill_run_e_.clear();
+    Edge last{};
+    any = false;
+    merge_visit<Edge>(live_e_.records(), step.e, std::less<Edge>(), [&](const Edge& e) {
+      if (any && e == last) return;
+      last = e, any = true;
+      if (edge_u(e) >= threshold)
+        merged_e_.push_back(e);
+      else if (edge_u(e) < edge_spill_min_)
+        ++edges_;
+      else
+        spill_run_e_.push_back(e);
+    });
+    if (!spill_run_e_.empty()) edge_spill_->push_sorted_run(std::span<Edge>(spill_run_e_));
+    live_e_.replace(merged_e_);
+    merge_edges(threshold);
   }
 }
 
