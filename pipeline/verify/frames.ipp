@@ -212,7 +212,7 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
   auto keep_facet = [&](const Facet& f) {
     return std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2]);
   };
-  if (sorted_by_min && good > 0 && near < 40) {
+  if (sorted_by_min && good > 0 && near < 40 && n < (std::size_t(1) << 30)) {
     // The keys of all but the long tets' records, and every smallest label.
     const std::uint64_t span = std::max(std::uint64_t(1) << near, last_min - base + 1);
     if (span <= lower_star_span_cap(step_tets_)) {

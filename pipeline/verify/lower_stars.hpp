@@ -4,16 +4,16 @@
 // canonical tets in order of their smallest labels, as a container's frames store them
 // (format.md §4.1) and `tetstream run` writes them.
 //
-// Why: sorting every record of a step was most of verify's work (at 10^7 points, 2^18
-// tets a step, the facets' radix sort and the sorts of the lower stars about 30% of
-// the CPU, the edges' about 25%). Here every record is keyed by a label of the step's
-// span, so the records fall into one small group a key: the A records (through a tet's
-// smallest label u) of u's lower star are adjacent already; the B records (the facet
-// and edges away from it) are placed in their key's bucket by one counting pass. Each
-// group is then sorted on its own (a few dozen records), and a key's edges are kept
-// once through a small table of the labels it met. The result is the same sequence a full sort
-// gives: FacetLess is a total order on the records of distinct tets, and the edges are
-// sorted and distinct.
+// Why: sorting every record of a step was most of verify's work (about 28 of 44 CPU
+// seconds on a clustered 10^7 output, steps of 2^18 tets: the facets' radix sort, the
+// sorts of the lower stars, the edges'). Here every record is keyed by a label of the
+// step's span, so the records fall into one small group a key: the A records (through a
+// tet's smallest label u) of u's lower star are adjacent already; the B records (the
+// facet and edges away from it) are placed in their key's bucket by one counting pass.
+// Each group is then sorted on its own (a few dozen records), and a key's edges are
+// kept once through a small table of the labels it met. The result is the sequence a
+// full sort gives: FacetLess is a total order on the records of distinct tets, and the
+// edges are sorted and distinct.
 #include "pipeline/verify/records.hpp"
 
 #include <algorithm>
@@ -25,8 +25,8 @@
 namespace tetstream::pipeline::verify_engine {
 
 // The most labels a step's keys may span here: their counts take 8 bytes a label of it
-// (8 MiB at steps of 2^18 tets). A step
-// whose keys reach further (long tets on the hull of a large output) is sorted whole.
+// (8 MiB at steps of 2^18 tets). A step whose keys reach further (long tets on the hull
+// of a large output) is sorted whole.
 inline std::size_t lower_star_span_cap(std::size_t step_tets) {
   return std::max<std::size_t>(4 * step_tets, std::size_t(1) << 16);
 }
@@ -100,9 +100,10 @@ std::size_t distinct_labels(LowerStarScratch<L>& w) {
 // The records of tets [0, n) of a step: canon their canonical labels (sorted), flags
 // bit 0 the parity, bit 1 broken (no records); tet i has ordinal first_ordinal + i.
 // The good tets must come in nondecreasing order of smallest label, every one in
-// [base, base + span), span <= 2^32. keep_facet(f): whether facet record f is made;
-// keep_key(u): whether edges keyed u are made; edges: whether any are (the sample makes
-// none). facets: sorted by FacetLess; edge_keys: sorted, distinct.
+// [base, base + span); span <= 2^32 and 3 n < 2^32 (the buckets' counts).
+// keep_facet(f): whether facet record f is made; keep_key(u): whether edges keyed u are
+// made; edges: whether any are (the sample makes none). facets: sorted by FacetLess;
+// edge_keys: sorted, distinct.
 template <class L, class KeepFacet, class KeepKey>
 void lower_star_records(const L* canon, const std::uint8_t* flags, std::size_t n, std::uint64_t first_ordinal,
                         std::uint64_t base, std::size_t span, const KeepFacet& keep_facet, const KeepKey& keep_key,
