@@ -85,15 +85,19 @@ void Engine<L>::plan_memory() {
   // The pass's frames in flight (run()): each slot holds a frame's records (4 facets,
   // at most 6 edges a tet) and its pairs (at most 2 a tet); each frame being prepared
   // (one a thread, at most one a slot) its labels and flags and one step's building
-  // buffers (7 facets and 9 edges a tet, and a table of edges); the ordered merge, the merged copy of one
-  // step. As many slots as threads and one, while the scratch takes at most half of
+  // buffers (7 facets and 9 edges a tet for a full sort; by lower stars a facet, 3
+  // labels and 9 edges a tet and counts over the keys' span; one of the two
+  // at a time, build_step(); and a table of edges); the ordered merge, the merged copy
+  // of one step. As many slots as threads and one, while the scratch takes at most half of
   // what the points leave (the open sets the rest); at least one.
   const std::size_t threads = std::size_t(std::max(1, omp_get_max_threads()));
   auto pass_scratch = [&](std::size_t slots) {
     const std::size_t slot = max_frame * (4 * sizeof(Facet) + 6 * sizeof(Edge) + 2 * sizeof(PairCheck));
-    const std::size_t preparing = max_frame * (4 * sizeof(L) + 1) +
-                                  step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge)) +
-                                  (std::size_t(1) << kSeenBits) * sizeof(Edge);
+    const std::size_t sorting = step_tets_ * (7 * sizeof(Facet) + 9 * sizeof(Edge));
+    const std::size_t by_stars =
+        step_tets_ * (sizeof(Facet) + 3 * sizeof(L) + 9 * sizeof(Edge)) + lower_star_span_cap(step_tets_) * 8;
+    const std::size_t preparing =
+        max_frame * (4 * sizeof(L) + 1) + std::max(sorting, by_stars) + (std::size_t(1) << kSeenBits) * sizeof(Edge);
     return slots * slot + std::min(slots, threads) * preparing + step_tets_ * (4 * sizeof(Facet) + 6 * sizeof(Edge));
   };
   slots_ = threads + 1;
@@ -300,9 +304,9 @@ void Engine<L>::run() {
     // sets before the spills merge.
     const auto t2 = Clock::now();
     if (!sampled_) merge_edges(~0ull);
-    live_e_.release(), merged_e_ = {};
+    live_e_.release(), merged_e_ = {}, spill_run_e_ = {};
     retire_facets(~0ull);
-    live_.release(), merged_ = {};
+    live_.release(), merged_ = {}, spill_run_ = {};
     finish_facets();
     if (!sampled_) finish_edges();
     seconds_final_ = since(t2);

@@ -123,9 +123,11 @@ void Engine<L>::prepare_frame(std::size_t k, std::uint64_t future_min, Slot& slo
 }
 
 // One prepared frame, in order: each step's records merged with the open sets (open
-// first on equal keys) and folded, the pairs formed kept in the slot for their insphere
-// tests (check_pairs(), on any thread: they are independent); then what no later tet
-// can touch retires.
+// first on equal keys) and each key's run folded in that order, the pairs formed kept
+// in the slot for their insphere tests (check_pairs(), on any thread: they are
+// independent). In one pass: a key no later tet can touch (below the step's threshold)
+// is final at once (or goes to the spill), and only the keys still open are copied,
+// into the other buffer; the step's records are not written again.
 template <class L>
 void Engine<L>::consume_frame(Slot& slot) {
   if (slot.error) std::rethrow_exception(slot.error);
@@ -135,72 +137,103 @@ void Engine<L>::consume_frame(Slot& slot) {
   tet_error6_.add(slot.error6);
   slot.pairs.clear();
   const FacetLess<L> less;
-  auto key_less = [](const Facet& a, const Facet& b) {
-    if (a.v[0] != b.v[0]) return a.v[0] < b.v[0];
-    if (a.v[1] != b.v[1]) return a.v[1] < b.v[1];
-    return a.v[2] < b.v[2];
-  };
   for (std::size_t s = 0; s < slot.step_count; ++s) {
-    StepRecords& step = slot.steps[s];
+    const StepRecords& step = slot.steps[s];
+    const std::uint64_t threshold = step.threshold;
     facets_checked_ += step.f.size();
-    {
-      const std::vector<std::span<const Facet>> in{live_.records(), step.f};
-      // Inside the pass's parallel region, merge_ranges() merges one range: the pairs
-      // of this step go to the slot in key order.
-      const std::size_t n =
-          merge_ranges(in, merged_, less, key_less, chunk_sizes_,
-                       [&](std::size_t, Facet* first, std::size_t m) { return fold_equal_keys(first, m, slot.pairs); });
-      merged_.resize(n);
-      live_.replace(merged_);
-      retire_facets(step.threshold);
-    }
-    if (!sampled_) {
-      const std::vector<std::span<const Edge>> in{live_e_.records(), step.e};
-      const std::less<Edge> el;
-      const std::size_t n = merge_ranges(
-          in, merged_e_, el, el, chunk_sizes_,
-          [](std::size_t, Edge* first, std::size_t m) { return std::size_t(std::unique(first, first + m) - first); });
-      merged_e_.resize(n);
-      live_e_.replace(merged_e_);
-      merge_edges(step.threshold);
-    }
+    merged_.clear(), spill_run_.clear();
+    auto settle = [&](const Facet& f) {  // a key with all this step's records folded
+      if (std::uint64_t(f.v[0]) >= threshold)
+        merged_.push_back(f);
+      else if (std::uint64_t(f.v[0]) < facet_spill_min_)
+        final_facet(f);
+      else
+        spill_run_.push_back(f);  // a spilled run may hold the same key
+    };
+    Facet key{};
+    bool any = false;
+    merge_visit<Facet>(live_.records(), step.f, less, [&](const Facet& r) {
+      if (any && same_key(key, r)) return combine(key, r, slot.pairs);
+      if (any) settle(key);
+      key = r, any = true;
+    });
+    if (any) settle(key);
+    if (!spill_run_.empty()) facet_spill_->push_sorted_run(std::span<Facet>(spill_run_));
+    live_.replace(merged_);
+    retire_facets(threshold);  // nothing below it is left: the peak, the budget, the hull edges
+    if (sampled_) continue;
+    merged_e_.clear(), spill_run_e_.clear();
+    Edge last{};
+    any = false;
+    merge_visit<Edge>(live_e_.records(), step.e, std::less<Edge>(), [&](const Edge& e) {
+      if (any && e == last) return;
+      last = e, any = true;
+      if (edge_u(e) >= threshold)
+        merged_e_.push_back(e);
+      else if (edge_u(e) < edge_spill_min_)
+        ++edges_;
+      else
+        spill_run_e_.push_back(e);
+    });
+    if (!spill_run_e_.empty()) edge_spill_->push_sorted_run(std::span<Edge>(spill_run_e_));
+    live_e_.replace(merged_e_);
+    merge_edges(threshold);
   }
 }
 
 // The sorted facet and edge records of tets [lo, hi) of a frame (canon, flags: from
-// tet lo on), on one thread.
-// A = the three facets (edges) through the tet's smallest label, B = the rest. Facet
-// opposite s_i, written (others sorted, s_i), has the orientation of (s0..s3) times
-// (-1)^(3-i), and (s0..s3) has the tet's times (-1)^parity.
+// tet lo on), on one thread: by lower stars (lower_stars.hpp) when the tets come in
+// order of their smallest labels and their keys span few labels, as in every frame of
+// `tetstream run`; else by sorting them all. A = the three facets (edges) through the
+// tet's smallest label, B = the rest (records.hpp).
 template <class L>
 void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const std::uint8_t* flags, std::size_t lo,
                            std::size_t hi, std::uint64_t first_ordinal, bool sorted_by_min) {
   const std::size_t n = hi - lo;
-  auto& a = w.a;
-  auto& b = w.b;
-  a.clear(), b.clear();
-  a.reserve(3 * n), b.reserve(n);
   // The labels' range: keys relative to its bottom sort in fewer radix digits; and
   // the reach of most tets (width[w]: tets whose labels lie within 2^w of it).
-  std::uint64_t base = ~0ull, top = 0;
+  std::uint64_t base = ~0ull, top = 0, last_min = 0;
   for (std::size_t i = 0; i < n; ++i)
     if (!(flags[i] & 2)) base = std::min<std::uint64_t>(base, canon[4 * i]);
   std::array<std::size_t, 65> width{};
   std::size_t good = 0;
-  // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
   for (std::size_t i = 0; i < n; ++i) {
-    if (flags[i] & 2) continue;  // broken: no facets
+    if (flags[i] & 2) continue;  // broken: no records
     const L* s = canon + 4 * i;
     top = std::max<std::uint64_t>(top, s[3]);
+    last_min = std::max<std::uint64_t>(last_min, s[0]);
     ++width[std::size_t(std::bit_width(std::uint64_t(s[3]) - base))], ++good;
-    tet_facets(s, first_ordinal + lo + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
-      if (std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2])) (through_min ? a : b).push_back(f);
-    });
   }
   const int bits = base <= top ? std::max(1, int(std::bit_width(top - base))) : 1;
   int near = 1;
   for (std::size_t within = width[0] + width[1]; near < bits && within < good - good / 128;)
     within += width[std::size_t(++near)];
+  // Records keyed at or above upper_ belong to a later rank (hand_over_front made them).
+  auto keep_facet = [&](const Facet& f) {
+    return std::uint64_t(f.v[0]) < upper_ && facet_sampled(f.v[0], f.v[1], f.v[2]);
+  };
+  if (sorted_by_min && good > 0 && near < 40 && n < (std::size_t(1) << 30)) {
+    // The keys of all but the long tets' records, and every smallest label.
+    const std::uint64_t span = std::max(std::uint64_t(1) << near, last_min - base + 1);
+    if (span <= lower_star_span_cap(step_tets_)) {
+      if (w.a.capacity()) w.a = {}, w.b = {}, w.tmp = {}, w.far = {}, w.ea = {}, w.eb = {}, w.etmp = {}, w.seen = {};
+      lower_star_records(
+          canon, flags, n, first_ordinal + lo, base, std::size_t(span), keep_facet,
+          [&](L u) { return std::uint64_t(u) < upper_; }, !sampled_, w.stars, out.f, out.e);
+      return;
+    }
+  }
+  w.stars = {};  // the plan holds one way's buffers at a time (plan_memory())
+  auto& a = w.a;
+  auto& b = w.b;
+  a.clear(), b.clear();
+  a.reserve(3 * n), b.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (flags[i] & 2) continue;
+    tet_facets(canon + 4 * i, first_ordinal + lo + i, flags[i] & 1, [&](const Facet& f, bool through_min) {
+      if (keep_facet(f)) (through_min ? a : b).push_back(f);
+    });
+  }
   const FacetLess<L> less;
   if (sorted_by_min) {
     // A is grouped by smallest label already: sort each group (a lower star).
@@ -238,8 +271,7 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
         ea.push_back(e);
         return;
       }
-      Edge& slot = seen[((std::uint64_t(u) * 0x9E3779B97F4A7C15ull) ^ std::uint64_t(v)) * 0xBF58476D1CE4E5B9ull >>
-                        (64 - kSeenBits)];
+      Edge& slot = seen[edge_slot(u, v, kSeenBits)];
       if (slot == e) return;
       slot = e;
       eb.push_back(e);
@@ -260,24 +292,4 @@ void Engine<L>::build_step(Scratch& w, StepRecords& out, const L* canon, const s
   eb.erase(std::unique(eb.begin(), eb.end()), eb.end());
   out.e.resize(ea.size() + eb.size());
   out.e.erase(std::set_union(ea.begin(), ea.end(), eb.begin(), eb.end(), out.e.begin()), out.e.end());
-}
-
-// A = the three facets through s[0], B = the fourth. Facet opposite s_i, written
-// (others sorted, s_i), has the orientation of (s0..s3) times (-1)^(3-i), and
-// (s0..s3) has the tet's times (-1)^parity; kSide when that is positive.
-template <class L>
-template <class Emit>
-void Engine<L>::tet_facets(const L* s, std::uint64_t ordinal, int parity, Emit&& emit) {
-  auto side = [&](int opp) { return ((parity + 3 - opp) & 1) == 0 ? kSide : 0; };
-  emit(Facet{{s[0], s[1], s[2]}, s[3], ordinal | side(3)}, true);
-  emit(Facet{{s[0], s[1], s[3]}, s[2], ordinal | side(2)}, true);
-  emit(Facet{{s[0], s[2], s[3]}, s[1], ordinal | side(1)}, true);
-  emit(Facet{{s[1], s[2], s[3]}, s[0], ordinal | side(0)}, false);
-}
-
-template <class L>
-template <class Emit>
-void Engine<L>::tet_edges(const L* s, Emit&& emit) {
-  emit(s[0], s[1], true), emit(s[0], s[2], true), emit(s[0], s[3], true);
-  emit(s[1], s[2], false), emit(s[1], s[3], false), emit(s[2], s[3], false);
 }
