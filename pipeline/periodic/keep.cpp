@@ -21,6 +21,7 @@
 #include <cmath>
 #include <exception>
 #include <limits>
+#include <ranges>
 #include <stdexcept>
 
 namespace tetstream::pipeline::periodic {
@@ -181,23 +182,18 @@ class Frontier {
 
   // F for the points lying before coordinate x on the sort axis (non-decreasing x).
   std::uint64_t points_before(double x) {
-    const double* xyz = m_.xyz.data();
-    const std::uint64_t n = m_.code.size();
     // The first padded label at or past x: the sort axis' coordinates never decrease.
-    std::uint64_t lo = cursor_, hi = n;
-    while (lo < hi) {
-      const std::uint64_t mid = lo + (hi - lo) / 2;
-      if (xyz[3 * mid + std::uint64_t(axis_)] < x)
-        lo = mid + 1;
-      else
-        hi = mid;
-    }
+    const auto labels = std::views::iota(cursor_, std::uint64_t(m_.code.size()));
+    const auto first = std::ranges::partition_point(labels, [&](std::uint64_t l) { return coord(l) < x; });
+    const std::uint64_t lo = cursor_ + std::uint64_t(first - labels.begin());
     for (; cursor_ < lo; ++cursor_) count_ += (m_.bits(cursor_) & 7) == 0;  // the box's own points
     return count_;
   }
-  std::uint64_t before_label(std::uint64_t base) { return points_before(m_.xyz[3 * base + std::uint64_t(axis_)]); }
+  std::uint64_t before_label(std::uint64_t base) { return points_before(coord(base)); }
 
  private:
+  double coord(std::uint64_t label) const { return m_.xyz[3 * label + std::uint64_t(axis_)]; }
+
   const PaddedMap& m_;
   int axis_;
   std::uint64_t cursor_ = 0, count_ = 0;

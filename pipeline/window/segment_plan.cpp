@@ -24,8 +24,8 @@ std::vector<SegmentPlan> plan_segments(const SortedView& view, std::uint64_t seg
     p.label_begin = first_label + todo * s / segments;
     p.label_end = first_label + todo * (s + 1) / segments;
     if (p.label_begin == p.label_end) continue;
-    p.window_begin = view.lower_bound(view.key(p.label_begin) - buffer_width);
-    p.window_end = view.upper_bound(view.key(p.label_end - 1) + buffer_width);
+    p.window_begin = view.lower_bound(view.read_key(p.label_begin) - buffer_width);
+    p.window_end = view.upper_bound(view.read_key(p.label_end - 1) + buffer_width);
     p.buffer_width = buffer_width;
     plans.push_back(p);
   }

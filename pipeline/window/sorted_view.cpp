@@ -34,20 +34,6 @@ std::pair<std::uint64_t, std::uint64_t> sample_bracket(const SortedView& view, A
   return {s == 0 ? 0 : (s - 1) * SortedView::kKeyStride + 1, std::min(view.count, s * SortedView::kKeyStride)};
 }
 
-// A label's key for the binary searches. From a mapped file, through its regions
-// (pread unless the region is held): a read that faults maps its whole folio of the
-// page cache (up to 2 MiB), and a plan's searches, two a segment and candidate plan,
-// held most of the file resident (10^7 points at --memory 100M peaked at 166 MiB).
-double probe_key(const SortedView& view, std::uint64_t label) {
-  if (!view.query_regions) return view.key(label);
-  std::array<std::byte, 64> record;
-  if (view.points.record_bytes() > record.size()) throw std::logic_error("SortedView: a record over 64 bytes");
-  view.query_regions->read(view.points.record(label), record.data(), view.points.record_bytes());
-  double xyz[3];
-  view.points.decode(record.data(), xyz);
-  return xyz[view.axis];
-}
-
 // The first label for which `after(key)` holds: the samples' bracket, then a binary
 // search of the file within it.
 template <class After>
@@ -55,7 +41,7 @@ std::uint64_t partition_point(const SortedView& view, After after) {
   auto [lo, hi] = sample_bracket(view, after);
   while (lo < hi) {
     const std::uint64_t mid = lo + (hi - lo) / 2;
-    if (after(probe_key(view, mid)))
+    if (after(view.read_key(mid)))
       hi = mid;
     else
       lo = mid + 1;
@@ -69,6 +55,16 @@ auto after(double x) {
   return [x](double k) { return k > x; };
 }
 }  // namespace
+
+double SortedView::read_key(std::uint64_t label) const {
+  if (!query_regions) return key(label);
+  std::array<std::byte, 64> record;
+  if (points.record_bytes() > record.size()) throw std::logic_error("SortedView: a record over 64 bytes");
+  query_regions->read(points.record(label), record.data(), points.record_bytes());
+  double xyz[3];
+  points.decode(record.data(), xyz);
+  return xyz[axis];
+}
 
 std::uint64_t SortedView::lower_bound(double x) const { return partition_point(*this, at_or_after(x)); }
 std::uint64_t SortedView::upper_bound(double x) const { return partition_point(*this, after(x)); }

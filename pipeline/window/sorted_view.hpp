@@ -47,6 +47,12 @@ struct SortedView {
   void sample_keys(bool release_file_pages = false);
 
   double key(std::uint64_t label) const { return points.coord(label, axis); }
+  // The same key read through query_regions when the points are a mapped file (pread
+  // unless its region is held): a read that faults maps the whole folio of the page
+  // cache around it (up to 2 MiB), and the plans' reads, scattered over the whole file
+  // (the searches below, each segment's ends), held most of it resident (10^7 points
+  // at --memory 100M: 166 MB sampled in the plan phase). key() where the pages are held.
+  double read_key(std::uint64_t label) const;
   // First label whose axis coordinate is >= x (count when none).
   std::uint64_t lower_bound(double x) const;
   // First label whose axis coordinate is > x.

@@ -165,8 +165,8 @@ SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64
                              : 0;
     if (local > 0 && local < p.buffer_width) {
       p.buffer_width = local;
-      p.window_begin = view.lower_bound(view.key(p.label_begin) - local);
-      p.window_end = view.upper_bound(view.key(p.label_end - 1) + local);
+      p.window_begin = view.lower_bound(view.read_key(p.label_begin) - local);
+      p.window_end = view.upper_bound(view.read_key(p.label_end - 1) + local);
     }
     split_into_zones(view, p, plan.zones);
     for (const Zone& st : p.zones) {
