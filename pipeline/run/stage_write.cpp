@@ -26,6 +26,7 @@ struct Counter {
   const char* name;
   std::uint64_t SegmentStats::*stat;
   std::uint64_t RunSummary::*summary;
+  bool since_wall = false;  // absent from the records of a job begun before the wall (read as 0)
 };
 constexpr Counter kCounters[] = {
     {"window_points", &SegmentStats::window_points, &RunSummary::window_points},
@@ -39,6 +40,8 @@ constexpr Counter kCounters[] = {
     {"rounds", &SegmentStats::rounds, &RunSummary::rounds_max},
     {"tets", &SegmentStats::tets, &RunSummary::tets},
     {"tets_by_query", &SegmentStats::tets_by_query, &RunSummary::tets_by_query},
+    {"tets_by_wall", &SegmentStats::tets_by_wall, &RunSummary::tets_by_wall, true},
+    {"wall_retries", &SegmentStats::wall_retries, &RunSummary::wall_retries, true},
 };
 
 // The points section from the sorted file's records, in label order, in the header's
@@ -76,7 +79,8 @@ json counters_json(const WrittenWork& work) {
 WrittenWork counters_from(const json& j) {
   WrittenWork work;
   work.segment_labels = j.at("zone_points").get<std::uint64_t>();
-  for (const Counter& c : kCounters) work.stats.*c.stat = j.at(c.name).get<std::uint64_t>();
+  for (const Counter& c : kCounters)
+    work.stats.*c.stat = c.since_wall && !j.contains(c.name) ? 0 : j.at(c.name).get<std::uint64_t>();
   work.stats.seconds_build = j.at("seconds_build").get<double>();
   work.stats.seconds_check = j.at("seconds_check").get<double>();
   return work;

@@ -69,6 +69,30 @@ class ZoneWorker {
   void zone_states(TetId t, Visit&& visit);
   // Marks the pending zone vertices of tet t blocked: not final after this round.
   void block_pending(TetId t);
+  // The wall (docs/certificate.md, Lemma 5). A window vertex that is not a zone vertex
+  // is *beyond* when its label is past the segment's (label_end on) and it lies in the
+  // strip's window; every other one (an earlier label, another strip's point, a held
+  // point outside the strip's window) is a *wall* vertex. Once every tet of the zone
+  // vertices' stars that has a wall vertex, and every hull facet among them, is
+  // certified, a finite tet of a zone vertex's star without a wall vertex is Delaunay
+  // as soon as its clipped ball ends before the key of label_end: the certified tets
+  // wall the zone off from every missing point its ball could hold on the other sides.
+  bool wall_vertex(VertexId v) const { return zone_of_[v] == kNoZone && !beyond_[v]; }
+  bool touches_wall(TetId t) const {
+    for (int i = 0; i < 4; ++i) {
+      const VertexId v = dt_.vertex(t, i);
+      if (v != core::kInfiniteVertex && wall_vertex(v)) return true;
+    }
+    return false;
+  }
+  // Whether tet t's certificate is settled: a query proved it, or it leaned on the wall
+  // in an earlier round whose wall held (proved_empty_'s marks).
+  bool proved(TetId t) const {
+    const std::uint8_t m = proved_empty_[t];
+    return m == kProved || m == kRanged || (m >= kLeaned && m - kLeaned < stats_.rounds - 1 && wall_held_[m - kLeaned]);
+  }
+  // Classifies window vertices [first, end) beyond the zone or not (beyond_).
+  void mark_beyond(VertexId first, VertexId end);
   bool check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs);
   // Zone index of local vertex v (its label minus label_begin), or -1 outside the zone
   // (outside the segment's labels, or in another worker's strip). One 4-byte load:
@@ -80,7 +104,16 @@ class ZoneWorker {
   }
 
   static constexpr std::uint32_t kNoZone = 0xFFFFFFFFu;
-  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2;
+  // kLeans: pending, and final after this round if the wall holds. kAside: leaned on a
+  // wall that broke; checked again once no other zone vertex is pending (a wall breaks
+  // in most rounds before the last, and checking such a star again every round cost
+  // more than the queries it saved).
+  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2, kLeans = 3, kAside = 4;
+  // proved_empty_'s marks: kProved by a query, kRanged by the range test (so that a
+  // star checked again in a later round computes no ball twice); kLeaned + r: leaned on
+  // the wall in round r + 1 (rounds past kLeanRounds query instead).
+  static constexpr std::uint8_t kProved = 1, kRanged = 2, kLeaned = 3;
+  static constexpr std::uint64_t kLeanRounds = 250;
 
   const SortedView& view_;
   OutputPool* const pool_;
@@ -100,14 +133,18 @@ class ZoneWorker {
   std::vector<VertexId> zone_vertex_;  // by zone index: the local vertex (kNoVertex: another strip's)
   std::vector<VertexId> pending_;      // the zone vertices still pending after a round
   std::vector<TetId> star_;            // scratch for a pending vertex's star
-  // By tet slot: 1 when a query proved the tet empty. A tet proved empty stays in its
-  // slot for the rest of the zone: no missing point is in its ball (or beyond its
-  // hull facet), and the repairs insert only missing points, so it is never in a
+  // By tet slot: how the tet was certified (kProved, kRanged, kLeaned + round; 0: not
+  // yet). A certified tet stays in its slot for the rest of the zone: no missing point
+  // is in its ball (or beyond its hull facet), and the repairs insert only missing points, so it is never in a
   // repair's cavity and its slot is never freed and reused. One byte a slot, where a
   // table keyed by the vertices took 32-64 bytes an entry and, on a surface (about 4
   // entries a window point on `gen --dist hills`), took a zone past its share of the
   // budget.
   std::vector<std::uint8_t> proved_empty_;
+  std::vector<std::uint8_t> beyond_;     // by local vertex: 1 for a beyond vertex (see wall_vertex)
+  double wall_key_ = 0;                  // the key of label_end (infinite for the last label)
+  bool wall_broken_ = false;             // this round: a wall tet or hull facet not certified
+  std::vector<std::uint8_t> wall_held_;  // by round - 1: whether its wall held
   // The most entries queued_ holds, from the window's size (run()): on a surface nearly
   // every tet fails the range test (10-25 a point on `gen --dist hills`), and an
   // unbounded queue of 72-byte entries was, with the table above, what took hills
@@ -121,6 +158,7 @@ class ZoneWorker {
   struct RoundWork {
     std::uint64_t checked = 0, queued = 0, queries = 0, conflicts = 0;
     double seconds_range = 0, seconds_queries = 0;
+    bool wall_held = false;
   };
   RoundWork round_;
 };
@@ -180,9 +218,26 @@ void ZoneWorker::load_window(bool with_hull) {
 
 bool ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   ++round_.checked;
-  if (dt_.is_infinite(t)) return check_hull_facet(t, repairs);
+  if (dt_.is_infinite(t)) {
+    const bool certified = check_hull_facet(t, repairs);
+    wall_broken_ |= !certified;
+    return certified;
+  }
+  if (proved(t)) return true;
   QueuedTet q{certificate_.range_test(dt_, t), t};
-  if (q.range.clears()) return true;
+  if (q.range.clears()) {
+    proved_empty_[t] = kRanged;
+    return true;
+  }
+  // The wall: the tet is final with this round's if every wall tet and hull facet of
+  // the zone's stars is certified in it (checked when the round ends).
+  if (q.range.bounded && q.range.hi < wall_key_ && stats_.rounds <= kLeanRounds && !touches_wall(t)) {
+    proved_empty_[t] = std::uint8_t(kLeaned + stats_.rounds - 1);
+    zone_states(t, [](std::uint8_t& state) {
+      if (state == kPending) state = kLeans;
+    });
+    return true;
+  }
   ++stats_.range_failures;
   queued_.push_back(q);
   if (queued_.size() >= queue_cap_) run_queued_queries(repairs);
@@ -192,10 +247,10 @@ bool ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
 bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs) {
   // A tet proved empty stays empty, and in its slot, for the rest of the zone: later
   // repairs insert only points that were missing, and none of those is in its ball.
-  if (proved_empty_[q.tet]) return true;
+  if (proved(q.tet)) return true;
   const std::uint64_t deepest = certificate_.query(dt_, q.tet, q.range, stats_);
   if (deepest == Certificate::kNone) {
-    proved_empty_[q.tet] = 1;
+    proved_empty_[q.tet] = kProved;
     return true;
   }
   repairs.push_back(deepest);
@@ -214,10 +269,10 @@ bool ZoneWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs) 
   // on the facet's plane, that the query would test one by one.
   if (certificate_.is_global_hull_facet(dt_, t)) return true;
   ++stats_.range_failures;
-  if (proved_empty_[t]) return true;
+  if (proved(t)) return true;
   const std::uint64_t nearest = certificate_.hull_facet_query(dt_, t, stats_);
   if (nearest == Certificate::kNone) {
-    proved_empty_[t] = 1;
+    proved_empty_[t] = kProved;
     return true;
   }
   repairs.push_back(nearest);
@@ -273,13 +328,25 @@ std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
   run_queued_queries(repairs);
   round_.seconds_range = since(t0) - round_.seconds_queries;
   round_.queries = stats_.queries - queries_before;
+  wall_held_.push_back(!wall_broken_);
+  round_.wall_held = !wall_broken_;
   pending_.clear();
+  std::size_t aside = 0;
   for (std::size_t z = 0; z < zone_state_.size(); ++z) {
     std::uint8_t& state = zone_state_[z];
-    if (state == kPending)
+    if (state == kPending || (state == kLeans && !wall_broken_)) {
       state = kDone;
-    else if (state == kBlocked)
+    } else if (state == kLeans) {
+      state = kAside, ++stats_.wall_retries;
+    } else if (state == kBlocked) {
       state = kPending, pending_.push_back(zone_vertex_[z]);
+    }
+    aside += state == kAside;
+  }
+  wall_broken_ = false;
+  if (pending_.empty() && aside != 0) {
+    for (std::size_t z = 0; z < zone_state_.size(); ++z)
+      if (zone_state_[z] == kAside) zone_state_[z] = kPending, pending_.push_back(zone_vertex_[z]);
   }
   return pending_.size();
 }
@@ -300,15 +367,26 @@ void ZoneWorker::run_queued_queries(std::vector<std::uint64_t>& repairs) {
   constexpr std::uint64_t kDeferRounds = 2;
   auto blocks_nothing_new = [&](TetId t) {
     bool pending = false;
-    zone_states(t, [&](std::uint8_t state) { pending |= state == kPending; });
+    zone_states(t, [&](std::uint8_t state) { pending |= state == kPending || state == kLeans; });
     return !pending;
   };
+  // A wall tet left unproved this round (waiting, or in conflict) breaks the wall.
   for (const QueuedTet& q : queued_) {
-    if (stats_.rounds <= kDeferRounds && blocks_nothing_new(q.tet)) continue;
-    if (!query_tet(q, repairs)) block_pending(q.tet), ++round_.conflicts;
+    if (stats_.rounds <= kDeferRounds && blocks_nothing_new(q.tet)) {
+      wall_broken_ |= touches_wall(q.tet);
+      continue;
+    }
+    if (!query_tet(q, repairs)) block_pending(q.tet), ++round_.conflicts, wall_broken_ |= touches_wall(q.tet);
   }
   queued_.clear();
   round_.seconds_queries += since(t0);
+}
+
+void ZoneWorker::mark_beyond(VertexId first, VertexId end) {
+  beyond_.resize(end, 0);
+  for (VertexId v = first; v < end; ++v)
+    beyond_[v] = zone_of_[v] == kNoZone && labels_[v] >= plan_->label_end &&
+                 certificate_.in_strip_window(&xyz_[3 * std::size_t(v)]);
 }
 
 // Minimum vertex filter, once every zone vertex is final: each finite tet whose
@@ -342,7 +420,12 @@ void ZoneWorker::emit(ZoneTets& out) {
     }
     const std::uint32_t z = zone_of_[m];
     owner[t] = z;
-    if (z != kNoZone) ++bucket_start[(z >> shift) + 1], stats_.tets_by_query += proved_empty_[t];
+    if (z != kNoZone) {
+      ++bucket_start[(z >> shift) + 1];
+      const std::uint8_t mark = proved_empty_[t];
+      stats_.tets_by_query += mark == kProved;
+      stats_.tets_by_wall += mark >= kLeaned && wall_held_[mark - kLeaned];
+    }
   }
   for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
   const std::size_t total = bucket_start[buckets];
@@ -410,6 +493,9 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   // eighth of a queue entry (9 bytes) and the memo's byte for each of its ~7 tet slots.
   queue_cap_ = std::max<std::size_t>(256, labels_.size() / 8);
   proved_empty_.assign(dt_.num_tet_slots(), 0);
+  wall_held_.clear();
+  wall_broken_ = false;
+  wall_key_ = plan_->label_end < view_.count ? view_.key(plan_->label_end) : std::numeric_limits<double>::infinity();
 
   t0 = Clock::now();
   // The zone vertices: the window's points with a label in the segment's zone and,
@@ -437,6 +523,7 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
     zone_vertex_[z] = v;
     zone_state_[z] = kPending;
   }
+  mark_beyond(0, VertexId(labels_.size()));
   std::vector<std::uint64_t> repairs;
   // (round: its work as check_round counted it; inserted, seconds: the repairs after it.
   // A zone that is its whole segment spans (-inf, inf) across.)
@@ -445,9 +532,10 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   auto log_round = [&](std::size_t inserted, double seconds) {
     spdlog::debug(
         "zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
-        "({} found a conflict, {:.3f} s), {} repair points inserted ({:.3f} s)",
+        "({} found a conflict, {:.3f} s), wall {}, {} repair points inserted ({:.3f} s)",
         plan_->label_begin, plan_->label_end, strip_lo, strip_hi, stats_.rounds, round_.checked, round_.seconds_range,
-        round_.queued, round_.queries, round_.conflicts, round_.seconds_queries, inserted, seconds);
+        round_.queued, round_.queries, round_.conflicts, round_.seconds_queries, round_.wall_held ? "held" : "broken",
+        inserted, seconds);
   };
   for (;;) {
     ++stats_.rounds;
@@ -469,6 +557,7 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
       held_.insert(std::upper_bound(held_.begin(), held_.end(), label), label);
     }
     zone_of_.resize(labels_.size(), kNoZone);  // repair points are never zone points
+    mark_beyond(VertexId(old_n), VertexId(labels_.size()));
     dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
     proved_empty_.resize(dt_.num_tet_slots(), 0);  // new slots; a reused one was never proved
