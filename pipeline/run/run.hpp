@@ -74,8 +74,9 @@ struct RunSummary {
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
   std::uint64_t query_points = 0;   // exact conflict tests the queries made
   std::uint64_t tets_by_query = 0;  // tets whose certificate was an emptiness query
-  std::uint64_t tets_by_wall = 0;   // tets certified by the wall (the rest: by the range test)
-  std::uint64_t wall_retries = 0;   // zone vertices that leaned on a wall that broke, checked again
+  std::uint64_t tets_by_wall = 0;   // tets certified by the wall
+  std::uint64_t tets_by_rim = 0;    // tets certified by the rim (the rest: by the range test)
+  std::uint64_t wall_retries = 0;   // zone vertices that leaned on a wall or rim that broke, checked again
   // 2 MiB regions of the sorted file that the queries' reads mapped and that were
   // handed back to keep them within their share of the budget (this process's)
   std::uint64_t query_region_releases = 0;

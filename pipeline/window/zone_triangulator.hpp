@@ -36,7 +36,8 @@ struct SegmentStats {
   std::uint64_t rounds = 0;                     // check/repair rounds
   std::uint64_t tets = 0;                       // tets emitted
   std::uint64_t tets_by_query = 0;              // of those, certified by a query
-  std::uint64_t tets_by_wall = 0;               // of those, by the wall (the rest: by the range test)
+  std::uint64_t tets_by_wall = 0;               // of those, by the wall
+  std::uint64_t tets_by_rim = 0;                // of those, by the rim (the rest: by the range test)
   std::uint64_t wall_retries = 0;               // zone vertices that leaned on a wall that broke: checked again
   std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
@@ -47,7 +48,8 @@ struct SegmentStats {
     segment_buffer_points += o.segment_buffer_points, zone_buffer_points += o.zone_buffer_points;
     hull_points += o.hull_points;
     queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
-    tets_by_query += o.tets_by_query, tets_by_wall += o.tets_by_wall, wall_retries += o.wall_retries;
+    tets_by_query += o.tets_by_query, tets_by_wall += o.tets_by_wall, tets_by_rim += o.tets_by_rim,
+        wall_retries += o.wall_retries;
     kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
     return *this;
   }
