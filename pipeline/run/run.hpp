@@ -76,7 +76,7 @@ struct RunSummary {
   std::uint64_t tets_by_query = 0;  // tets whose certificate was an emptiness query
   std::uint64_t tets_by_wall = 0;   // tets certified by the wall
   std::uint64_t tets_by_rim = 0;    // tets certified by the rim (the rest: by the range test)
-  std::uint64_t wall_retries = 0;   // zone vertices that leaned on a wall or rim that broke, checked again
+  std::uint64_t rim_rechecks = 0;   // rim tets left unproved by a round, checked again in the next
   // 2 MiB regions of the sorted file that the queries' reads mapped and that were
   // handed back to keep them within their share of the budget (this process's)
   std::uint64_t query_region_releases = 0;

@@ -42,7 +42,7 @@ constexpr Counter kCounters[] = {
     {"tets_by_query", &SegmentStats::tets_by_query, &RunSummary::tets_by_query},
     {"tets_by_wall", &SegmentStats::tets_by_wall, &RunSummary::tets_by_wall, true},
     {"tets_by_rim", &SegmentStats::tets_by_rim, &RunSummary::tets_by_rim, true},
-    {"wall_retries", &SegmentStats::wall_retries, &RunSummary::wall_retries, true},
+    {"rim_rechecks", &SegmentStats::rim_rechecks, &RunSummary::rim_rechecks, true},
 };
 
 // The points section from the sorted file's records, in label order, in the header's

@@ -33,7 +33,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
                         {"by_query", s.tets_by_query},
                         {"by_wall", s.tets_by_wall},
                         {"by_rim", s.tets_by_rim}}},
-                      {"wall_retries", s.wall_retries},
+                      {"rim_rechecks", s.rim_rechecks},
                       {"output_bytes", s.output_bytes},
                       {"disk_planned_bytes", s.disk_planned_bytes},
                       {"disk_peak_bytes", s.disk_peak_bytes},

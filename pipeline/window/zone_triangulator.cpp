@@ -37,16 +37,13 @@ class ZoneWorker {
   // `with_hull`, also the global hull's vertices (only for a window too flat for a
   // triangulation of its own).
   void load_window(bool with_hull);
-  // One round: marks the pending zone vertices whose stars hold a tet that is not
-  // certified (collecting repair points), declares the others final, and returns how
-  // many zone vertices remain pending.
+  // One round: checks the rim tets not yet certified (collecting repair points) and
+  // returns how many it left unproved (0: the rim holds, every zone vertex is final).
   std::size_t check_round(std::vector<std::uint64_t>& repairs);
   void emit(ZoneTets& out);
-  // Tet t's range test (a hull facet's is followed by its query at once, or a memo of
-  // an earlier one). A finite tet that fails it goes to queued_, and query_tet()
-  // settles it once the round has queued all of them. False: t is not certified, and
-  // the repair point is pushed.
-  bool check_tet(TetId t, std::vector<std::uint64_t>& repairs);
+  // Rim tet t's certificate: the range test, the wall, or a query (queued_; a hull
+  // facet's runs at once). One left unproved goes to recheck_next_.
+  void check_tet(TetId t, std::vector<std::uint64_t>& repairs);
   // A round's finite tets that failed the range test, by the low end of their extent
   // along the sort axis: queried in that order, they read the file from one end to
   // the other. Each keeps the ball and extent of its range test: on a surface nearly
@@ -64,11 +61,11 @@ class ZoneWorker {
   // Runs the queued tets' queries (along the sort axis) and empties the queue: at the
   // end of a round's range tests, and whenever the queue reaches queue_cap_.
   void run_queued_queries(std::vector<std::uint64_t>& repairs);
-  // Calls visit(state) for the zone state of each of tet t's vertices in this zone.
-  template <class Visit>
-  void zone_states(TetId t, Visit&& visit);
-  // Marks the pending zone vertices of tet t blocked: not final after this round.
-  void block_pending(TetId t);
+  // The first two rounds' waiting rule: a conflict blocks its tet's zone vertices for
+  // the round (blocked_round_), and a queued tet whose zone vertices are all blocked
+  // waits for the next round.
+  void block_zone_vertices(TetId t);
+  bool all_zone_vertices_blocked(TetId t) const;
   // The rim and the wall (docs/certificate.md, Lemmas 5 and 6). A window vertex that
   // is not a zone vertex is *beyond* when its label is past the segment's (label_end
   // on) and it lies in the strip's window; every other one (an earlier label, another
@@ -94,17 +91,12 @@ class ZoneWorker {
     return zone_only ? TetKind::kInterior : TetKind::kBeyond;
   }
   // Whether tet t's certificate is settled: a query or the range test proved it, or it
-  // leaned on the wall or the rim in an earlier round in which that held (proved_empty_'s
-  // marks).
+  // leaned on the wall in an earlier round whose wall held (proved_empty_'s marks).
   bool proved(TetId t) const {
     const std::uint8_t m = proved_empty_[t];
     if (m == kProved || m == kRanged) return true;
-    const std::uint64_t done = stats_.rounds - 1;  // rounds whose held_ is known
-    if (m >= kLeanedInterior) return std::uint64_t(m - kLeanedInterior) < done && rim_held_[m - kLeanedInterior];
-    return m >= kLeaned && std::uint64_t(m - kLeaned) < done && wall_held_[m - kLeaned];
+    return m >= kLeaned && std::uint64_t(m - kLeaned) < stats_.rounds - 1 && wall_held_[m - kLeaned];
   }
-  // Tet t leans on the wall (`state` kLeans) or the rim (kLeansRim) in this round.
-  void lean(TetId t, std::uint8_t mark, std::uint8_t state);
   // Classifies window vertices [first, end) beyond the zone or not (beyond_).
   void mark_beyond(VertexId first, VertexId end);
   bool check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs);
@@ -118,17 +110,11 @@ class ZoneWorker {
   }
 
   static constexpr std::uint32_t kNoZone = 0xFFFFFFFFu;
-  // kLeans, kLeansRim: pending, and final after this round if the wall (the rim) holds.
-  // kAside: leaned on a wall or rim that broke; checked again once no other zone vertex
-  // is pending (one breaks in most rounds before the last, and checking such a star
-  // again every round cost more than the queries it saved).
-  static constexpr std::uint8_t kDone = 0, kPending = 1, kBlocked = 2, kLeans = 3, kLeansRim = 4, kAside = 5;
-  // proved_empty_'s marks: kProved by a query, kRanged by the range test (so that a
-  // star checked again in a later round computes no ball twice); kLeaned + r,
-  // kLeanedInterior + r: leaned on the wall, the rim, in round r + 1 (past kLeanRounds
-  // rounds the tets are checked as before the wall).
-  static constexpr std::uint64_t kLeanRounds = 126;
-  static constexpr std::uint8_t kProved = 1, kRanged = 2, kLeaned = 3, kLeanedInterior = kLeaned + kLeanRounds;
+  // proved_empty_'s marks: kProved by a query, kRanged by the range test (a tet checked
+  // again computes no ball twice); kLeaned + r: leaned on the wall in round r + 1 (past
+  // kLeanRounds rounds the tets are queried instead).
+  static constexpr std::uint64_t kLeanRounds = 250;
+  static constexpr std::uint8_t kProved = 1, kRanged = 2, kLeaned = 3;
 
   const SortedView& view_;
   OutputPool* const pool_;
@@ -141,14 +127,19 @@ class ZoneWorker {
   std::vector<std::size_t> hull_extra_;  // load_window's scratch
   std::vector<std::uint64_t> held_;      // labels outside the window range held anyway (hull, repairs), sorted
   std::vector<QueuedTet> queued_;
-  std::vector<std::uint32_t> zone_of_;  // by local vertex: zone index or kNoZone
-  // Per zone vertex (by zone index): kPending until it is final and its tets
-  // are emitted, then kDone.
-  std::vector<std::uint8_t> zone_state_;
-  std::vector<VertexId> zone_vertex_;  // by zone index: the local vertex (kNoVertex: another strip's)
-  std::vector<VertexId> pending_;      // the zone vertices still pending after a round
-  std::size_t zone_points_ = 0;        // the zone vertices of this window
-  std::vector<TetId> star_;            // scratch for a pending vertex's star
+  std::vector<std::uint32_t> zone_of_;        // by local vertex: zone index or kNoZone
+  std::vector<std::uint32_t> blocked_round_;  // by zone index: the round a conflict blocked it in
+  // The rim tets left unproved by the last round (checked again in this one: a slot
+  // reused since holds another tet, checked if it is on the rim), and this round's.
+  std::vector<TetId> recheck_, recheck_next_;
+  std::vector<TetId> leaned_;  // this round's tets that leaned on the wall
+  // Rim tets met in a round's repair stars whose zone vertices no conflict blocked in
+  // the round before: checked once a round inserts no repair point (their stars have
+  // settled: checked at once, most were destroyed by later repairs on a surface).
+  std::vector<TetId> deferred_;
+  VertexId repairs_from_ = 0;  // the local ids of the last round's repair points start here
+  bool force_ = false;         // a round after one that left tets unproved without a repair: no waiting
+  std::vector<TetId> star_;    // scratch for a repair point's star
   // By tet slot: how the tet was certified (kProved, kRanged, kLeaned + round; 0: not
   // yet). A certified tet stays in its slot for the rest of the zone: no missing point
   // is in its ball (or beyond its hull facet), and the repairs insert only missing points, so it is never in a
@@ -157,12 +148,10 @@ class ZoneWorker {
   // entries a window point on `gen --dist hills`), took a zone past its share of the
   // budget.
   std::vector<std::uint8_t> proved_empty_;
-  std::vector<std::uint8_t> beyond_;  // by local vertex: 1 for a beyond vertex (see wall_vertex)
-  double wall_key_ = 0;               // the key of label_end (infinite for the last label)
-  // This round: a wall tet or hull facet not certified (the wall broke); a rim tet not
-  // certified (the rim broke: also when the wall did).
-  bool wall_broken_ = false, rim_broken_ = false;
-  std::vector<std::uint8_t> wall_held_, rim_held_;  // by round - 1
+  std::vector<std::uint8_t> beyond_;     // by local vertex: 1 for a beyond vertex (see wall_vertex)
+  double wall_key_ = 0;                  // the key of label_end (infinite for the last label)
+  bool wall_broken_ = false;             // this round: a wall tet or hull facet not certified
+  std::vector<std::uint8_t> wall_held_;  // by round - 1
   // The most entries queued_ holds, from the window's size (run()): on a surface nearly
   // every tet fails the range test (10-25 a point on `gen --dist hills`), and an
   // unbounded queue of 72-byte entries was, with the table above, what took hills
@@ -174,9 +163,9 @@ class ZoneWorker {
   // facets', which run with the range tests and count in their seconds); conflicts:
   // queued tets a missing point was found in.
   struct RoundWork {
-    std::uint64_t checked = 0, queued = 0, queries = 0, conflicts = 0;
+    std::uint64_t checked = 0, queued = 0, queries = 0, conflicts = 0, unproved = 0;
     double seconds_range = 0, seconds_queries = 0;
-    bool wall_held = false, rim_held = false;
+    bool wall_held = false;
   };
   RoundWork round_;
 };
@@ -234,40 +223,32 @@ void ZoneWorker::load_window(bool with_hull) {
   stats_.window_points = total;
 }
 
-bool ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
+// Tet t of the rim (a zone vertex and another: finite, or a hull facet): its range
+// test, then the wall, or the queue (a hull facet's query runs at once). One left
+// unproved in this round (in conflict, waiting, or leaning on a wall that broke) is
+// checked again in the next.
+void ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
   ++round_.checked;
   if (dt_.is_infinite(t)) {
-    const bool certified = check_hull_facet(t, repairs);
-    wall_broken_ |= !certified;
-    return certified;
+    if (!check_hull_facet(t, repairs)) wall_broken_ = true, block_zone_vertices(t), recheck_next_.push_back(t);
+    return;
   }
-  if (proved(t)) return true;
-  // The rim and the wall: the tet is certified with this round if the rim (the wall)
-  // holds in it, which the end of the round tells. A tet of zone vertices alone leans on
-  // the rim without its range test: on a surface most of them fail it, and their balls
-  // (flat tets: the exact fallback) were a seventh of the run; on uniform points the
-  // rim breaks in the first round and the zone's vertices are checked again, by one
-  // scan, at its end (measured: no slower than the range test first, terrain 1.2-1.3x
-  // faster).
-  const bool lean_rounds = stats_.rounds <= kLeanRounds;
-  const TetKind k = kind(t);
-  if (k == TetKind::kInterior && lean_rounds) {
-    lean(t, std::uint8_t(kLeanedInterior + stats_.rounds - 1), kLeansRim);
-    return true;
-  }
+  if (proved(t)) return;
   QueuedTet q{certificate_.range_test(dt_, t), t};
   if (q.range.clears()) {
     proved_empty_[t] = kRanged;
-    return true;
+    return;
   }
-  if (k == TetKind::kBeyond && lean_rounds && q.range.bounded && q.range.hi < wall_key_) {
-    lean(t, std::uint8_t(kLeaned + stats_.rounds - 1), kLeans);
-    return true;
+  // The wall: certified with this round if the wall holds in it (the round's end tells).
+  if (!force_ && stats_.rounds <= kLeanRounds && kind(t) == TetKind::kBeyond && q.range.bounded &&
+      q.range.hi < wall_key_) {
+    proved_empty_[t] = std::uint8_t(kLeaned + stats_.rounds - 1);
+    leaned_.push_back(t);
+    return;
   }
   ++stats_.range_failures;
   queued_.push_back(q);
   if (queued_.size() >= queue_cap_) run_queued_queries(repairs);
-  return true;
 }
 
 bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repairs) {
@@ -305,124 +286,108 @@ bool ZoneWorker::check_hull_facet(TetId t, std::vector<std::uint64_t>& repairs) 
   return false;
 }
 
-// The states of tet t's vertices in this zone (other vertices have none).
-template <class Visit>
-void ZoneWorker::zone_states(TetId t, Visit&& visit) {
+void ZoneWorker::block_zone_vertices(TetId t) {
   for (int i = 0; i < 4; ++i) {
     const VertexId v = dt_.vertex(t, i);
-    if (v == core::kInfiniteVertex) continue;
-    const std::int64_t z = zone_index(v);
-    if (z >= 0) visit(zone_state_[std::size_t(z)]);
+    if (v != core::kInfiniteVertex && zone_of_[v] != kNoZone)
+      blocked_round_[zone_of_[v]] = std::uint32_t(stats_.rounds);
   }
 }
 
-void ZoneWorker::block_pending(TetId t) {
-  zone_states(t, [](std::uint8_t& state) {
-    if (state != kDone) state = kBlocked;
-  });
+bool ZoneWorker::all_zone_vertices_blocked(TetId t) const {
+  for (int i = 0; i < 4; ++i) {
+    const VertexId v = dt_.vertex(t, i);
+    if (v != core::kInfiniteVertex && zone_of_[v] != kNoZone && blocked_round_[zone_of_[v]] != stats_.rounds)
+      return false;
+  }
+  return true;
 }
 
-// A zone vertex is final when no tet incident to it is unsafe. The first round, with
-// every zone vertex pending, scans the tet array in memory order (a tet belongs to
-// the star of each of its vertices, so one pass marks the blocked vertices), and so
-// does a round with more than a quarter of them pending (those that leaned on a rim
-// that broke, checked again at the end: on uniform points nearly all); other rounds,
-// with few vertices left, walk the stars of those alone. A final vertex's
-// star never changes again (no later repair point lies in any of its tets' balls),
-// so its tets can be emitted after the last round.
+// A round checks the rim tets not yet certified: in the first, every rim tet (one scan
+// of the tet array in memory order); in later ones, those left unproved by the round
+// before and the new ones, every one of which is in the star of a point that round's
+// repairs inserted (an insertion's new tets all have the new point). The tets of zone
+// vertices alone are never checked: when a round leaves no rim tet unproved, the rim
+// holds and they are all Delaunay (Lemma 6), and so every zone vertex is final.
 std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
   round_ = RoundWork{};
   const std::uint64_t queries_before = stats_.queries;
   const auto t0 = Clock::now();
-  if (stats_.rounds == 1 || 4 * pending_.size() > zone_points_) {
-    const std::size_t slots = dt_.num_tet_slots();
-    for (std::size_t t = 0; t < slots; ++t) {
-      if (!dt_.is_alive(TetId(t))) continue;
-      bool touches_pending = false;
-      for (int i = 0; i < 4; ++i) {
-        const VertexId v = dt_.vertex(TetId(t), i);
-        touches_pending |= v != core::kInfiniteVertex && zone_of_[v] != kNoZone && zone_state_[zone_of_[v]] != kDone;
-      }
-      if (touches_pending && !check_tet(TetId(t), repairs)) block_pending(TetId(t));
+  recheck_next_.clear();
+  leaned_.clear();
+  auto visit = [&](TetId t) {
+    if (!dt_.is_alive(t)) return;
+    bool zone = false, other = false;
+    for (int i = 0; i < 4; ++i) {
+      const VertexId v = dt_.vertex(t, i);
+      const bool z = v != core::kInfiniteVertex && zone_of_[v] != kNoZone;
+      zone |= z, other |= !z;
     }
+    if (zone && other) check_tet(t, repairs);
+  };
+  if (stats_.rounds == 1) {
+    const std::size_t slots = dt_.num_tet_slots();
+    for (std::size_t t = 0; t < slots; ++t) visit(TetId(t));
+  } else if (repairs_from_ == VertexId(labels_.size())) {
+    // No repair point last round: the deferred tets' turn.
+    for (TetId t : recheck_) visit(t);
+    for (TetId t : deferred_) visit(t);
+    deferred_.clear();
   } else {
-    for (VertexId v : pending_) {
+    for (TetId t : recheck_) visit(t);
+    const std::uint32_t last = std::uint32_t(stats_.rounds - 1);
+    auto blocked_last_round = [&](TetId t) {
+      for (int i = 0; i < 4; ++i) {
+        const VertexId v = dt_.vertex(t, i);
+        if (v != core::kInfiniteVertex && zone_of_[v] != kNoZone && blocked_round_[zone_of_[v]] == last) return true;
+      }
+      return false;
+    };
+    for (VertexId v = repairs_from_; v < VertexId(labels_.size()); ++v) {
       star_.clear();
       dt_.star(v, star_);
-      for (TetId t : star_)
-        if (!check_tet(t, repairs)) block_pending(t);
+      for (TetId t : star_) {
+        if (blocked_last_round(t))
+          visit(t);
+        else
+          deferred_.push_back(t);
+      }
     }
   }
   run_queued_queries(repairs);
   round_.seconds_range = since(t0) - round_.seconds_queries;
   round_.queries = stats_.queries - queries_before;
-  rim_broken_ |= wall_broken_;
   wall_held_.push_back(!wall_broken_);
-  rim_held_.push_back(!rim_broken_);
-  round_.wall_held = !wall_broken_, round_.rim_held = !rim_broken_;
-  pending_.clear();
-  std::size_t aside = 0;
-  for (std::size_t z = 0; z < zone_state_.size(); ++z) {
-    std::uint8_t& state = zone_state_[z];
-    if (state == kPending || (state == kLeans && !wall_broken_) || (state == kLeansRim && !rim_broken_)) {
-      state = kDone;
-    } else if (state == kLeans || state == kLeansRim) {
-      state = kAside, ++stats_.wall_retries;
-    } else if (state == kBlocked) {
-      state = kPending, pending_.push_back(zone_vertex_[z]);
-    }
-    aside += state == kAside;
-  }
-  wall_broken_ = rim_broken_ = false;
-  if (pending_.empty() && aside != 0) {
-    for (std::size_t z = 0; z < zone_state_.size(); ++z)
-      if (zone_state_[z] == kAside) zone_state_[z] = kPending, pending_.push_back(zone_vertex_[z]);
-  }
-  return pending_.size();
+  round_.wall_held = !wall_broken_;
+  if (wall_broken_) recheck_next_.insert(recheck_next_.end(), leaned_.begin(), leaned_.end());
+  wall_broken_ = false;
+  recheck_.swap(recheck_next_);
+  round_.unproved = recheck_.size();
+  stats_.rim_rechecks += recheck_.size();
+  return recheck_.size() + deferred_.size();
 }
 
 void ZoneWorker::run_queued_queries(std::vector<std::uint64_t>& repairs) {
   const auto t0 = Clock::now();
-  // The queries, along the sort axis (a tet of several pending stars once).
+  // The queries, along the sort axis (a tet met twice once).
   std::sort(queued_.begin(), queued_.end());
   queued_.erase(std::unique(queued_.begin(), queued_.end()), queued_.end());
   round_.queued += queued_.size();
   // In the first two rounds, a tet whose zone vertices a conflict has already blocked
-  // in this round waits: its vertices stay pending, so the next round checks it again
-  // if the repairs leave it (near the window's ragged edge they often do not). No
-  // vertex becomes final with a tet of its star unchecked. On surfaces this saves
-  // queries of tets the first round's repairs remove. Not in later rounds: there a
-  // zone's last few conflicts would then be repaired one a round, and each round
-  // checks the remaining stars' range tests again.
+  // in this round waits for the next round: near the window's ragged edge the repairs
+  // often remove it. Not in later rounds: there a zone's last few conflicts would then
+  // be repaired one a round. A rim tet left unproved (waiting, or in conflict) is
+  // checked again next round; one with a wall vertex breaks the wall.
   constexpr std::uint64_t kDeferRounds = 2;
-  auto blocks_nothing_new = [&](TetId t) {
-    bool pending = false;
-    zone_states(t, [&](std::uint8_t state) { pending |= state == kPending || state == kLeans || state == kLeansRim; });
-    return !pending;
-  };
-  // A rim tet left unproved this round (waiting, or in conflict) breaks the rim, and the
-  // wall when it has a wall vertex. (Every queued tet is a rim tet.)
-  auto unproved = [&](TetId t) {
-    rim_broken_ = true;
-    wall_broken_ |= kind(t) == TetKind::kWall;
-  };
   for (const QueuedTet& q : queued_) {
-    if (stats_.rounds <= kDeferRounds && blocks_nothing_new(q.tet)) {
-      unproved(q.tet);
-      continue;
-    }
-    if (!query_tet(q, repairs)) block_pending(q.tet), ++round_.conflicts, unproved(q.tet);
+    const bool wait = !force_ && stats_.rounds <= kDeferRounds && all_zone_vertices_blocked(q.tet);
+    if (!wait && query_tet(q, repairs)) continue;
+    if (!wait) block_zone_vertices(q.tet), ++round_.conflicts;
+    wall_broken_ |= kind(q.tet) == TetKind::kWall;
+    recheck_next_.push_back(q.tet);
   }
   queued_.clear();
   round_.seconds_queries += since(t0);
-}
-
-void ZoneWorker::lean(TetId t, std::uint8_t mark, std::uint8_t leans) {
-  proved_empty_[t] = mark;
-  // A vertex leaning on the rim needs the wall too (the rim holds only if the wall does).
-  zone_states(t, [leans](std::uint8_t& state) {
-    if (state == kPending || (state == kLeans && leans == kLeansRim)) state = leans;
-  });
 }
 
 void ZoneWorker::mark_beyond(VertexId first, VertexId end) {
@@ -446,7 +411,7 @@ void ZoneWorker::mark_beyond(VertexId first, VertexId end) {
 // for the cache, is then ordered in place by its own counting sort.
 void ZoneWorker::emit(ZoneTets& out) {
   const std::size_t slots = dt_.num_tet_slots();
-  const std::size_t zone_size = zone_state_.size();
+  const std::size_t zone_size = blocked_round_.size();
   const int shift = std::max(0, int(std::bit_width(zone_size)) - 11);
   const std::size_t buckets = (zone_size >> shift) + 1;
   // Pass 1: each tet's owner (the zone index of its smallest label, or kNoZone),
@@ -465,10 +430,14 @@ void ZoneWorker::emit(ZoneTets& out) {
     owner[t] = z;
     if (z != kNoZone) {
       ++bucket_start[(z >> shift) + 1];
+      // How it was certified: four zone vertices, by the rim (never checked itself);
+      // otherwise by its mark (a query, the wall in a round it held, or the range test).
+      bool interior = true;
+      for (int i = 0; i < 4; ++i) interior &= zone_of_[dt_.vertex(TetId(t), i)] != kNoZone;
       const std::uint8_t mark = proved_empty_[t];
-      stats_.tets_by_query += mark == kProved;
-      stats_.tets_by_wall += mark >= kLeaned && mark < kLeanedInterior && wall_held_[mark - kLeaned];
-      stats_.tets_by_rim += mark >= kLeanedInterior && rim_held_[mark - kLeanedInterior];
+      stats_.tets_by_rim += interior;
+      stats_.tets_by_query += !interior && mark == kProved;
+      stats_.tets_by_wall += !interior && mark >= kLeaned && wall_held_[mark - kLeaned];
     }
   }
   for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
@@ -521,7 +490,10 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   zone_ = zone;
   certificate_.start_zone(plan, zone, held_);
   stats_ = SegmentStats{};
-  pending_.clear();
+  recheck_.clear();
+  deferred_.clear();
+  repairs_from_ = 0;
+  force_ = false;
   auto t0 = Clock::now();
   // A window is triangulated on its own points; its hull facets are checked like its
   // other tets. A window too flat for a triangulation (a slab of a planar region)
@@ -538,18 +510,15 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   queue_cap_ = std::max<std::size_t>(256, labels_.size() / 8);
   proved_empty_.assign(dt_.num_tet_slots(), 0);
   wall_held_.clear();
-  rim_held_.clear();
-  wall_broken_ = rim_broken_ = false;
+  wall_broken_ = false;
   wall_key_ = plan_->label_end < view_.count ? view_.key(plan_->label_end) : std::numeric_limits<double>::infinity();
 
   t0 = Clock::now();
   // The zone vertices: the window's points with a label in the segment's zone and,
   // with strips, a coordinate in this strip. Every other label of the zone is
-  // another strip's (kDone here from the start).
-  zone_state_.assign(plan_->label_end - plan_->label_begin, kDone);
-  zone_vertex_.assign(plan_->label_end - plan_->label_begin, core::kNoVertex);
+  // another strip's.
+  blocked_round_.assign(plan_->label_end - plan_->label_begin, 0);
   zone_of_.assign(labels_.size(), kNoZone);
-  zone_points_ = 0;
   for (VertexId v = 0; v < labels_.size(); ++v) {
     const std::uint64_t l = labels_[v];
     const bool in_strip = zone_.axis < 0 || (xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] >= zone_.lo &&
@@ -566,9 +535,6 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
     }
     const std::uint64_t z = l - plan_->label_begin;
     zone_of_[v] = std::uint32_t(z);
-    zone_vertex_[z] = v;
-    zone_state_[z] = kPending;
-    ++zone_points_;
   }
   mark_beyond(0, VertexId(labels_.size()));
   std::vector<std::uint64_t> repairs;
@@ -579,10 +545,10 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   auto log_round = [&](std::size_t inserted, double seconds) {
     spdlog::debug(
         "zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
-        "({} found a conflict, {:.3f} s), wall {}, rim {}, {} repair points inserted ({:.3f} s)",
+        "({} found a conflict, {:.3f} s), wall {}, {} rim tets left, {} repair points inserted ({:.3f} s)",
         plan_->label_begin, plan_->label_end, strip_lo, strip_hi, stats_.rounds, round_.checked, round_.seconds_range,
         round_.queued, round_.queries, round_.conflicts, round_.seconds_queries, round_.wall_held ? "held" : "broken",
-        round_.rim_held ? "held" : "broken", inserted, seconds);
+        round_.unproved, inserted, seconds);
   };
   for (;;) {
     ++stats_.rounds;
@@ -591,6 +557,9 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
       log_round(0, 0);
       break;
     }
+    // Tets left unproved without a repair (not expected: a wait or a broken wall comes
+    // with a conflict) are checked next round without waiting or leaning.
+    force_ = repairs.empty() && round_.unproved != 0;
     const auto t_insert = Clock::now();
     std::sort(repairs.begin(), repairs.end());
     repairs.erase(std::unique(repairs.begin(), repairs.end()), repairs.end());
@@ -607,6 +576,7 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
     mark_beyond(VertexId(old_n), VertexId(labels_.size()));
     dt_.set_points(xyz_.data(), labels_.data(), labels_.size());
     dt_.insert_range(VertexId(old_n), VertexId(labels_.size()));
+    repairs_from_ = VertexId(old_n);
     proved_empty_.resize(dt_.num_tet_slots(), 0);  // new slots; a reused one was never proved
     stats_.repair_points += repairs.size();
     log_round(repairs.size(), since(t_insert));

@@ -38,7 +38,7 @@ struct SegmentStats {
   std::uint64_t tets_by_query = 0;              // of those, certified by a query
   std::uint64_t tets_by_wall = 0;               // of those, by the wall
   std::uint64_t tets_by_rim = 0;                // of those, by the rim (the rest: by the range test)
-  std::uint64_t wall_retries = 0;               // zone vertices that leaned on a wall that broke: checked again
+  std::uint64_t rim_rechecks = 0;               // rim tets left unproved by a round, checked again
   std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
 
@@ -49,7 +49,7 @@ struct SegmentStats {
     hull_points += o.hull_points;
     queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
     tets_by_query += o.tets_by_query, tets_by_wall += o.tets_by_wall, tets_by_rim += o.tets_by_rim,
-        wall_retries += o.wall_retries;
+        rim_rechecks += o.rim_rechecks;
     kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
     return *this;
   }

@@ -124,7 +124,7 @@ TEST_F(PipelineTest, ZooManySegments) {
     // The rim (docs/certificate.md, Lemma 6) certifies tets, and breaks in some rounds,
     // whose vertices that leaned on it are checked again: both paths run.
     EXPECT_GT(s.tets_by_rim, 0u) << io::to_string(d);
-    EXPECT_GT(s.wall_retries, 0u) << io::to_string(d);
+    EXPECT_GT(s.rim_rechecks, 0u) << io::to_string(d);
     EXPECT_LE(s.tets_by_query + s.tets_by_wall + s.tets_by_rim, s.tets) << io::to_string(d);
   }
 }
