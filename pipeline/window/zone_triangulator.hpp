@@ -4,12 +4,14 @@
 // vertex filter that emits each tet once, grouped by its minimum label.
 //
 // A zone vertex is *final* when every tet of its star is certified. A round checks the
-// stars of the pending vertices; a query that finds missing points in a tet's ball
-// inserts the deepest one (a repair point), and the next round checks the vertices
-// left pending. A final vertex stays final: its tets' balls are empty of every point,
-// so no repair point lands in them (docs/certificate.md, "Invariants"). Then each
-// finite tet whose minimum label is a zone vertex is emitted: every tet exactly once
-// over the whole job.
+// zone's *rim* (its tets with a zone vertex and another vertex) where it is not yet
+// certified; a query that finds missing points in a tet's ball inserts the deepest one
+// (a repair point), and the next round checks the rim tets left and new. When a round
+// leaves none, the tets of zone vertices alone are Delaunay too, unchecked
+// (docs/certificate.md, Lemma 6), and every zone vertex is final. A certified tet stays:
+// its ball is empty of every point, so no repair point lands in it ("Invariants"). Then
+// each finite tet whose minimum label is a zone vertex is emitted: every tet exactly
+// once over the whole job.
 #include "core/delaunay.hpp"
 #include "pipeline/window/segment_plan.hpp"
 #include "pipeline/window/sorted_view.hpp"
