@@ -26,7 +26,7 @@ struct Counter {
   const char* name;
   std::uint64_t SegmentStats::*stat;
   std::uint64_t RunSummary::*summary;
-  bool since_wall = false;  // absent from the records of a job begun before the wall (read as 0)
+  bool may_be_absent = false;  // not in the records of a job begun before it was counted (read as 0)
 };
 constexpr Counter kCounters[] = {
     {"window_points", &SegmentStats::window_points, &RunSummary::window_points},
@@ -81,7 +81,7 @@ WrittenWork counters_from(const json& j) {
   WrittenWork work;
   work.segment_labels = j.at("zone_points").get<std::uint64_t>();
   for (const Counter& c : kCounters)
-    work.stats.*c.stat = c.since_wall && !j.contains(c.name) ? 0 : j.at(c.name).get<std::uint64_t>();
+    work.stats.*c.stat = c.may_be_absent && !j.contains(c.name) ? 0 : j.at(c.name).get<std::uint64_t>();
   work.stats.seconds_build = j.at("seconds_build").get<double>();
   work.stats.seconds_check = j.at("seconds_check").get<double>();
   return work;

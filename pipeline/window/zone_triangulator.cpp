@@ -43,7 +43,8 @@ class ZoneWorker {
   void emit(ZoneTets& out);
   // Rim tet t's certificate: the range test, the wall, or a query (queued_; a hull
   // facet's runs at once). One left unproved goes to recheck_next_.
-  void check_tet(TetId t, std::vector<std::uint64_t>& repairs);
+  enum class TetKind : std::uint8_t;
+  void check_tet(TetId t, TetKind kind, std::vector<std::uint64_t>& repairs);
   // A round's finite tets that failed the range test, by the low end of their extent
   // along the sort axis: queried in that order, they read the file from one end to
   // the other. Each keeps the ball and extent of its range test: on a surface nearly
@@ -65,7 +66,8 @@ class ZoneWorker {
   // the round (blocked_round_), and a queued tet whose zone vertices are all blocked
   // waits for the next round.
   void block_zone_vertices(TetId t);
-  bool all_zone_vertices_blocked(TetId t) const;
+  // Whether some zone vertex of t (with `every`: each one) was blocked in `round`.
+  bool zone_vertex_blocked(TetId t, std::uint64_t round, bool every) const;
   // The rim and the wall (docs/certificate.md, Lemmas 5 and 6). A window vertex that
   // is not a zone vertex is *beyond* when its label is past the segment's (label_end
   // on) and it lies in the strip's window; every other one (an earlier label, another
@@ -76,19 +78,20 @@ class ZoneWorker {
   // clipped ball ends before the key of label_end (Lemma 5); once it has certified
   // every rim tet (the rim holds), a tet of zone vertices alone is Delaunay whatever
   // its ball (Lemma 6): a missing point in its ball would be in the ball of a rim tet.
-  bool wall_vertex(VertexId v) const { return zone_of_[v] == kNoZone && !beyond_[v]; }
-  // kInterior: the tet's four vertices are zone vertices; else kWall when one is a wall
-  // vertex, kBeyond when none is.
-  enum class TetKind : std::uint8_t { kInterior, kWall, kBeyond };
+  // kOutside: no zone vertex; kInterior: four zone vertices; otherwise a rim tet (a
+  // hull facet with a zone vertex too): kWall when it has a wall vertex, else kBeyond.
+  enum class TetKind : std::uint8_t { kOutside, kInterior, kBeyond, kWall };
   TetKind kind(TetId t) const {
-    bool zone_only = true;
+    bool zone = false, other = false, wall = false;
     for (int i = 0; i < 4; ++i) {
       const VertexId v = dt_.vertex(t, i);
-      if (v == core::kInfiniteVertex || zone_of_[v] != kNoZone) continue;
-      if (!beyond_[v]) return TetKind::kWall;
-      zone_only = false;
+      const bool in_zone = v != core::kInfiniteVertex && zone_of_[v] != kNoZone;
+      zone |= in_zone, other |= !in_zone;
+      wall |= !in_zone && v != core::kInfiniteVertex && !beyond_[v];
     }
-    return zone_only ? TetKind::kInterior : TetKind::kBeyond;
+    if (!zone) return TetKind::kOutside;
+    if (!other) return TetKind::kInterior;
+    return wall ? TetKind::kWall : TetKind::kBeyond;
   }
   // Whether tet t's certificate is settled: a query or the range test proved it, or it
   // leaned on the wall in an earlier round whose wall held (proved_empty_'s marks).
@@ -148,7 +151,7 @@ class ZoneWorker {
   // entries a window point on `gen --dist hills`), took a zone past its share of the
   // budget.
   std::vector<std::uint8_t> proved_empty_;
-  std::vector<std::uint8_t> beyond_;     // by local vertex: 1 for a beyond vertex (see wall_vertex)
+  std::vector<std::uint8_t> beyond_;     // by local vertex: 1 for a beyond vertex (see kind)
   double wall_key_ = 0;                  // the key of label_end (infinite for the last label)
   bool wall_broken_ = false;             // this round: a wall tet or hull facet not certified
   std::vector<std::uint8_t> wall_held_;  // by round - 1
@@ -227,7 +230,7 @@ void ZoneWorker::load_window(bool with_hull) {
 // test, then the wall, or the queue (a hull facet's query runs at once). One left
 // unproved in this round (in conflict, waiting, or leaning on a wall that broke) is
 // checked again in the next.
-void ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
+void ZoneWorker::check_tet(TetId t, TetKind kind, std::vector<std::uint64_t>& repairs) {
   ++round_.checked;
   if (dt_.is_infinite(t)) {
     if (!check_hull_facet(t, repairs)) wall_broken_ = true, block_zone_vertices(t), recheck_next_.push_back(t);
@@ -240,7 +243,7 @@ void ZoneWorker::check_tet(TetId t, std::vector<std::uint64_t>& repairs) {
     return;
   }
   // The wall: certified with this round if the wall holds in it (the round's end tells).
-  if (!force_ && stats_.rounds <= kLeanRounds && kind(t) == TetKind::kBeyond && q.range.bounded &&
+  if (!force_ && stats_.rounds <= kLeanRounds && kind == TetKind::kBeyond && q.range.bounded &&
       q.range.hi < wall_key_) {
     proved_empty_[t] = std::uint8_t(kLeaned + stats_.rounds - 1);
     leaned_.push_back(t);
@@ -294,13 +297,13 @@ void ZoneWorker::block_zone_vertices(TetId t) {
   }
 }
 
-bool ZoneWorker::all_zone_vertices_blocked(TetId t) const {
+bool ZoneWorker::zone_vertex_blocked(TetId t, std::uint64_t round, bool every) const {
   for (int i = 0; i < 4; ++i) {
     const VertexId v = dt_.vertex(t, i);
-    if (v != core::kInfiniteVertex && zone_of_[v] != kNoZone && blocked_round_[zone_of_[v]] != stats_.rounds)
-      return false;
+    if (v == core::kInfiniteVertex || zone_of_[v] == kNoZone) continue;
+    if ((blocked_round_[zone_of_[v]] == round) != every) return !every;
   }
-  return true;
+  return every;
 }
 
 // A round checks the rim tets not yet certified: in the first, every rim tet (one scan
@@ -317,13 +320,8 @@ std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
   leaned_.clear();
   auto visit = [&](TetId t) {
     if (!dt_.is_alive(t)) return;
-    bool zone = false, other = false;
-    for (int i = 0; i < 4; ++i) {
-      const VertexId v = dt_.vertex(t, i);
-      const bool z = v != core::kInfiniteVertex && zone_of_[v] != kNoZone;
-      zone |= z, other |= !z;
-    }
-    if (zone && other) check_tet(t, repairs);
+    const TetKind k = kind(t);
+    if (k == TetKind::kBeyond || k == TetKind::kWall) check_tet(t, k, repairs);
   };
   if (stats_.rounds == 1) {
     const std::size_t slots = dt_.num_tet_slots();
@@ -335,19 +333,11 @@ std::size_t ZoneWorker::check_round(std::vector<std::uint64_t>& repairs) {
     deferred_.clear();
   } else {
     for (TetId t : recheck_) visit(t);
-    const std::uint32_t last = std::uint32_t(stats_.rounds - 1);
-    auto blocked_last_round = [&](TetId t) {
-      for (int i = 0; i < 4; ++i) {
-        const VertexId v = dt_.vertex(t, i);
-        if (v != core::kInfiniteVertex && zone_of_[v] != kNoZone && blocked_round_[zone_of_[v]] == last) return true;
-      }
-      return false;
-    };
     for (VertexId v = repairs_from_; v < VertexId(labels_.size()); ++v) {
       star_.clear();
       dt_.star(v, star_);
       for (TetId t : star_) {
-        if (blocked_last_round(t))
+        if (zone_vertex_blocked(t, stats_.rounds - 1, /*every=*/false))
           visit(t);
         else
           deferred_.push_back(t);
@@ -380,7 +370,8 @@ void ZoneWorker::run_queued_queries(std::vector<std::uint64_t>& repairs) {
   // checked again next round; one with a wall vertex breaks the wall.
   constexpr std::uint64_t kDeferRounds = 2;
   for (const QueuedTet& q : queued_) {
-    const bool wait = !force_ && stats_.rounds <= kDeferRounds && all_zone_vertices_blocked(q.tet);
+    const bool wait =
+        !force_ && stats_.rounds <= kDeferRounds && zone_vertex_blocked(q.tet, stats_.rounds, /*every=*/true);
     if (!wait && query_tet(q, repairs)) continue;
     if (!wait) block_zone_vertices(q.tet), ++round_.conflicts;
     wall_broken_ |= kind(q.tet) == TetKind::kWall;
@@ -432,8 +423,7 @@ void ZoneWorker::emit(ZoneTets& out) {
       ++bucket_start[(z >> shift) + 1];
       // How it was certified: four zone vertices, by the rim (never checked itself);
       // otherwise by its mark (a query, the wall in a round it held, or the range test).
-      bool interior = true;
-      for (int i = 0; i < 4; ++i) interior &= zone_of_[dt_.vertex(TetId(t), i)] != kNoZone;
+      const bool interior = kind(TetId(t)) == TetKind::kInterior;
       const std::uint8_t mark = proved_empty_[t];
       stats_.tets_by_rim += interior;
       stats_.tets_by_query += !interior && mark == kProved;

@@ -121,8 +121,8 @@ TEST_F(PipelineTest, ZooManySegments) {
     // entries for windows this small, through its mid-round flushes.
     EXPECT_GT(s.tets_by_query, 0u) << io::to_string(d);
     EXPECT_GT(s.range_failures, 256u * s.zones) << io::to_string(d);
-    // The rim (docs/certificate.md, Lemma 6) certifies tets, and breaks in some rounds,
-    // whose vertices that leaned on it are checked again: both paths run.
+    // The rim (docs/certificate.md, Lemma 6) certifies tets, and some rim tets a round
+    // leaves unproved are checked again in the next: both paths run.
     EXPECT_GT(s.tets_by_rim, 0u) << io::to_string(d);
     EXPECT_GT(s.rim_rechecks, 0u) << io::to_string(d);
     EXPECT_LE(s.tets_by_query + s.tets_by_wall + s.tets_by_rim, s.tets) << io::to_string(d);
