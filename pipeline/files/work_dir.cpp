@@ -18,6 +18,7 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <sys/file.h>
+#include <stdio.h>  // renameat2
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -82,7 +83,7 @@ bool is_own_work_dir(const std::string& path) {
   return text.find(want) != std::string::npos;
 }
 
-void write_marker(const std::string& dir) {
+void write_marker(const std::string& dir, const std::string& shown_path) {
   struct stat st {};
   if (::lstat(dir.c_str(), &st) != 0 || !S_ISDIR(st.st_mode)) throw IoError(dir + ": cannot stat: " + errno_text());
   const std::string m = dir + "/" + WorkDir::kMarker;
@@ -90,7 +91,7 @@ void write_marker(const std::string& dir) {
   char host[256] = {};
   ::gethostname(host, sizeof host - 1);
   const std::string text = "made by tetstream: its working files; removed when the job ends\n" + identity_line(st) +
-                           "\npath " + dir + "\njob " + std::to_string(::getpid()) + "@" + host + " " +
+                           "\npath " + shown_path + "\njob " + std::to_string(::getpid()) + "@" + host + " " +
                            std::to_string(std::time(nullptr)) + "\n";
   const bool ok = ::write(fd, text.data(), text.size()) == ssize_t(text.size()) && ::fsync(fd) == 0;
   ::close(fd);
@@ -119,7 +120,7 @@ WorkDir WorkDir::create_unique(const std::string& parent, const std::string& pre
   if (!::mkdtemp(buf.data())) throw IoError("cannot create a temporary directory in " + parent + ": " + errno_text());
   WorkDir w(buf.data());
   w.lock_or_refuse();
-  write_marker(w.dir_);
+  write_marker(w.dir_, w.dir_);
   return w;
 }
 
@@ -128,21 +129,39 @@ WorkDir WorkDir::open_or_create(const std::string& path) {
   struct stat st {};
   if (::lstat(path.c_str(), &st) != 0) {
     if (errno != ENOENT) throw IoError(path + ": cannot stat: " + errno_text());
-    // Not its parents: a mistyped --tmpdir is an error, not a tree of new directories.
-    if (::mkdir(path.c_str(), 0700) != 0) {
-      if (errno == ENOENT) {
-        const std::string::size_type slash = path.rfind('/');
-        const std::string parent = slash == std::string::npos ? "." : path.substr(0, slash);
+    // Made complete under a unique name beside PATH (directory, lock, marker), then
+    // renamed to PATH: a process killed while making it leaves no unmarked PATH that
+    // --resume would have to refuse as not tetstream's (a SIGKILL between mkdir and the
+    // marker did that), only PATH.new-XXXXXX, which `tetstream clean` removes once
+    // marked. Not its parents: a mistyped --tmpdir is an error, not a tree of new
+    // directories.
+    const std::string::size_type slash = path.rfind('/');
+    const std::string parent = slash == std::string::npos ? "." : path.substr(0, slash);
+    const std::string base = slash == std::string::npos ? path : path.substr(slash + 1);
+    std::string templ = parent + "/" + base + ".new-XXXXXX";
+    std::vector<char> buf(templ.begin(), templ.end());
+    buf.push_back('\0');
+    if (!::mkdtemp(buf.data())) {
+      if (errno == ENOENT)
         throw UsageError(parent +
                          " does not exist: the directory given for the work files (--checkpoint DIR, "
                          "--tmpdir DIR) must exist; tetstream makes " +
                          path + " inside it");
-      }
       throw IoError(path + ": cannot create the work directory: " + errno_text());
     }
-    w.lock_or_refuse();
-    write_marker(path);
-    return w;
+    WorkDir made(buf.data());
+    made.lock_or_refuse();
+    write_marker(made.dir_, path);
+    // RENAME_NOREPLACE: never onto a directory (even an empty one) that appeared
+    // meanwhile; then the made one goes and PATH is judged as an existing path below.
+    if (::renameat2(AT_FDCWD, made.dir_.c_str(), AT_FDCWD, path.c_str(), RENAME_NOREPLACE) == 0) {
+      made.dir_ = path;
+      return made;
+    }
+    const int err = errno;
+    made.remove();
+    if (err != EEXIST) throw IoError(path + ": cannot create the work directory: " + std::strerror(err));
+    if (::lstat(path.c_str(), &st) != 0) throw IoError(path + ": cannot stat: " + errno_text());
   }
   if (S_ISLNK(st.st_mode)) throw UsageError(path + " is a symbolic link: tetstream does not follow it (remove it)");
   if (!S_ISDIR(st.st_mode)) throw UsageError(path + " exists and is not a directory");

@@ -16,7 +16,9 @@
 //     leaves it in place when anything else is in it.
 // Order of creation: directory, lock (taken), marker. A directory with a marker has
 // had its lock taken before, so `tetstream clean` cannot take a live job's directory
-// for a dead one.
+// for a dead one. A named directory (open_or_create) is made so under PATH.new-XXXXXX
+// and renamed to PATH once marked: PATH never exists unmarked, whenever the process
+// is killed.
 #include <string>
 #include <vector>
 

@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include <cfloat>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <random>
@@ -148,6 +149,28 @@ TEST_F(WriterSafety, ACopiedMarkerDoesNotMakeAWorkDirectory) {
   for (const auto& s : stale) EXPECT_TRUE(pipeline::remove_stale_work_dir(s));
   EXPECT_EQ(get("thesis/state.json"), "{\"mine\": true}");
   EXPECT_EQ(get("thesis/points-1.run"), "chapter 1");
+}
+
+// A named work directory appears whole (made under PATH.new-XXXXXX, marked, renamed):
+// it is never seen unmarked, nothing is left beside it, and an empty directory of the
+// user's at PATH is refused and kept, not replaced by the rename.
+TEST_F(WriterSafety, ANamedWorkDirectoryAppearsMarkedAndReplacesNothing) {
+  const std::string ckpt = path("out.tets.ckpt");
+  {
+    pipeline::WorkDir w = pipeline::WorkDir::open_or_create(ckpt);
+    EXPECT_EQ(w.dir(), ckpt);
+    struct stat st {};
+    EXPECT_EQ(::lstat((ckpt + "/" + pipeline::WorkDir::kMarker).c_str(), &st), 0);
+    std::vector<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+    EXPECT_EQ(names, std::vector<std::string>{"out.tets.ckpt"});
+  }
+  // Reopened by a later process (the marker names this directory).
+  { pipeline::WorkDir again = pipeline::WorkDir::open_or_create(ckpt); }
+  const std::string mine = path("empty-of-mine");
+  ASSERT_EQ(::mkdir(mine.c_str(), 0700), 0);
+  EXPECT_THROW(pipeline::WorkDir::open_or_create(mine), UsageError);
+  EXPECT_TRUE(std::filesystem::is_empty(mine));
 }
 
 TEST_F(WriterSafety, AMissingParentOfTheWorkDirectoryIsSaid) {
