@@ -171,7 +171,8 @@ class RankJob {
       write.run();
       // From where this rank's record says its labels are written (a resumed job).
       const std::uint64_t from = std::max(mine.first_label, write.first_label());
-      triangulate.emplace(options_, index, plan.zones, plan.shares.query_page_bytes, threads_);
+      triangulate.emplace(options_, index, plan.zones, plan.shares.query_page_bytes, plan.shares.shared_rim_bytes,
+                          threads_);
       triangulate->prepare(from, write.segments_done(), mine.end_label);
       if (job_progress) {
         // One progress line for the job, rank 0's, counting every rank's labels.

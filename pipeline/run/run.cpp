@@ -212,7 +212,8 @@ RunSummary Job::run() {
   disk.sample();
 
   // ---- triangulate: the segments' zones, `threads` at a time, written in order ----
-  TriangulateStage triangulate(options_, index, plan.zones, plan.shares.query_page_bytes, threads_);
+  TriangulateStage triangulate(options_, index, plan.zones, plan.shares.query_page_bytes, plan.shares.shared_rim_bytes,
+                               threads_);
   triangulate.prepare(write.first_label(), write.segments_done());
   budget_.plan_triangulate(plan.shares.index_bytes, triangulate.window_bytes());  // the windows as measured
   triangulate.run(write);

@@ -72,11 +72,14 @@ struct RunSummary {
   std::uint64_t input_points = 0, points = 0, duplicates = 0;
   std::uint64_t segments = 0, zones = 0, segment_labels = 0, window_points = 0, repair_points = 0;
   std::uint64_t hull_vertices = 0, range_failures = 0, queries = 0, rounds_max = 0;
-  std::uint64_t query_points = 0;   // exact conflict tests the queries made
-  std::uint64_t tets_by_query = 0;  // tets whose certificate was an emptiness query
-  std::uint64_t tets_by_wall = 0;   // tets certified by the wall
-  std::uint64_t tets_by_rim = 0;    // tets certified by the rim (the rest: by the range test)
-  std::uint64_t rim_rechecks = 0;   // rim tets left unproved by a round, checked again in the next
+  std::uint64_t query_points = 0;         // exact conflict tests the queries made
+  std::uint64_t tets_by_query = 0;        // tets whose certificate was an emptiness query
+  std::uint64_t tets_by_wall = 0;         // tets certified by the wall
+  std::uint64_t tets_by_rim = 0;          // tets certified by the rim
+  std::uint64_t tets_by_neighbour = 0;    // tets a finished zone had certified (the rest: by the range test)
+  std::uint64_t rim_published = 0;        // rim tets finished zones handed to the running ones
+  std::uint64_t rim_from_neighbours = 0;  // rim tets the running zones found there (no ball, no query)
+  std::uint64_t rim_rechecks = 0;         // rim tets left unproved by a round, checked again in the next
   // 2 MiB regions of the sorted file that the queries' reads mapped and that were
   // handed back to keep them within their share of the budget (this process's)
   std::uint64_t query_region_releases = 0;

@@ -36,14 +36,15 @@ TriangulatePlan plan_triangulation(const IndexStage& indexed, const RunOptions& 
 // The queries of a zone read the file along the sort axis, and a share that holds
 // their sweep saves faulting regions in again.
 TriangulateStage::TriangulateStage(const RunOptions& options, IndexStage& indexed, const ZonePlan& plan,
-                                   std::uint64_t query_page_bytes, int threads)
+                                   std::uint64_t query_page_bytes, std::uint64_t shared_rim_bytes, int threads)
     : options_(options),
       indexed_(indexed),
       plan_(plan),
       threads_(threads),
       query_regions_(indexed.mapped_data(), indexed.mapped_bytes(),
                      std::max<std::size_t>(1, std::size_t(query_page_bytes / MappedRegions::kRegionBytes)),
-                     indexed.path()) {
+                     indexed.path()),
+      shared_rim_(std::size_t(shared_rim_bytes)) {
   indexed_.view().query_regions = &query_regions_;
 }
 
@@ -103,7 +104,7 @@ void TriangulateStage::run(SegmentSink& out) {
         check_interrupted();
         maybe_inject_fault("segment", first_segment_ + unit.segment);
         auto& triangulator = triangulators[std::size_t(omp_get_thread_num())];
-        if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool_);
+        if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool_, &shared_rim_);
         s = triangulator->run(plan, plan.zones[unit.zone], tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
@@ -171,6 +172,11 @@ void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentS
       segment_work_.seconds_build, segment_work_.seconds_check, human_bytes(double(segment_work_.kernel_bytes)));
   for (auto& part : parts_) output_pool_.give(std::move(part));
   parts_.clear();
+  // Every zone of the segments so far has finished: a tet of labels all below this
+  // segment's end has no vertex in a zone still to run.
+  shared_rim_.forget_below(plan.label_end);
+  spdlog::debug("shared rim: {} tets ({}) kept for the zones to come", shared_rim_.size(),
+                human_bytes(double(shared_rim_.bytes())));
   segment_work_ = SegmentStats{};
   if (failure) std::rethrow_exception(failure);
 }

@@ -7,6 +7,7 @@
 // (pipeline/stage_write.hpp). prepare plans the labels from there on.
 #include "pipeline/util/memory_budget.hpp"
 #include "pipeline/run/run.hpp"
+#include "pipeline/window/shared_rim.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
 #include "pipeline/run/stage_index.hpp"
 #include "pipeline/files/temp_files.hpp"
@@ -53,7 +54,7 @@ class TriangulateStage {
   // zones' emptiness queries map (handed back past it). The view's query tracker is
   // this stage's for its lifetime.
   TriangulateStage(const RunOptions& options, IndexStage& indexed, const ZonePlan& plan, std::uint64_t query_page_bytes,
-                   int threads);
+                   std::uint64_t shared_rim_bytes, int threads);
   ~TriangulateStage();
   TriangulateStage(const TriangulateStage&) = delete;
   TriangulateStage& operator=(const TriangulateStage&) = delete;
@@ -85,6 +86,8 @@ class TriangulateStage {
   std::uint64_t query_region_releases() const { return query_regions_.releases(); }
   // What the windows of the plan prepare made take, from their measured sizes.
   double window_bytes() const { return window_bytes_; }
+  // The most the finished zones' shared rim tets took (SharedRim).
+  std::uint64_t shared_rim_peak_bytes() const { return shared_rim_.peak_bytes(); }
 
  private:
   struct Unit {
@@ -106,6 +109,9 @@ class TriangulateStage {
   std::vector<ZoneTets> parts_;
   SegmentStats segment_work_;
   OutputPool output_pool_;
+  // The rim tets of finished zones for the zones still running; a segment's are
+  // forgotten once every zone that could hold them has finished (collect).
+  SharedRim shared_rim_;
   double seconds_ = 0;
   double window_bytes_ = 0;
   double sink_seconds_ = 0;  // in the sink's add_segment (the write stage's share of the wall time)

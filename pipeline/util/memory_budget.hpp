@@ -73,6 +73,7 @@ struct TriangulateShares {
   std::uint64_t query_page_bytes = 0;  // mapped pages of the sorted file the queries read
   std::uint64_t index_bytes = 0;       // the point index and the hull's (as measured)
   double window_bytes = 0;             // the windows: kernels, coordinates, held output (the plan's "available")
+  std::uint64_t shared_rim_bytes = 0;  // the finished zones' rim tets for the running ones (SharedRim)
 };
 
 struct KeepShares {

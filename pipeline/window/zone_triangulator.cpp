@@ -4,6 +4,7 @@
 #include "core/huge_pages.hpp"
 #include "core/spatial_sort.hpp"
 #include "pipeline/window/certificate.hpp"
+#include "pipeline/window/shared_rim.hpp"
 
 #include <spdlog/spdlog.h>
 
@@ -28,7 +29,8 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 // its memory in once.
 class ZoneWorker {
  public:
-  ZoneWorker(const SortedView& view, OutputPool* pool) : view_(view), pool_(pool), certificate_(view) {}
+  ZoneWorker(const SortedView& view, OutputPool* pool, SharedRim* shared)
+      : view_(view), pool_(pool), shared_(shared), certificate_(view) {}
 
   SegmentStats run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out);
 
@@ -41,6 +43,11 @@ class ZoneWorker {
   // returns how many it left unproved (0: the rim holds, every zone vertex is final).
   std::size_t check_round(std::vector<std::uint64_t>& repairs);
   void emit(ZoneTets& out);
+  // The finished zone's rim tets that a zone still running may hold (a vertex of a
+  // later label or of another strip), for shared_.
+  void publish_rim();
+  // Whether a finished zone certified a tet with t's labels (shared_).
+  bool certified_by_neighbour(TetId t) const;
   // Rim tet t's certificate: the range test, the wall, or a query (queued_; a hull
   // facet's runs at once). One left unproved goes to recheck_next_.
   enum class TetKind : std::uint8_t;
@@ -97,7 +104,7 @@ class ZoneWorker {
   // leaned on the wall in an earlier round whose wall held (proved_empty_'s marks).
   bool proved(TetId t) const {
     const std::uint8_t m = proved_empty_[t];
-    if (m == kProved || m == kRanged) return true;
+    if (m == kProved || m == kRanged || m == kShared) return true;
     return m >= kLeaned && std::uint64_t(m - kLeaned) < stats_.rounds - 1 && wall_held_[m - kLeaned];
   }
   // Classifies window vertices [first, end) beyond the zone or not (beyond_).
@@ -114,13 +121,16 @@ class ZoneWorker {
 
   static constexpr std::uint32_t kNoZone = 0xFFFFFFFFu;
   // proved_empty_'s marks: kProved by a query, kRanged by the range test (a tet checked
-  // again computes no ball twice); kLeaned + r: leaned on the wall in round r + 1 (past
-  // kLeanRounds rounds the tets are queried instead).
+  // again computes no ball twice), kShared by a finished neighbour (shared_); kLeaned +
+  // r: leaned on the wall in round r + 1 (past kLeanRounds rounds the tets are queried
+  // instead).
   static constexpr std::uint64_t kLeanRounds = 250;
-  static constexpr std::uint8_t kProved = 1, kRanged = 2, kLeaned = 3;
+  static constexpr std::uint8_t kProved = 1, kRanged = 2, kShared = 3, kLeaned = 4;
 
   const SortedView& view_;
   OutputPool* const pool_;
+  SharedRim* const shared_;                 // the finished zones' rim tets (null: none shared)
+  std::vector<SharedRim::Labels> publish_;  // publish_rim's scratch
   Certificate certificate_;
   const SegmentPlan* plan_ = nullptr;  // of the zone being triangulated
   Zone zone_;
@@ -240,6 +250,11 @@ void ZoneWorker::check_tet(TetId t, TetKind kind, std::vector<std::uint64_t>& re
   QueuedTet q{certificate_.range_test(dt_, t), t};
   if (q.range.clears()) {
     proved_empty_[t] = kRanged;
+    return;
+  }
+  if (certified_by_neighbour(t)) {
+    proved_empty_[t] = kShared;
+    ++stats_.rim_from_neighbours;
     return;
   }
   // The wall: certified with this round if the wall holds in it (the round's end tells).
@@ -381,6 +396,40 @@ void ZoneWorker::run_queued_queries(std::vector<std::uint64_t>& repairs) {
   round_.seconds_queries += since(t0);
 }
 
+bool ZoneWorker::certified_by_neighbour(TetId t) const {
+  if (!shared_) return false;
+  SharedRim::Labels l;
+  for (int i = 0; i < 4; ++i) l[std::size_t(i)] = labels_[dt_.vertex(t, i)];
+  std::sort(l.begin(), l.end());
+  return shared_->contains(l);
+}
+
+// Once the rim holds, every rim tet is a tet of DT(P). Those with a vertex that another
+// zone may still hold as its own (a label past the zone's first that is not a zone
+// vertex: a later segment's, or another strip's) go to shared_; the others' vertices
+// are all in segments before this one, whose zones have all started before it.
+void ZoneWorker::publish_rim() {
+  if (!shared_) return;
+  publish_.clear();
+  const std::size_t slots = dt_.num_tet_slots();
+  for (std::size_t t = 0; t < slots; ++t) {
+    if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
+    bool zone = false, later = false;
+    SharedRim::Labels l;
+    for (int i = 0; i < 4; ++i) {
+      const VertexId v = dt_.vertex(TetId(t), i);
+      const bool in_zone = zone_of_[v] != kNoZone;
+      zone |= in_zone;
+      later |= !in_zone && labels_[v] >= plan_->label_begin;
+      l[std::size_t(i)] = labels_[v];
+    }
+    if (!zone || !later) continue;
+    std::sort(l.begin(), l.end());
+    publish_.push_back(l);
+  }
+  stats_.rim_published += shared_->publish(publish_);
+}
+
 void ZoneWorker::mark_beyond(VertexId first, VertexId end) {
   beyond_.resize(end, 0);
   for (VertexId v = first; v < end; ++v)
@@ -428,6 +477,7 @@ void ZoneWorker::emit(ZoneTets& out) {
       stats_.tets_by_rim += interior;
       stats_.tets_by_query += !interior && mark == kProved;
       stats_.tets_by_wall += !interior && mark >= kLeaned && wall_held_[mark - kLeaned];
+      stats_.tets_by_neighbour += !interior && mark == kShared;
     }
   }
   for (std::size_t b = 1; b <= buckets; ++b) bucket_start[b] += bucket_start[b - 1];
@@ -571,6 +621,7 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
     stats_.repair_points += repairs.size();
     log_round(repairs.size(), since(t_insert));
   }
+  publish_rim();
   emit(out);
   stats_.seconds_check = since(t0);
   stats_.kernel_bytes = dt_.memory_bytes();
@@ -592,8 +643,8 @@ void OutputPool::give(ZoneTets&& v) {
   spare_.push_back(std::move(v));
 }
 
-ZoneTriangulator::ZoneTriangulator(const SortedView& view, OutputPool* pool)
-    : worker_(std::make_unique<ZoneWorker>(view, pool)) {}
+ZoneTriangulator::ZoneTriangulator(const SortedView& view, OutputPool* pool, SharedRim* shared)
+    : worker_(std::make_unique<ZoneWorker>(view, pool, shared)) {}
 ZoneTriangulator::~ZoneTriangulator() = default;
 
 SegmentStats ZoneTriangulator::run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out) {

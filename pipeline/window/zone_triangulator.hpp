@@ -39,7 +39,10 @@ struct SegmentStats {
   std::uint64_t tets = 0;                       // tets emitted
   std::uint64_t tets_by_query = 0;              // of those, certified by a query
   std::uint64_t tets_by_wall = 0;               // of those, by the wall
-  std::uint64_t tets_by_rim = 0;                // of those, by the rim (the rest: by the range test)
+  std::uint64_t tets_by_rim = 0;                // of those, by the rim
+  std::uint64_t tets_by_neighbour = 0;          // of those, by a finished zone (the rest: by the range test)
+  std::uint64_t rim_published = 0;              // rim tets handed to the zones still running (SharedRim)
+  std::uint64_t rim_from_neighbours = 0;        // rim tets certified by finding them there
   std::uint64_t rim_rechecks = 0;               // rim tets left unproved by a round, checked again
   std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
@@ -52,6 +55,8 @@ struct SegmentStats {
     queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
     tets_by_query += o.tets_by_query, tets_by_wall += o.tets_by_wall, tets_by_rim += o.tets_by_rim,
         rim_rechecks += o.rim_rechecks;
+    tets_by_neighbour += o.tets_by_neighbour, rim_published += o.rim_published,
+        rim_from_neighbours += o.rim_from_neighbours;
     kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
     return *this;
   }
@@ -86,6 +91,7 @@ class OutputPool {
 };
 
 class ZoneWorker;
+class SharedRim;
 // Triangulates zones of segments, one at a time, and emits each one's tets into `out`
 // (taken from `pool` when given). Every label of a segment belongs to exactly one of
 // its zones, so the zones' outputs together are the segment's tets, each once. Throws
@@ -97,7 +103,9 @@ class ZoneWorker;
 // per thread (not thread-safe).
 class ZoneTriangulator {
  public:
-  explicit ZoneTriangulator(const SortedView& view, OutputPool* pool = nullptr);
+  // `shared`: the rim tets finished zones certified, looked up before a query and
+  // added to when a zone ends (null: each zone proves its whole rim itself).
+  explicit ZoneTriangulator(const SortedView& view, OutputPool* pool = nullptr, SharedRim* shared = nullptr);
   ~ZoneTriangulator();
   SegmentStats run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out);
 

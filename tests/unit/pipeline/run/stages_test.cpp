@@ -204,7 +204,7 @@ TEST_F(StagesTest, TriangulateStageEqualsTheInCoreKernel) {
   EXPECT_LE(budget.phase_total("triangulate"), options_.memory_bytes);
   CollectSegments out;
   {
-    TriangulateStage stage(options_, index, plan.zones, plan.shares.query_page_bytes, 2);
+    TriangulateStage stage(options_, index, plan.zones, plan.shares.query_page_bytes, plan.shares.shared_rim_bytes, 2);
     stage.prepare(0, 0);
     EXPECT_GE(stage.segments(), 3u);
     EXPECT_GT(stage.zones(), stage.segments()) << "no segment was cut into zones";

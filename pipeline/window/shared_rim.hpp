@@ -1,0 +1,59 @@
+#pragma once
+// The rim tets that finished zones certified, for the zones still running
+// (docs/certificate.md, "Neighbours").
+//
+// A tet with vertices in two zones is on the rim of both, and each used to prove it on
+// its own: on a surface, where these tets' balls are wide, half of the emptiness
+// queries proved again what a neighbour had proved. A zone that has finished has
+// certified its whole rim: every one of those tets is a tet of DT(P) (a set of labels;
+// the perturbation is the same in every window). So a running zone whose window has a
+// tet with the same four labels knows it is Delaunay without a ball or a query.
+//
+// What is here never decides an output: a tet found here is Delaunay (true whichever
+// zone published it, whenever), one not found is checked as before. The bytes are the
+// same for any thread count, plan or timing; only the counters say which zone did the
+// work. Thread-safe: published once a zone ends, looked up by the zones that run,
+// forgotten once no zone that could hold the tet is left.
+#include <array>
+#include <cstdint>
+#include <shared_mutex>
+#include <span>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+class SharedRim {
+ public:
+  using Labels = std::array<std::uint64_t, 4>;  // increasing
+
+  // At most `max_bytes` of table (the ledger's share): when the table is full at that
+  // size, a zone's tets are not published (its neighbours check them themselves) until
+  // forget_below makes room.
+  explicit SharedRim(std::size_t max_bytes) : max_bytes_(max_bytes) {}
+
+  // Whether a finished zone certified the tet with these labels.
+  bool contains(const Labels& tet) const;
+  // A finished zone's rim tets; returns how many were published (the others: no room).
+  std::size_t publish(std::span<const Labels> tets);
+  // Forgets the tets whose labels are all below `label`: every zone that could hold a
+  // vertex of theirs has finished.
+  void forget_below(std::uint64_t label);
+
+  std::size_t size() const;
+  std::size_t bytes() const;       // the table's now
+  std::size_t peak_bytes() const;  // the most it took
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);  // never a label
+  static std::size_t hash(const Labels& t);
+  bool insert_locked(const Labels& t);  // false: already there
+  void rebuild_locked(std::size_t capacity, std::uint64_t keep_from);
+
+  const std::size_t max_bytes_;
+  mutable std::shared_mutex mutex_;
+  std::vector<Labels> slots_;  // open addressing, linear probing; slot[0] == kEmpty: free
+  std::size_t size_ = 0;
+  std::size_t peak_bytes_ = 0;
+};
+
+}  // namespace tetstream::pipeline

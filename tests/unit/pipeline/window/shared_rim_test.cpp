@@ -1,0 +1,93 @@
+// SharedRim (pipeline/window/shared_rim.hpp): the rim tets finished zones certified, for
+// the zones still running. A tet is found exactly by its four labels, forgotten once all
+// its labels are below the segments still to run, and never takes the table past its
+// share: a tet without room is not published (the zones check it themselves). Lookups
+// from threads while another publishes and forgets see only tets that were published.
+#include "pipeline/window/shared_rim.hpp"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cstdint>
+#include <thread>
+#include <vector>
+
+namespace tetstream::pipeline {
+namespace {
+
+using Labels = SharedRim::Labels;
+
+TEST(SharedRim, FindsExactlyThePublishedTets) {
+  SharedRim rim(1 << 20);
+  const std::vector<Labels> tets = {{1, 2, 3, 4}, {1, 2, 3, 5}, {10, 20, 30, 40}};
+  EXPECT_EQ(rim.publish(tets), 3u);
+  for (const Labels& t : tets) EXPECT_TRUE(rim.contains(t));
+  EXPECT_FALSE(rim.contains({1, 2, 3, 6}));
+  EXPECT_FALSE(rim.contains({2, 3, 4, 5}));
+  EXPECT_FALSE(rim.contains({0, 2, 3, 4}));
+  // Published twice (two zones finished with it): counted once.
+  EXPECT_EQ(rim.publish(std::vector<Labels>{{1, 2, 3, 4}}), 0u);
+  EXPECT_EQ(rim.size(), 3u);
+}
+
+TEST(SharedRim, ForgetsTetsWhoseLabelsAreAllBelow) {
+  SharedRim rim(1 << 20);
+  std::vector<Labels> tets;
+  for (std::uint64_t i = 0; i < 5000; ++i) tets.push_back({i, i + 1, i + 2, i + 100});
+  ASSERT_EQ(rim.publish(tets), tets.size());
+  rim.forget_below(2100);  // keeps the tets whose largest label is 2100 or more
+  for (const Labels& t : tets) EXPECT_EQ(rim.contains(t), t[3] >= 2100) << t[0];
+  EXPECT_EQ(rim.size(), 5000u - 2000u);
+  rim.forget_below(~std::uint64_t(0) >> 1);
+  EXPECT_EQ(rim.size(), 0u);
+  EXPECT_EQ(rim.bytes(), 0u);
+  EXPECT_FALSE(rim.contains(tets.back()));
+}
+
+TEST(SharedRim, StaysWithinItsShare) {
+  const std::size_t share = 64 << 10;  // 2048 slots of 32 bytes
+  SharedRim rim(share);
+  std::vector<Labels> tets;
+  for (std::uint64_t i = 0; i < 10000; ++i) tets.push_back({4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3});
+  const std::size_t published = rim.publish(tets);
+  EXPECT_GT(published, 0u);
+  EXPECT_LT(published, tets.size());
+  EXPECT_LE(rim.peak_bytes(), share);
+  EXPECT_LE(rim.bytes(), share);
+  std::size_t found = 0;
+  for (const Labels& t : tets) found += rim.contains(t);
+  EXPECT_EQ(found, published);  // what was not published is not found
+  // Forgetting makes room again.
+  rim.forget_below(4 * 10000);
+  EXPECT_EQ(rim.publish(tets), published);
+}
+
+TEST(SharedRim, LookupsWhilePublishingAndForgetting) {
+  SharedRim rim(8 << 20);
+  std::atomic<bool> done{false};
+  std::atomic<std::uint64_t> wrong{0};
+  // Only tets with an even first label are ever published.
+  std::thread reader([&] {
+    std::uint64_t i = 0;
+    while (!done.load()) {
+      const std::uint64_t a = 2 * (i % 20000) + 1;
+      wrong += rim.contains({a, a + 1, a + 2, a + 3});
+      ++i;
+    }
+  });
+  for (std::uint64_t round = 0; round < 50; ++round) {
+    std::vector<Labels> tets;
+    for (std::uint64_t i = 0; i < 2000; ++i) {
+      const std::uint64_t a = 2 * (round * 2000 + i);
+      tets.push_back({a, a + 1, a + 2, a + 3});
+    }
+    rim.publish(tets);
+    rim.forget_below(2 * round * 2000);
+  }
+  done = true;
+  reader.join();
+  EXPECT_EQ(wrong.load(), 0u);
+}
+
+}  // namespace
+}  // namespace tetstream::pipeline
