@@ -154,12 +154,16 @@ TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, doub
   // no more than that 25%. So the phase sums to at most the ceiling.
   const double fixed = double(runtime_) + double(t.writer_bytes);
   const double rest = std::max(0.0, double(ceiling_) - fixed);
-  // The shared rim tets (pipeline/window/shared_rim.hpp): a 32nd of that, out of the
-  // windows' share, and no more than 64 bytes a point (two slots a point: the tets
-  // that cross zones are a fraction of the ~6.5 a point).
-  t.shared_rim_bytes = std::uint64_t(std::min(rest / 32, 64.0 * double(points_)));
-  t.window_bytes = 0.75 * rest - double(index_bytes) - double(t.shared_rim_bytes);
-  t.query_page_bytes = std::uint64_t(std::min({double(ceiling_ / 8), double(points_) * 32 + 2.0 * kMiB, 0.25 * rest}));
+  t.window_bytes = 0.75 * rest - double(index_bytes);
+  // The shared rim tets (pipeline/window/shared_rim.hpp): a 32nd of that, and no more
+  // than 64 bytes a point (two slots a point: the tets that cross zones are a fraction
+  // of the ~6.5 a point), out of the query pages' share, which keeps at least one
+  // region. Not out of the windows': smaller windows made more zones, whose rims cost
+  // more queries than the table saved (indoor 10^6 at 128M: 11 segments became 14).
+  const double query_pages = std::min({double(ceiling_ / 8), double(points_) * 32 + 2.0 * kMiB, 0.25 * rest});
+  t.shared_rim_bytes =
+      std::uint64_t(std::clamp(query_pages - 2.0 * kMiB, 0.0, std::min(rest / 32, 64.0 * double(points_))));
+  t.query_page_bytes = std::uint64_t(query_pages) - t.shared_rim_bytes;
   record("triangulate", "runtime", runtime_);
   record("triangulate", "writer", t.writer_bytes);
   record("triangulate", "query_pages", t.query_page_bytes);
