@@ -383,7 +383,7 @@ void ZoneWorker::run_queued_queries(std::vector<std::uint64_t>& repairs) {
   // often remove it. Not in later rounds: there a zone's last few conflicts would then
   // be repaired one a round. A rim tet left unproved (waiting, or in conflict) is
   // checked again next round; one with a wall vertex breaks the wall.
-  static const std::uint64_t kDeferRounds = getenv("TS_DEFER") ? std::uint64_t(atoi(getenv("TS_DEFER"))) : 2;
+  constexpr std::uint64_t kDeferRounds = 2;
   for (const QueuedTet& q : queued_) {
     const bool wait =
         !force_ && stats_.rounds <= kDeferRounds && zone_vertex_blocked(q.tet, stats_.rounds, /*every=*/true);
