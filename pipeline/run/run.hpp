@@ -86,6 +86,7 @@ struct RunSummary {
   // The redundant insertions by cause (SegmentStats): sort-axis buffers, the strip
   // buffers of parallel zones, hull vertices outside the window; and repair_points.
   std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_window_points = 0;
+  std::uint64_t neighbour_points = 0;           // held from a zone's start: its finished neighbours' rim tets' vertices
   double seconds_build = 0, seconds_check = 0;  // kernel builds and exactness checks, summed over segments
   std::uint64_t tets = 0, output_bytes = 0;
   std::uint64_t disk_planned_bytes = 0;  // pipeline/disk_plan.hpp; 0: not planned (unknown count, resumed)

@@ -34,6 +34,7 @@ constexpr Counter kCounters[] = {
     {"segment_buffer_points", &SegmentStats::segment_buffer_points, &RunSummary::segment_buffer_points},
     {"zone_buffer_points", &SegmentStats::zone_buffer_points, &RunSummary::zone_buffer_points},
     {"hull_points", &SegmentStats::hull_points, &RunSummary::hull_window_points},
+    {"neighbour_points", &SegmentStats::neighbour_points, &RunSummary::neighbour_points, true},
     {"range_failures", &SegmentStats::range_failures, &RunSummary::range_failures},
     {"queries", &SegmentStats::queries, &RunSummary::queries},
     {"query_points", &SegmentStats::query_points, &RunSummary::query_points},

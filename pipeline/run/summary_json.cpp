@@ -26,6 +26,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
        {{"segment_buffers", s.segment_buffer_points},
         {"zone_buffers", s.zone_buffer_points},
         {"hull", s.hull_window_points},
+        {"neighbours", s.neighbour_points},
         {"repairs", s.repair_points}}},
       {"zone_buffer_share", s.zone_buffer_share()},
       {"tets", s.tets},

@@ -67,6 +67,13 @@ std::size_t SharedRim::publish(std::span<const Labels> tets) {
   return published;
 }
 
+void SharedRim::tets_touching(std::uint64_t begin, std::uint64_t end, std::vector<Labels>& out) const {
+  std::shared_lock lock(mutex_);
+  for (const Labels& t : slots_)
+    if (t[0] != kEmpty && std::any_of(t.begin(), t.end(), [&](std::uint64_t l) { return l >= begin && l < end; }))
+      out.push_back(t);
+}
+
 void SharedRim::forget_below(std::uint64_t label) {
   std::unique_lock lock(mutex_);
   if (slots_.empty()) return;

@@ -35,6 +35,9 @@ class SharedRim {
   bool contains(const Labels& tet) const;
   // A finished zone's rim tets; returns how many were published (the others: no room).
   std::size_t publish(std::span<const Labels> tets);
+  // Appends every tet here with a label in [begin, end) (with a zone's labels: the
+  // finished neighbours of its points there).
+  void tets_touching(std::uint64_t begin, std::uint64_t end, std::vector<Labels>& out) const;
   // Forgets the tets whose labels are all below `label`: every zone that could hold a
   // vertex of theirs has finished.
   void forget_below(std::uint64_t label);

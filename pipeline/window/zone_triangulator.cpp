@@ -130,7 +130,7 @@ class ZoneWorker {
   const SortedView& view_;
   OutputPool* const pool_;
   SharedRim* const shared_;                 // the finished zones' rim tets (null: none shared)
-  std::vector<SharedRim::Labels> publish_;  // publish_rim's scratch
+  std::vector<SharedRim::Labels> publish_;  // publish_rim's and load_window's scratch
   Certificate certificate_;
   const SegmentPlan* plan_ = nullptr;  // of the zone being triangulated
   Zone zone_;
@@ -138,7 +138,8 @@ class ZoneWorker {
   std::vector<double> xyz_;
   std::vector<std::uint64_t> labels_;
   std::vector<std::size_t> hull_extra_;  // load_window's scratch
-  std::vector<std::uint64_t> held_;      // labels outside the window range held anyway (hull, repairs), sorted
+  std::vector<std::uint64_t> held_;      // labels outside the window range held anyway (hull, repairs, seeds), sorted
+  std::vector<std::uint64_t> seeded_;    // of those, the finished neighbours' (load_window), sorted
   std::vector<QueuedTet> queued_;
   std::vector<std::uint32_t> zone_of_;        // by local vertex: zone index or kNoZone
   std::vector<std::uint32_t> blocked_round_;  // by zone index: the round a conflict blocked it in
@@ -217,6 +218,39 @@ void ZoneWorker::load_window(bool with_hull) {
   for (std::size_t i : hull_extra) {
     xyz_.insert(xyz_.end(), view_.hull_points[i].xyz, view_.hull_points[i].xyz + 3);
     labels_.push_back(view_.hull_points[i].original);
+  }
+  // The finished zones' rim tets with a label of this zone's range: their vertices are
+  // the true neighbours of its points there (Lemma 7), which repairs would otherwise
+  // bring in one a query (on a surface, the far ends of the long edges across the
+  // zone's boundary). Held, as repair points are.
+  seeded_.clear();
+  if (shared_) {
+    // Only the tets with a point of this zone: a label of its range in its strip.
+    publish_.clear();
+    shared_->tets_touching(plan_->label_begin, plan_->label_end, publish_);
+    QueryScratch scratch;
+    for (const SharedRim::Labels& t : publish_) {
+      const bool touches = std::any_of(t.begin(), t.end(), [&](std::uint64_t l) {
+        if (l < plan_->label_begin || l >= plan_->label_end) return false;
+        if (zone_.axis < 0) return true;
+        const double x = certificate_.read_point(l, scratch)[zone_.axis];
+        return x >= zone_.lo && x < zone_.hi;
+      });
+      if (touches) seeded_.insert(seeded_.end(), t.begin(), t.end());
+    }
+    std::sort(seeded_.begin(), seeded_.end());
+    seeded_.erase(std::unique(seeded_.begin(), seeded_.end()), seeded_.end());
+    std::size_t kept = 0;
+    for (std::uint64_t label : seeded_) {
+      const double* p = certificate_.read_point(label, scratch);
+      if (certificate_.in_window(label, p) || std::binary_search(held_.begin(), held_.end(), label)) continue;
+      xyz_.insert(xyz_.end(), p, p + 3);
+      labels_.push_back(label);
+      seeded_[kept++] = label;
+    }
+    seeded_.resize(kept);
+    held_.insert(held_.end(), seeded_.begin(), seeded_.end());
+    std::sort(held_.begin(), held_.end());
   }
   const std::size_t total = labels_.size();
   // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
@@ -565,7 +599,9 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
                                              xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] < zone_.hi);
     const bool in_range = l >= plan_->label_begin && l < plan_->label_end;
     if (!in_range || !in_strip) {
-      if (std::binary_search(held_.begin(), held_.end(), l))
+      if (std::binary_search(seeded_.begin(), seeded_.end(), l))
+        ++stats_.neighbour_points;
+      else if (std::binary_search(held_.begin(), held_.end(), l))
         ++stats_.hull_points;
       else if (!in_strip)
         ++stats_.zone_buffer_points;

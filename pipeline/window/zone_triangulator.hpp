@@ -31,6 +31,7 @@ struct SegmentStats {
   // segment into zones adds (everything outside the strip: the price of parallel
   // zones), and the hull's vertices from elsewhere.
   std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_points = 0;
+  std::uint64_t neighbour_points = 0;           // held from the start: finished zones' rim tets' vertices (SharedRim)
   std::uint64_t repair_points = 0;              // inserted by the emptiness queries
   std::uint64_t range_failures = 0;             // star tets the range test could not clear
   std::uint64_t queries = 0;                    // emptiness queries run
@@ -51,7 +52,7 @@ struct SegmentStats {
   SegmentStats& operator+=(const SegmentStats& o) {
     window_points += o.window_points, repair_points += o.repair_points, range_failures += o.range_failures;
     segment_buffer_points += o.segment_buffer_points, zone_buffer_points += o.zone_buffer_points;
-    hull_points += o.hull_points;
+    hull_points += o.hull_points, neighbour_points += o.neighbour_points;
     queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
     tets_by_query += o.tets_by_query, tets_by_wall += o.tets_by_wall, tets_by_rim += o.tets_by_rim,
         rim_rechecks += o.rim_rechecks;

@@ -129,6 +129,8 @@ TEST_F(PipelineTest, ZooManySegments) {
     // on one thread the zones end in plan order, so both happen on every member.
     EXPECT_GT(s.rim_published, 0u) << io::to_string(d);
     EXPECT_GT(s.rim_from_neighbours, 0u) << io::to_string(d);
+    // ... and the later zones' windows start with the far ends of those tets.
+    EXPECT_GT(s.neighbour_points, 0u) << io::to_string(d);
     EXPECT_LE(s.tets_by_query + s.tets_by_wall + s.tets_by_rim + s.tets_by_neighbour, s.tets) << io::to_string(d);
   }
 }
