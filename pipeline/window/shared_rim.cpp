@@ -57,8 +57,10 @@ std::size_t SharedRim::publish(std::span<const Labels> tets) {
   std::size_t published = 0;
   for (const Labels& t : tets) {
     if (too_full(size_ + 1, slots_.size())) {
+      // The old table and the new one are both held while it grows (and while
+      // forget_below rebuilds): together within the share.
       const std::size_t grown = std::max(kMinSlots, 2 * slots_.size());
-      if (grown * sizeof(Labels) > max_bytes_) break;
+      if ((grown + slots_.size()) * sizeof(Labels) > max_bytes_) break;
       rebuild_locked(grown, 0);
       peak_bytes_ = std::max(peak_bytes_, slots_.size() * sizeof(Labels));
     }
@@ -67,22 +69,16 @@ std::size_t SharedRim::publish(std::span<const Labels> tets) {
   return published;
 }
 
-void SharedRim::tets_touching(std::uint64_t begin, std::uint64_t end, std::vector<Labels>& out) const {
-  std::shared_lock lock(mutex_);
-  for (const Labels& t : slots_)
-    if (t[0] != kEmpty && std::any_of(t.begin(), t.end(), [&](std::uint64_t l) { return l >= begin && l < end; }))
-      out.push_back(t);
-}
-
 void SharedRim::forget_below(std::uint64_t label) {
   std::unique_lock lock(mutex_);
   if (slots_.empty()) return;
   std::size_t kept = 0;
   for (const Labels& t : slots_) kept += t[0] != kEmpty && t[3] >= label;
-  // The smallest table that holds the rest below the load limit (memory goes back).
+  // The smallest table that holds the rest below the load limit (memory goes back;
+  // never larger than the old one, so the two fit the share together).
   std::size_t capacity = kMinSlots;
   while (too_full(kept, capacity)) capacity *= 2;
-  rebuild_locked(kept == 0 ? 0 : capacity, label);
+  rebuild_locked(kept == 0 ? 0 : std::min(capacity, slots_.size()), label);
 }
 
 std::size_t SharedRim::size() const {
@@ -99,5 +95,7 @@ std::size_t SharedRim::peak_bytes() const {
   std::shared_lock lock(mutex_);
   return peak_bytes_;
 }
+
+std::shared_lock<std::shared_mutex> SharedRim::read_lock() const { return std::shared_lock(mutex_); }
 
 }  // namespace tetstream::pipeline

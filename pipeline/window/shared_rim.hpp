@@ -26,18 +26,29 @@ class SharedRim {
  public:
   using Labels = std::array<std::uint64_t, 4>;  // increasing
 
-  // At most `max_bytes` of table (the ledger's share): when the table is full at that
-  // size, a zone's tets are not published (its neighbours check them themselves) until
-  // forget_below makes room.
+  // At most `max_bytes` of table (the ledger's share), counting the old table while a
+  // new one is filled: when the table is full at that size, a zone's tets are not published (its neighbours check them
+  // themselves) until forget_below makes room.
   explicit SharedRim(std::size_t max_bytes) : max_bytes_(max_bytes) {}
 
   // Whether a finished zone certified the tet with these labels.
   bool contains(const Labels& tet) const;
   // A finished zone's rim tets; returns how many were published (the others: no room).
   std::size_t publish(std::span<const Labels> tets);
-  // Appends every tet here with a label in [begin, end) (with a zone's labels: the
-  // finished neighbours of its points there).
-  void tets_touching(std::uint64_t begin, std::uint64_t end, std::vector<Labels>& out) const;
+  // Calls visit(tet) for every tet here with a label in [begin, end) (with a zone's
+  // labels: the finished neighbours of its points there), under the read lock.
+  template <class Visit>
+  void for_each_touching(std::uint64_t begin, std::uint64_t end, Visit&& visit) const {
+    auto lock = read_lock();
+    for (const Labels& t : slots_) {
+      if (t[0] == kEmpty) continue;
+      for (std::uint64_t l : t)
+        if (l >= begin && l < end) {
+          visit(t);
+          break;
+        }
+    }
+  }
   // Forgets the tets whose labels are all below `label`: every zone that could hold a
   // vertex of theirs has finished.
   void forget_below(std::uint64_t label);
@@ -48,6 +59,7 @@ class SharedRim {
 
  private:
   static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);  // never a label
+  std::shared_lock<std::shared_mutex> read_lock() const;
   static std::size_t hash(const Labels& t);
   bool insert_locked(const Labels& t);  // false: already there
   void rebuild_locked(std::size_t capacity, std::uint64_t keep_from);

@@ -129,8 +129,9 @@ class ZoneWorker {
 
   const SortedView& view_;
   OutputPool* const pool_;
-  SharedRim* const shared_;                 // the finished zones' rim tets (null: none shared)
-  std::vector<SharedRim::Labels> publish_;  // publish_rim's and load_window's scratch
+  SharedRim* const shared_;  // the finished zones' rim tets (null: none shared)
+  static constexpr std::size_t kPublishBatch = 2048;
+  std::vector<SharedRim::Labels> publish_;  // publish_rim's scratch: one batch
   Certificate certificate_;
   const SegmentPlan* plan_ = nullptr;  // of the zone being triangulated
   Zone zone_;
@@ -226,10 +227,8 @@ void ZoneWorker::load_window(bool with_hull) {
   seeded_.clear();
   if (shared_) {
     // Only the tets with a point of this zone: a label of its range in its strip.
-    publish_.clear();
-    shared_->tets_touching(plan_->label_begin, plan_->label_end, publish_);
     QueryScratch scratch;
-    for (const SharedRim::Labels& t : publish_) {
+    shared_->for_each_touching(plan_->label_begin, plan_->label_end, [&](const SharedRim::Labels& t) {
       const bool touches = std::any_of(t.begin(), t.end(), [&](std::uint64_t l) {
         if (l < plan_->label_begin || l >= plan_->label_end) return false;
         if (zone_.axis < 0) return true;
@@ -237,7 +236,7 @@ void ZoneWorker::load_window(bool with_hull) {
         return x >= zone_.lo && x < zone_.hi;
       });
       if (touches) seeded_.insert(seeded_.end(), t.begin(), t.end());
-    }
+    });
     std::sort(seeded_.begin(), seeded_.end());
     seeded_.erase(std::unique(seeded_.begin(), seeded_.end()), seeded_.end());
     std::size_t kept = 0;
@@ -460,6 +459,8 @@ void ZoneWorker::publish_rim() {
     if (!zone || !later) continue;
     std::sort(l.begin(), l.end());
     publish_.push_back(l);
+    // In batches: the scratch stays small (a zone's rim is tens of thousands of tets).
+    if (publish_.size() == kPublishBatch) stats_.rim_published += shared_->publish(publish_), publish_.clear();
   }
   stats_.rim_published += shared_->publish(publish_);
 }
