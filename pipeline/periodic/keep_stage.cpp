@@ -1,5 +1,6 @@
 #include "pipeline/periodic/keep_stage.hpp"
 
+#include "core/compiler.hpp"
 #include "core/error.hpp"
 #include "io/tet_container.hpp"
 #include "io/tet_periodic.hpp"
@@ -8,9 +9,10 @@
 #include "pipeline/files/checkpoint.hpp"
 #include "pipeline/files/external_sort.hpp"
 #include "pipeline/files/temp_files.hpp"
+#include "pipeline/periodic/ball_grid.hpp"
 #include "pipeline/periodic/keep_parts.hpp"
-#include "pipeline/periodic/kept_stream.hpp"
 #include "pipeline/periodic/tet_records.hpp"
+#include "pipeline/periodic/zone_keep.hpp"
 #include "pipeline/run/stage_write.hpp"
 #include "pipeline/write/async_tet_writer.hpp"
 
@@ -63,7 +65,7 @@ class RankedBits {
 // every padded label.
 class PeriodicLabels {
  public:
-  PeriodicLabels(const SortedView& view, const KeepSetup& s, io::TetFileHeader& header)
+  PeriodicLabels(const SortedView& view, const KeepSetup& s, io::TetFileHeader& header, BallGrid& grid)
       : s_(s), box_(view.count), has_images_(s.input_points) {
     for (std::uint64_t code : s.images->code) has_images_.set(code >> 3);
     has_images_.count();
@@ -77,11 +79,12 @@ class PeriodicLabels {
       ReleaseBehind behind(view.points, 0, view.query_regions != nullptr);
       for (std::uint64_t label = 0; label < view.count; ++label) {
         const std::uint64_t original = records[label].original();
+        double p[3];
+        records[label].xyz(p);
+        grid.mark(p);
         if (original < s.input_points) {
           box_.set(label);
           if (has_images_.test(original)) image_point_label_[has_images_.rank(original)] = points_;
-          double p[3];
-          records[label].xyz(p);
           for (int k = 0; k < 3; ++k) {
             header.bbox_min[k] = std::min(header.bbox_min[k], p[k]);
             header.bbox_max[k] = std::max(header.bbox_max[k], p[k]);
@@ -179,7 +182,7 @@ class AppendFile {
 
 constexpr const char* kDeferredFile = "periodic-deferred.tets";
 constexpr const char* kOffsetsFile = "periodic-offsets.tets";
-constexpr std::size_t kChunkTets = std::size_t(1) << 16;  // kept tets handed to the stream at a time
+constexpr std::size_t kBlockTets = std::size_t(1) << 16;  // deferred tets read back at a time
 
 class KeepStage final : public OutputStage {
  public:
@@ -220,17 +223,13 @@ class KeepStage final : public OutputStage {
   std::uint64_t tet_bytes() const override { return writer_ ? writer_->tet_bytes() : 0; }
 
  private:
-  // A zone's code words, by local id, from zone_done to its segment's add_segment.
-  struct ZoneCodes {
-    std::vector<std::uint64_t> code;
-    std::uint64_t long_edges = 0;
-  };
-
   std::uint64_t frontier(std::uint64_t padded_label) const;
   void emit_frame(std::vector<std::uint64_t>&& labels, std::vector<std::uint16_t>&& codes);
+  void write(const KeptTet& t);
+  void defer(std::span<const KeptTet> tets) { deferred_->append(tets.data(), tets.size_bytes()); }
   void record(std::uint64_t next_label, bool finishing);
   void restore(const json& rec);
-  void merge_deferred(const KeptStream::Write& write);
+  void merge_deferred();
 
   StageContext context_;
   const SortedView& view_;
@@ -239,18 +238,26 @@ class KeepStage final : public OutputStage {
   KeepResult& result_;
   std::array<double, 3> lower_{};
   io::TetFileHeader header_;
+  std::optional<BallGrid> grid_;
   std::optional<PeriodicLabels> labels_;
   std::unique_ptr<io::TetWriter> writer_;
   std::optional<AsyncTetWriter> async_;
   std::optional<AppendFile> deferred_, offsets_file_;
   io::PeriodicOffsetsWriter offsets_;
   std::optional<FrameFeeder> feeder_;
-  std::optional<KeptStream> stream_;
-  std::vector<KeptTet> chunk_;
+  std::uint64_t deferred_from_ = 0;  // tets of m from here on are written last (deferred)
+  // The kept tets at or past the frontier, sorted, waiting for the next segments; past
+  // waiting_cap_ of them everything goes through the deferred file (spilling_).
+  std::vector<KeptTet> waiting_, still_waiting_;
+  std::size_t waiting_cap_ = 1;
+  bool spilling_ = false;
+  std::uint64_t last_ = 0;  // the last m written (a wrong frontier is refused, never written)
   std::mutex zones_mutex_;
-  std::map<std::size_t, ZoneCodes> zones_;  // by unit, until its segment is added
-  std::size_t next_unit_ = 0;               // the unit of the next segment's first zone
+  std::map<std::size_t, ZoneKept> zones_;  // by unit, until its segment is added
+  std::vector<std::vector<std::uint64_t>> spare_codes_;
+  std::size_t next_unit_ = 0;              // the unit of the next segment's first zone
   std::uint64_t long_edges_ = 0;
+  bool safe_edges_ = false;
   int label_bits_ = 1;
   bool resumed_ = false, finishing_ = false, done_ = false, abandoned_ = false;
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0, output_bytes_ = 0;
@@ -266,7 +273,17 @@ void KeepStage::prepare() {
   header_.tool = "tetstream 0.1.0";
   header_.options = s_.options_json;
   header_.input_count = s_.input_points;
-  labels_.emplace(view_, s_, header_);
+  // Cells of about 16 points of uniform data (2.52 mean spacings): with the reach of 4
+  // cells, the ball test is skipped for the points more than ~10 spacings inside the
+  // padded box, and a uniform set leaves a cell empty about once in 10^7 points.
+  const double spacing = std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] /
+                                    double(std::max<std::uint64_t>(s_.input_points, 1)));
+  grid_.emplace(lower_, s_.period, 2.52 * spacing);
+  labels_.emplace(view_, s_, header_, *grid_);
+  grid_->finish();
+  // Safe tets are far below CGAL's edge limit once the box is some 25 spacings wide.
+  const double l = std::min({s_.period[0], s_.period[1], s_.period[2]});
+  safe_edges_ = grid_->diameter_bound() < std::sqrt(0.166) * l * (1 - 0x1p-20);
   header_.point_count = labels_->points();
   label_bits_ = std::max(1, int(std::bit_width(labels_->points())));
 
@@ -311,12 +328,9 @@ void KeepStage::prepare() {
     feeder_.emplace([this](std::vector<std::uint64_t>&& l, std::vector<std::uint16_t>&& c) { emit_frame(std::move(l), std::move(c)); },
                     s_.frame_tets);
     const int axis = view_.axis;
-    const std::uint64_t deferred_from = labels_->box_points_before(
+    deferred_from_ = labels_->box_points_before(
         view_.lower_bound(canonical_threshold(s_.period[std::size_t(axis)], s_.margin[std::size_t(axis)])));
-    stream_.emplace([this](std::span<const KeptTet> tets) { feeder_->add(tets); }, deferred_from,
-                    std::size_t(s_.waiting_bytes),
-                    [this](std::span<const KeptTet> tets) { deferred_->append(tets.data(), tets.size_bytes()); },
-                    [this](const KeptStream::Write& write) { merge_deferred(write); }, label_bits_);
+    waiting_cap_ = std::max<std::size_t>(1, std::size_t(s_.waiting_bytes / sizeof(KeptTet)));
     if (resumed_) restore(state["keep"]);
   }
   if (resumed_)
@@ -357,7 +371,9 @@ void KeepStage::restore(const json& rec) {
     throw DamagedCheckpoint(offsets_file_->path() + ": damaged checkpoint (" + std::to_string(frames) +
                             " frames of offsets, " + std::to_string(writer_->frames_written()) + " frames)");
   feeder_->restore(read_tets(rec.at("pending")), rec.at("kept").get<std::uint64_t>());
-  stream_->restore(read_tets(rec.at("waiting")), rec.at("last").get<std::uint64_t>(), rec.at("spilling").get<bool>());
+  waiting_ = read_tets(rec.at("waiting"));
+  last_ = rec.at("last").get<std::uint64_t>();
+  spilling_ = rec.at("spilling").get<bool>();
   long_edges_ = rec.at("long_edges").get<std::uint64_t>();
 }
 
@@ -395,21 +411,37 @@ void KeepStage::run() {
   record(0, false);
 }
 
-// On the zone's thread: its window's code words, its tets with a vertex at a canonical
-// image certified (their balls inside the padded box), and only the kept ones left, in
-// the order they came (each still grouped by smallest padded label).
+// On the zone's thread: its window's code words, and its tets certified and kept in
+// place, in the stored order (zone_keep.hpp).
 void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   const auto t0 = StageClock::now();
-  ZoneCodes zc;
+  // Per thread, kept from zone to zone: fresh pages for each would cost their zeroing.
+  thread_local std::vector<ZoneVertex> vx;
+  thread_local std::vector<std::uint8_t> safe;
+  thread_local KeptGroup group;
+  thread_local std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>> apart;
+  thread_local std::vector<std::uint32_t> deferred;
+  ZoneKept kept;
+  {
+    const std::lock_guard lock(zones_mutex_);
+    if (!spare_codes_.empty()) {
+      kept.code = std::move(spare_codes_.back());
+      spare_codes_.pop_back();
+    }
+  }
   const std::size_t n = z.labels.size();
-  zc.code.resize(n);
-  std::vector<double> xyz(3 * n);
+  kept.code.resize(n);
+  vx.resize(n);
+  safe.resize(n);
   std::uint64_t lo = ~std::uint64_t(0), hi = 0;
   view_.points.visit([&](const auto* records) {
+    constexpr std::size_t kAhead = 16;  // the records of a strip's window: a stride, not a run
     for (std::size_t i = 0; i < n; ++i) {
+      if (i + kAhead < n) TS_PREFETCH(&records[z.labels[i + kAhead]]);
       const std::uint64_t label = z.labels[i];
-      records[label].xyz(&xyz[3 * i]);
-      zc.code[i] = labels_->code(label, records[label].original(), &xyz[3 * i]);
+      records[label].xyz(vx[i].x);
+      vx[i].code = kept.code[i] = labels_->code(label, records[label].original(), vx[i].x);
+      safe[i] = grid_->safe(vx[i].x);
       lo = std::min(lo, label);
       hi = std::max(hi, label);
     }
@@ -418,38 +450,14 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   // reads handed them back behind it already).
   if (n > 0 && view_.query_regions != nullptr)
     release_mapped_pages(view_.points.record(lo), std::size_t(hi - lo + 1) * view_.points.record_bytes());
-  std::uint64_t failures = 0;
-  std::size_t kept = 0;
-  std::uint32_t* t = z.tets.data();
-  const std::size_t tets = z.size();
-  for (std::size_t i = 0; i < tets; ++i) {
-    const std::uint32_t* v = t + 4 * i;
-    const std::uint64_t c[4] = {zc.code[v[0]], zc.code[v[1]], zc.code[v[2]], zc.code[v[3]]};
-    const Verdict verdict = judge(c);
-    if (!verdict.certify) continue;
-    const double* p[4] = {&xyz[3 * v[0]], &xyz[3 * v[1]], &xyz[3 * v[2]], &xyz[3 * v[3]]};
-    if (!ball_inside(p, s_.period, lower_)) {
-      ++failures;
-      break;  // one is enough: the margin doubles
-    }
-    if (!verdict.kept) continue;
-    KeptTet form;
-    if (!stored_form_of(c, form)) {
-      ++failures;
-      break;
-    }
-    zc.long_edges += long_edge(p, s_.period);
-    if (kept != i) std::copy(v, v + 4, t + 4 * kept);
-    ++kept;
-  }
-  if (failures != 0) {
+  if (!keep_zone(z, kept, vx, safe, view_.axis, s_.period, lower_, deferred_from_, safe_edges_, group, apart,
+                 deferred)) {
     abandoned_ = true;
     throw BallsLeaveBox(s_.input + ": a Delaunay ball at a canonical image leaves the padded box");
   }
-  z.tets.resize(4 * kept);
   {
     const std::lock_guard lock(zones_mutex_);
-    zones_[unit] = std::move(zc);
+    zones_[unit] = std::move(kept);
   }
   double s = zone_seconds_.load();
   while (!zone_seconds_.compare_exchange_weak(s, s + seconds_since(t0))) {
@@ -464,45 +472,105 @@ std::uint64_t KeepStage::frontier(std::uint64_t padded_label) const {
   return labels_->box_points_before(view_.lower_bound(view_.read_key(padded_label)));
 }
 
+// The segment's zones' kept tets (each zone: a run in order and one sorted apart) and
+// the tets still waiting, merged in the stored order: those below the frontier to the
+// output, the others waiting for the next segments; the deferred ones to their file.
 void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentStats& work, std::uint64_t points,
                             std::uint64_t next_label) {
   const auto t0 = StageClock::now();
-  std::vector<ZoneCodes> codes(parts.size());
+  std::vector<ZoneKept> kept(parts.size());
   {
     const std::lock_guard lock(zones_mutex_);
     for (std::size_t p = 0; p < parts.size(); ++p) {
       auto it = zones_.find(next_unit_ + p);
       if (it == zones_.end()) throw std::logic_error("periodic keep: a zone's tets were not kept");
-      codes[p] = std::move(it->second);
+      kept[p] = std::move(it->second);
       zones_.erase(it);
     }
   }
   next_unit_ += parts.size();
-  // Merged by smallest padded label, a chunk at a time: every tet after a chunk has its
-  // smallest padded label at the chunk's last one or past it, which gives the frontier.
-  chunk_.clear();
-  merge_by_min_label(parts, [&](const ZoneTets& part, std::size_t b, std::size_t e) {
-    const std::vector<std::uint64_t>& code = codes[std::size_t(&part - parts.data())].code;
-    for (std::size_t i = b; i < e; ++i) {
-      const std::uint64_t c[4] = {code[part.tets[4 * i]], code[part.tets[4 * i + 1]], code[part.tets[4 * i + 2]],
-                                  code[part.tets[4 * i + 3]]};
-      KeptTet t;
-      stored_form_of(c, t);  // it was checked in zone_done
-      chunk_.push_back(t);
+  // The runs to merge: [begin, end) of a zone's tets, and the waiting tets.
+  struct Run {
+    const ZoneTets* part;
+    const ZoneKept* kept;
+    std::size_t at, end;
+    KeptTet head;
+  };
+  std::vector<Run> runs;
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    const std::size_t bounds[3] = {0, kept[p].in_order_end, kept[p].sorted_end};
+    for (int r = 0; r < 2; ++r)
+      if (bounds[r] < bounds[r + 1]) runs.push_back({&parts[p], &kept[p], bounds[r], bounds[r + 1], {}});
+  }
+  for (Run& r : runs) r.head = kept_tet(&r.part->tets[4 * r.at], r.kept->code);
+  std::size_t w = 0;  // the next waiting tet
+  const std::uint64_t f = frontier(next_label);
+  const KeptTetLess less;
+  still_waiting_.clear();
+  for (;;) {
+    Run* best = nullptr;
+    for (Run& r : runs)
+      if (r.at < r.end && (!best || less(r.head, best->head))) best = &r;
+    const bool from_waiting = w < waiting_.size() && (!best || less(waiting_[w], best->head));
+    if (!best && !from_waiting) break;
+    const KeptTet& t = from_waiting ? waiting_[w] : best->head;
+    if (!spilling_ && t.v[0] < f)
+      write(t);
+    else
+      still_waiting_.push_back(t);
+    if (from_waiting) {
+      ++w;
+    } else if (++best->at < best->end) {
+      const std::uint32_t* q = &best->part->tets[4 * best->at];
+      if (best->at + 8 < best->end)
+        for (int j = 0; j < 4; ++j) TS_PREFETCH(&best->kept->code[q[32 + j]]);
+      best->head = kept_tet(q, best->kept->code);
     }
-    if (chunk_.size() >= kChunkTets) {
-      stream_->add(chunk_, frontier(part.min_label(e - 1)));
-      chunk_.clear();
-    }
-  });
-  stream_->add(chunk_, frontier(next_label));
-  chunk_.clear();
-  for (const ZoneCodes& zc : codes) long_edges_ += zc.long_edges;
+  }
+  if (spilling_) {
+    defer(still_waiting_);
+    still_waiting_.clear();
+  }
+  waiting_.swap(still_waiting_);
+  if (!spilling_ && waiting_.size() > waiting_cap_) {
+    // Tets far out of order (a shape this frontier does not suit): they and all the
+    // rest go through the external sort, which then writes them in order.
+    defer(waiting_);
+    waiting_.clear();
+    waiting_.shrink_to_fit();
+    spilling_ = true;
+    spdlog::debug("periodic keep: tets far out of order, the rest through the external sort");
+  }
+  // The deferred tets, in any order: the external sort orders them at the end.
+  std::vector<KeptTet> tail;
+  for (std::size_t p = 0; p < parts.size(); ++p) {
+    tail.clear();
+    for (std::size_t i = kept[p].sorted_end; i < parts[p].size(); ++i)
+      tail.push_back(kept_tet(&parts[p].tets[4 * i], kept[p].code));
+    defer(tail);
+    long_edges_ += kept[p].long_edges;
+  }
+  {
+    // The code tables back to the zones to come: their pages are already there.
+    const std::lock_guard lock(zones_mutex_);
+    for (ZoneKept& k : kept) spare_codes_.push_back(std::move(k.code));
+    while (spare_codes_.size() > parts.size() + 2) spare_codes_.pop_back();
+  }
   work_.stats += work;
   work_.segment_labels += points;
   ++segments_done_;
   record(next_label, false);
   seconds_ += seconds_since(t0);
+}
+
+// One kept tet to the output, in the stored order; a tet before the last one written
+// would mean a wrong frontier: refused, never written.
+void KeepStage::write(const KeptTet& t) {
+  if (t.v[0] < last_)
+    throw std::logic_error("periodic keep: a tet of label " + std::to_string(t.v[0]) +
+                           " came after the frontier passed it");
+  last_ = t.v[0];
+  feeder_->add(std::span<const KeptTet>(&t, 1));
 }
 
 void KeepStage::emit_frame(std::vector<std::uint64_t>&& labels, std::vector<std::uint16_t>&& codes) {
@@ -544,10 +612,10 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
                    {"segments", segments_done_},
                    {"counters", counters_json(work_)},
                    {"pending", save_tets("pending", feeder_->pending())},
-                   {"waiting", save_tets("waiting", stream_->waiting())},
+                   {"waiting", save_tets("waiting", waiting_)},
                    {"kept", feeder_->count()},
-                   {"last", stream_->last()},
-                   {"spilling", stream_->spilled()},
+                   {"last", last_},
+                   {"spilling", spilling_},
                    {"long_edges", long_edges_},
                    {"deferred_bytes", deferred_->bytes()},
                    {"deferred_crc32c", deferred_->crc()},
@@ -575,27 +643,31 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
 }
 
 // The deferred tets (kept at an image below 0 on the sort axis, and all after a
-// spill), sorted by the external sort from their file.
-void KeepStage::merge_deferred(const KeptStream::Write& write) {
+// spill), sorted by the external sort from their file, to the output after the rest.
+void KeepStage::merge_deferred() {
   ExternalSorter<KeptTet, KeptTetLess> sorter(
       sort_options(std::size_t(std::max<std::uint64_t>(s_.sort_bytes, 4 << 20)), context_.dir, "periodic-tets"));
   const int bits = label_bits_;
   sorter.set_run_sort([bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, bits); });
-  std::vector<KeptTet> block(kChunkTets);
+  std::vector<KeptTet> block(kBlockTets);
   const std::uint64_t count = deferred_->bytes() / sizeof(KeptTet);
   for (std::uint64_t first = 0; first < count; first += block.size()) {
     const std::size_t k = std::size_t(std::min<std::uint64_t>(block.size(), count - first));
     deferred_->read(first * sizeof(KeptTet), block.data(), k * sizeof(KeptTet));
     sorter.push(std::span<const KeptTet>(block.data(), k));
   }
-  sorter.merge([&write](std::span<const KeptTet> batch) { write(batch); });
+  sorter.merge([this](std::span<const KeptTet> batch) {
+    for (const KeptTet& t : batch) write(t);
+  });
 }
 
 void KeepStage::commit(std::uint64_t /*end_label*/) {
   const auto t0 = StageClock::now();
   if (done_ || finishing_) return;
   if (long_edges_ != 0) throw long_edges_error(s_.input, long_edges_);
-  stream_->finish();
+  for (const KeptTet& t : waiting_) write(t);
+  waiting_.clear();
+  merge_deferred();
   feeder_->flush();
   if (context_.checkpoint) {
     record(view_.count, true);
@@ -634,10 +706,11 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
                                std::uint64_t waiting_bytes) {
   // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the image
-  // points' labels, the stream's waiting tets and its chunk, the offsets (compressed:
-  // under a byte a tet, at 7 tets a point).
-  return padded_points / 4 + input_points / 4 + 8 * images + waiting_bytes + 2 * kChunkTets * sizeof(KeptTet) +
-         padded_points + (1 << 20);
+  // points' labels, the waiting tets (twice: the merge makes the next list beside the
+  // last), the offsets (compressed: a tenth of a byte a tet, 7 tets a point), the
+  // ball grid (two bytes a cell of about 16 points).
+  return padded_points / 4 + input_points / 4 + 8 * images + 2 * waiting_bytes + padded_points / 2 +
+         padded_points / 8 + (1 << 20);
 }
 
 }  // namespace tetstream::pipeline::periodic
