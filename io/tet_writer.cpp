@@ -183,6 +183,7 @@ void TetWriter::rebuild_frame_index(std::uint64_t from, std::uint64_t committed)
 std::uint64_t TetWriter::skip_leading_section(std::uint64_t at, std::uint64_t committed) {
   // A section the caller added between the points and the first frame (a periodic
   // container's PBOX, docs/periodic.md): checked and kept in the index, as written.
+  if (at == committed) return at;
   const std::string partial = path_ + ".partial";
   std::uint8_t sh[kSectionHeaderSize];
   if (committed - at < kSectionHeaderSize + kSectionTrailerSize)

@@ -241,8 +241,7 @@ namespace {
 // The partial output a stale checkpoint's job kept for --resume (state.json names the
 // output): removed with the checkpoint, which alone could finish it. Only a regular
 // file of one link, this user's, that starts as a container or is still empty (the
-// job's claim made it and was killed before writing: a periodic job's output stays
-// empty until its keep step) and that no process holds locked (a live job's claim
+// job's claim made it and was killed before writing) and that no process holds locked (a live job's claim
 // holds its flock) is removed: an empty file holds nothing to lose.
 void remove_orphaned_partial(const std::string& dir) {
   std::string output;

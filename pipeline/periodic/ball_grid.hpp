@@ -94,7 +94,8 @@ class BallGrid {
       if ((start / stride) % n != 0) continue;
       for (std::int64_t i = 0; i < n; ++i) line[std::size_t(i)] = safe_[std::size_t(start + i * stride)];
       bad_before[0] = 0;
-      for (std::int64_t i = 0; i < n; ++i) bad_before[std::size_t(i + 1)] = bad_before[std::size_t(i)] + !line[std::size_t(i)];
+      for (std::int64_t i = 0; i < n; ++i)
+        bad_before[std::size_t(i + 1)] = bad_before[std::size_t(i)] + !line[std::size_t(i)];
       for (std::int64_t i = 0; i < n; ++i) {
         const bool inside = i - kReach >= 0 && i + kReach < n;
         safe_[std::size_t(start + i * stride)] =

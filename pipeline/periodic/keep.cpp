@@ -90,8 +90,7 @@ struct KeptFrame {
 // certified (its ball inside the padded box), and those whose smallest periodic label
 // sits at its canonical image kept, in stored form.
 void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
-                const std::array<double, 3>& lower,
-                std::vector<std::uint64_t>& t, KeptFrame& out) {
+                const std::array<double, 3>& lower, std::vector<std::uint64_t>& t, KeptFrame& out) {
   r.read_frame(f, t);
   out.kept.clear();
   out.failures = out.long_edges = 0;

@@ -17,13 +17,17 @@
 #include "pipeline/write/async_tet_writer.hpp"
 
 #include <fcntl.h>
+#include <omp.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <bit>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -44,7 +48,8 @@ class RankedBits {
   void count() {
     before_.resize(words_.size() + 1);
     before_[0] = 0;
-    for (std::size_t w = 0; w < words_.size(); ++w) before_[w + 1] = before_[w] + std::uint64_t(std::popcount(words_[w]));
+    for (std::size_t w = 0; w < words_.size(); ++w)
+      before_[w + 1] = before_[w] + std::uint64_t(std::popcount(words_[w]));
   }
   // The bits set before position i (i up to n).
   std::uint64_t rank(std::uint64_t i) const {
@@ -188,7 +193,12 @@ class KeepStage final : public OutputStage {
  public:
   KeepStage(const StageContext& context, const SortedView& view, const TriangulateShares& shares,
             const KeepSetup& setup, KeepResult& result)
-      : context_(context), view_(view), shares_(shares), s_(setup), result_(result) {}
+      : context_(context),
+        view_(view),
+        shares_(shares),
+        s_(setup),
+        result_(result),
+        scratch_(std::size_t(std::max(context.options.threads, omp_get_max_threads()))) {}
 
   ~KeepStage() override {
     // The zones stop before this (the triangulation is destroyed first); the writer's
@@ -212,11 +222,6 @@ class KeepStage final : public OutputStage {
   void commit(std::uint64_t end_label) override;
   void finish() override;
 
-  std::uint64_t first_label() const override { return first_label_; }
-  std::uint64_t segments_resumed() const override { return segments_resumed_; }
-  std::uint64_t segments_done() const override { return segments_done_; }
-  const WrittenWork& work() const override { return work_; }
-  double seconds() const override { return seconds_; }
   double busy_seconds() const override { return async_ ? async_->busy_seconds() : 0; }
   double producer_wait_seconds() const override { return async_ ? async_->producer_wait_seconds() : 0; }
   std::uint64_t bytes_written() const override { return writer_ ? writer_->bytes_written() : output_bytes_; }
@@ -252,17 +257,27 @@ class KeepStage final : public OutputStage {
   std::size_t waiting_cap_ = 1;
   bool spilling_ = false;
   std::uint64_t last_ = 0;  // the last m written (a wrong frontier is refused, never written)
+  // Each zone thread's buffers (by omp_get_thread_num()), kept from zone to zone:
+  // fresh pages for each zone would cost their zeroing.
+  struct Scratch {
+    std::vector<ZoneVertex> vx;
+    std::vector<std::uint8_t> safe;
+    KeptGroup group;
+    std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>> apart;
+    std::vector<std::uint32_t> deferred;
+  };
+  std::vector<Scratch> scratch_;
   std::mutex zones_mutex_;
   std::map<std::size_t, ZoneKept> zones_;  // by unit, until its segment is added
   std::vector<std::vector<std::uint64_t>> spare_codes_;
-  std::size_t next_unit_ = 0;              // the unit of the next segment's first zone
+  std::size_t next_unit_ = 0;  // the unit of the next segment's first zone
   std::uint64_t long_edges_ = 0;
   bool safe_edges_ = false;
+  std::uint64_t certified_ = 0, balls_ = 0;  // this process's: tets certified, and by their ball
   int label_bits_ = 1;
-  bool resumed_ = false, finishing_ = false, done_ = false, abandoned_ = false;
-  std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0, output_bytes_ = 0;
-  WrittenWork work_;
-  double seconds_ = 0;
+  bool resumed_ = false, finishing_ = false, done_ = false;
+  std::atomic<bool> abandoned_{false};  // set by a zone's thread
+  std::uint64_t output_bytes_ = 0;
   std::atomic<double> zone_seconds_{0};
 };
 
@@ -276,8 +291,8 @@ void KeepStage::prepare() {
   // Cells of about 16 points of uniform data (2.52 mean spacings): with the reach of 4
   // cells, the ball test is skipped for the points more than ~10 spacings inside the
   // padded box, and a uniform set leaves a cell empty about once in 10^7 points.
-  const double spacing = std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] /
-                                    double(std::max<std::uint64_t>(s_.input_points, 1)));
+  const double spacing =
+      std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] / double(std::max<std::uint64_t>(s_.input_points, 1)));
   grid_.emplace(lower_, s_.period, 2.52 * spacing);
   labels_.emplace(view_, s_, header_, *grid_);
   grid_->finish();
@@ -301,7 +316,9 @@ void KeepStage::prepare() {
     const std::uint64_t committed = rec.at("committed").get<std::uint64_t>();
     finishing_ = rec.value("finishing", false);
     std::error_code ec;
-    if (finishing_ && !std::filesystem::exists(s_.output + ".partial", ec) && std::filesystem::exists(s_.output, ec)) {
+    // The job's claim made the partial file afresh (it was not there): the output
+    // had been renamed into place.
+    if (finishing_ && s_.claim->created() && std::filesystem::exists(s_.output, ec)) {
       // Renamed into place: only the checkpoint's removal was cut short.
       const io::TetReader finished(s_.output, io::TetReader::Periodic::kAccept);  // throws unless complete
       done_ = true;
@@ -325,7 +342,8 @@ void KeepStage::prepare() {
     const std::uint64_t keep_offsets = resumed_ ? state["keep"].at("offsets_bytes").get<std::uint64_t>() : 0;
     deferred_.emplace(context_.dir + "/" + kDeferredFile, keep_deferred);
     offsets_file_.emplace(context_.dir + "/" + kOffsetsFile, keep_offsets);
-    feeder_.emplace([this](std::vector<std::uint64_t>&& l, std::vector<std::uint16_t>&& c) { emit_frame(std::move(l), std::move(c)); },
+    feeder_.emplace([this](std::vector<std::uint64_t>&& l,
+                           std::vector<std::uint16_t>&& c) { emit_frame(std::move(l), std::move(c)); },
                     s_.frame_tets);
     const int axis = view_.axis;
     deferred_from_ = labels_->box_points_before(
@@ -415,12 +433,9 @@ void KeepStage::run() {
 // place, in the stored order (zone_keep.hpp).
 void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   const auto t0 = StageClock::now();
-  // Per thread, kept from zone to zone: fresh pages for each would cost their zeroing.
-  thread_local std::vector<ZoneVertex> vx;
-  thread_local std::vector<std::uint8_t> safe;
-  thread_local KeptGroup group;
-  thread_local std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>> apart;
-  thread_local std::vector<std::uint32_t> deferred;
+  Scratch& scratch = scratch_.at(std::size_t(omp_get_thread_num()));
+  std::vector<ZoneVertex>& vx = scratch.vx;
+  std::vector<std::uint8_t>& safe = scratch.safe;
   ZoneKept kept;
   {
     const std::lock_guard lock(zones_mutex_);
@@ -450,8 +465,8 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   // reads handed them back behind it already).
   if (n > 0 && view_.query_regions != nullptr)
     release_mapped_pages(view_.points.record(lo), std::size_t(hi - lo + 1) * view_.points.record_bytes());
-  if (!keep_zone(z, kept, vx, safe, view_.axis, s_.period, lower_, deferred_from_, safe_edges_, group, apart,
-                 deferred)) {
+  if (!keep_zone(z, kept, vx, safe, view_.axis, s_.period, lower_, deferred_from_, safe_edges_, scratch.group,
+                 scratch.apart, scratch.deferred)) {
     abandoned_ = true;
     throw BallsLeaveBox(s_.input + ": a Delaunay ball at a canonical image leaves the padded box");
   }
@@ -549,6 +564,8 @@ void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSta
       tail.push_back(kept_tet(&parts[p].tets[4 * i], kept[p].code));
     defer(tail);
     long_edges_ += kept[p].long_edges;
+    certified_ += kept[p].certified;
+    balls_ += kept[p].balls;
   }
   {
     // The code tables back to the zones to come: their pages are already there.
@@ -596,9 +613,8 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
   const auto save_tets = [&](const char* kind, const std::vector<KeptTet>& tets) {
     const std::string name = std::string("periodic-") + kind + "-" + std::to_string(segments_done_) + ".tets";
     if (!tets.empty()) write_file_atomically(context_.dir, name, tets.data(), tets.size() * sizeof(KeptTet));
-    return json{{"name", name},
-                {"tets", tets.size()},
-                {"crc32c", io::crc32c(tets.data(), tets.size() * sizeof(KeptTet))}};
+    return json{
+        {"name", name}, {"tets", tets.size()}, {"crc32c", io::crc32c(tets.data(), tets.size() * sizeof(KeptTet))}};
   };
   std::vector<std::string> old;
   if (state.contains("keep")) {
@@ -680,9 +696,8 @@ void KeepStage::commit(std::uint64_t /*end_label*/) {
 void KeepStage::finish() {
   const auto t0 = StageClock::now();
   if (!done_) {
-    async_->add_task([payload = offsets_.payload()](io::TetWriter& w) {
-      w.add_section(io::kTagPeriodicOffsets, payload);
-    });
+    async_->add_task(
+        [payload = offsets_.payload()](io::TetWriter& w) { w.add_section(io::kTagPeriodicOffsets, payload); });
     async_->finish();
     output_bytes_ = writer_->bytes_written();
     result_.points = labels_->points();
@@ -691,8 +706,10 @@ void KeepStage::finish() {
   result_.output_bytes = output_bytes_;
   result_.complete = true;
   seconds_ += seconds_since(t0);
-  spdlog::debug("periodic keep: {:.2f}s in the zones (summed over threads), {:.2f}s in the segments and the end",
-                zone_seconds_.load(), seconds_);
+  spdlog::debug(
+      "periodic keep: {:.2f}s in the zones (summed over threads), {:.2f}s in the segments and the end; {} tets "
+      "certified, {} of them by their circumsphere (the others by the ball grid)",
+      zone_seconds_.load(), seconds_, certified_, balls_);
 }
 
 }  // namespace
@@ -704,13 +721,15 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 }
 
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
-                               std::uint64_t waiting_bytes) {
+                               std::uint64_t waiting_bytes, int threads) {
   // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the image
   // points' labels, the waiting tets (twice: the merge makes the next list beside the
-  // last), the offsets (compressed: a tenth of a byte a tet, 7 tets a point), the
-  // ball grid (two bytes a cell of about 16 points).
-  return padded_points / 4 + input_points / 4 + 8 * images + 2 * waiting_bytes + padded_points / 2 +
-         padded_points / 8 + (1 << 20);
+  // last), the offsets (compressed: a tenth of a byte a tet, 7 tets a point), the ball
+  // grid (two bytes a cell of about 16 points), the zones' code tables held for their
+  // segment (8 bytes a window point: about a byte a padded point), and each zone
+  // thread's buffers (33 bytes a window point, a window taken as a 32nd of the points).
+  return padded_points / 4 + input_points / 4 + 8 * images + 2 * waiting_bytes + padded_points / 2 + padded_points / 8 +
+         padded_points + std::uint64_t(std::max(threads, 1)) * 33 * padded_points / 32 + (1 << 20);
 }
 
 }  // namespace tetstream::pipeline::periodic

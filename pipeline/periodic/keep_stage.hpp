@@ -44,8 +44,8 @@ struct KeepSetup {
   const io::OutputClaim* claim = nullptr;
   std::size_t frame_tets = std::size_t(1) << 18;  // as KeepInput::frame_tets
   std::string options_json;                       // the output header's options
-  std::uint64_t waiting_bytes = 0;  // the tets waiting for the frontier, before the stream spills
-  std::uint64_t sort_bytes = 0;     // the external sort of the tets written last (after the triangulation)
+  std::uint64_t waiting_bytes = 0;                // the tets waiting for the frontier, before the stream spills
+  std::uint64_t sort_bytes = 0;  // the external sort of the tets written last (after the triangulation)
 };
 
 // A ball at a canonical image leaves the padded box: the attempt is given up, its
@@ -64,6 +64,6 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 // its label tables, the tets waiting for the frontier and the offsets; the padded job
 // runs within the rest of --memory.
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
-                               std::uint64_t waiting_bytes);
+                               std::uint64_t waiting_bytes, int threads);
 
 }  // namespace tetstream::pipeline::periodic

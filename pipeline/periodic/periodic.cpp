@@ -15,6 +15,7 @@
 #include "pipeline/periodic/pad.hpp"
 
 #include <nlohmann/json.hpp>
+#include <omp.h>
 #include <spdlog/spdlog.h>
 
 #include <chrono>
@@ -249,12 +250,16 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   // The tets waiting for the frontier are a slab a few spacings thick (ties on the sort
   // axis, and the tets at the lower face that wait for the box's first points); past
   // this share the stream spills (the same bytes, through the external sort).
-  setup.waiting_bytes = options.memory_bytes / 32;
+  setup.waiting_bytes = options.memory_bytes / 64;
   setup.sort_bytes = options.memory_bytes / 4;  // after the triangulation: the windows are gone
   // The keep's tables beside the padded job's shares: that job plans within the rest.
   const std::uint64_t keep_bytes =
-      keep_stage_bytes(points.count + images.code.size(), points.count, images.code.size(), setup.waiting_bytes);
-  inner.memory_bytes = options.memory_bytes - std::min(keep_bytes, options.memory_bytes / 4);
+      keep_stage_bytes(points.count + images.code.size(), points.count, images.code.size(), setup.waiting_bytes,
+                       options.threads > 0 ? options.threads : omp_get_max_threads());
+  // (Not below the 32M every job takes: a budget that small holds a small input, whose
+  // shares are its own needs, far below it.)
+  inner.memory_bytes =
+      std::max(options.memory_bytes - std::min(keep_bytes, options.memory_bytes / 4), std::uint64_t(32) << 20);
   KeepResult kept;
   const auto make = [&](const StageContext& context, const SortedPoints&, const SortedView& view,
                         const TriangulateShares& shares,
@@ -272,7 +277,8 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   sum.output_bytes = kept.output_bytes;
   sum.padded.memory_ceiling = options.memory_bytes;
   auto& ledger = sum.padded.memory_shares;
-  ledger.push_back({"triangulate", "keep: label tables, offsets, waiting tets", std::min(keep_bytes, options.memory_bytes / 4)});
+  ledger.push_back(
+      {"triangulate", "keep: label tables, offsets, waiting tets", std::min(keep_bytes, options.memory_bytes / 4)});
   ledger.push_back({"keep", "sort", setup.sort_bytes});
   return true;
 }

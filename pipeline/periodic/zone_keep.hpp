@@ -27,6 +27,7 @@ struct ZoneKept {
   std::vector<std::uint64_t> code;  // by local id: the code word of the window's point
   std::size_t in_order_end = 0, sorted_end = 0;
   std::uint64_t long_edges = 0;
+  std::uint64_t certified = 0, balls = 0;  // tets certified; of them, by their circumsphere
 };
 
 // The even rotation of a tet (its vertices v, code words c) that puts m (the smallest
@@ -114,10 +115,10 @@ struct KeptGroup {
 // the first tet that fails the certificate (its ball leaves the padded box): the
 // margin must double. `safe_edges`: a tet with a safe vertex (its ball smaller than the
 // grid's reach) has no edge as long as CGAL's limit. The last three are scratch.
-inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx, const std::vector<std::uint8_t>& safe,
-                      int axis, const std::array<double, 3>& period, const std::array<double, 3>& lower,
-                      std::uint64_t deferred_from, bool safe_edges, KeptGroup& group,
-                      std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
+inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx,
+                      const std::vector<std::uint8_t>& safe, int axis, const std::array<double, 3>& period,
+                      const std::array<double, 3>& lower, std::uint64_t deferred_from, bool safe_edges,
+                      KeptGroup& group, std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
                       std::vector<std::uint32_t>& deferred) {
   apart.clear();
   deferred.clear();
@@ -150,6 +151,8 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     if (!verdict.certify) continue;
     const double* p[4] = {vx[v[0]].x, vx[v[1]].x, vx[v[2]].x, vx[v[3]].x};
     const bool small = safe[v[0]] | safe[v[1]] | safe[v[2]] | safe[v[3]];
+    ++k.certified;
+    k.balls += !small;
     if (!small && !ball_inside(p, period, lower)) return false;
     if (!verdict.kept) continue;
     int order[4] = {0, 1, 2, 3};

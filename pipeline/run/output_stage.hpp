@@ -31,17 +31,24 @@ class OutputStage : public SegmentSink {
   virtual void finish() = 0;
 
   // From the record prepare read: the label the triangulation goes on from, and the
-  // segments an earlier process wrote.
-  virtual std::uint64_t first_label() const = 0;
-  virtual std::uint64_t segments_resumed() const = 0;
-  virtual std::uint64_t segments_done() const = 0;
-  virtual const WrittenWork& work() const = 0;
-  // The summary's seconds_write, seconds_writer_busy, seconds_writer_wait, output_bytes, tet_bytes.
-  virtual double seconds() const = 0;
+  // segments an earlier process wrote; the segments written and their work so far.
+  std::uint64_t first_label() const { return first_label_; }
+  std::uint64_t segments_resumed() const { return segments_resumed_; }
+  std::uint64_t segments_done() const { return segments_done_; }
+  const WrittenWork& work() const { return work_; }
+  // The triangulation waiting on this stage (merges, records, a full queue) and the
+  // commit and finish: the summary's seconds_write. Then its seconds_writer_busy,
+  // seconds_writer_wait, output_bytes, tet_bytes.
+  double seconds() const { return seconds_; }
   virtual double busy_seconds() const = 0;
   virtual double producer_wait_seconds() const = 0;
   virtual std::uint64_t bytes_written() const = 0;
   virtual std::uint64_t tet_bytes() const = 0;
+
+ protected:
+  std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
+  WrittenWork work_;
+  double seconds_ = 0;
 };
 
 }  // namespace tetstream::pipeline

@@ -369,8 +369,9 @@ RunSummary detail::run_job(const RunOptions& requested, const OutputStageFactory
   if (opened.finished) return *opened.finished;
   try {
     RunSummary summary;
-    trusting_checkpoint(checkpoint,
-                        [&] { summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim, make_output).run(); });
+    trusting_checkpoint(checkpoint, [&] {
+      summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim, make_output).run();
+    });
     checkpoint.remove();
     summary.disk_planned_bytes = opened.disk;
     return summary;

@@ -92,15 +92,6 @@ class WriteStage final : public OutputStage {
   // The index, footer and rename (a fragment: its rename). Nothing may follow it.
   void finish() override;
 
-  // From the record prepare read: the label the triangulation goes on from, and the
-  // segments an earlier process wrote.
-  std::uint64_t first_label() const override { return first_label_; }
-  std::uint64_t segments_resumed() const override { return segments_resumed_; }
-  std::uint64_t segments_done() const override { return segments_done_; }
-  const WrittenWork& work() const override { return work_; }
-  // The triangulation waiting on this stage (merges, records, a full queue) and the
-  // commit and finish: the summary's seconds_write.
-  double seconds() const override { return seconds_; }
   double busy_seconds() const override { return async_->busy_seconds(); }
   double producer_wait_seconds() const override { return async_->producer_wait_seconds(); }
   std::uint64_t bytes_written() const override { return writer_->bytes_written(); }
@@ -117,12 +108,9 @@ class WriteStage final : public OutputStage {
   const io::OutputClaim* claim_;
   std::string fragment_path_;  // write_fragment()
   std::string pending_prefix_ = "pending-";
-  bool resumed_ = false;           // the state held an "output" record
-  bool points_in_output_ = false;  // the sort merged the points into the partial output
-  std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
-  WrittenWork work_;
+  bool resumed_ = false;                // the state held an "output" record
+  bool points_in_output_ = false;       // the sort merged the points into the partial output
   std::vector<std::uint64_t> pending_;  // the resumed frame, until the cutter takes it
-  double seconds_ = 0;
   // In this order: the cutter feeds the queue, which feeds the writer, so on the way
   // out of a failure the queue is cancelled and its thread joined before the writer
   // goes.
