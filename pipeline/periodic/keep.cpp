@@ -254,7 +254,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   sorter.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
   io::PeriodicOffsetsWriter offsets;
   FrameFeeder feeder(
-      [&w, &offsets](std::vector<std::uint64_t>&& labels, std::vector<std::uint16_t>&& codes) {
+      [&w, &offsets](std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {
         w.add_tets(labels);
         offsets.add_frame(codes);
       },

@@ -116,10 +116,12 @@ inline bool stored_form_of(const std::uint64_t code[4], KeptTet& out) {
 
 // The kept tets, in stored order, cut into frames at group boundaries (a frame at the
 // first new smallest label past `frame_tets` tets): each frame's labels and offset
-// codes go to `emit` as it is cut. The frame being filled is what a checkpoint keeps.
+// codes go to `emit` as it is cut, which takes them (leaving empty vectors, recycled
+// ones best: a frame's fresh pages cost their zeroing). The frame being filled is
+// what a checkpoint keeps.
 class FrameFeeder {
  public:
-  using Emit = std::function<void(std::vector<std::uint64_t>&& labels, std::vector<std::uint16_t>&& codes)>;
+  using Emit = std::function<void(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes)>;
   FrameFeeder(Emit emit, std::size_t frame_tets) : emit_(std::move(emit)), frame_tets_(frame_tets) {}
 
   void add(std::span<const KeptTet> batch) {
@@ -132,7 +134,7 @@ class FrameFeeder {
   }
   void flush() {
     if (codes_.empty()) return;
-    emit_(std::move(labels_), std::move(codes_));
+    emit_(labels_, codes_);
     labels_.clear();
     codes_.clear();
   }

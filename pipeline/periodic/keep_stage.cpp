@@ -2,6 +2,7 @@
 
 #include "core/compiler.hpp"
 #include "core/error.hpp"
+#include "io/output_file.hpp"
 #include "io/tet_container.hpp"
 #include "io/tet_periodic.hpp"
 #include "io/tet_reader.hpp"
@@ -134,10 +135,13 @@ class PeriodicLabels {
 class AppendFile {
  public:
   AppendFile(std::string path, std::uint64_t keep_bytes) : path_(std::move(path)) {
-    fd_ = ::open(path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW, 0644);
-    if (fd_ < 0) throw IoError(path_ + ": cannot open: " + std::strerror(errno));
-    if (::ftruncate(fd_, off_t(keep_bytes)) != 0 || ::lseek(fd_, off_t(keep_bytes), SEEK_SET) < 0)
-      throw IoError(path_ + ": cannot cut back: " + std::strerror(errno));
+    // A new job's file is made afresh; a resumed job's is the one its record names.
+    fd_ = keep_bytes == 0 ? io::create_work_file(path_, O_RDWR) : io::open_work_file(path_);
+    if (::ftruncate(fd_, off_t(keep_bytes)) != 0 || ::lseek(fd_, off_t(keep_bytes), SEEK_SET) < 0) {
+      const std::string why = std::strerror(errno);
+      ::close(fd_);
+      throw IoError(path_ + ": cannot cut back: " + why);
+    }
     bytes_ = keep_bytes;
   }
   ~AppendFile() {
@@ -229,7 +233,7 @@ class KeepStage final : public OutputStage {
 
  private:
   std::uint64_t frontier(std::uint64_t padded_label) const;
-  void emit_frame(std::vector<std::uint64_t>&& labels, std::vector<std::uint16_t>&& codes);
+  void emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes);
   void write(const KeptTet& t);
   void defer(std::span<const KeptTet> tets) { deferred_->append(tets.data(), tets.size_bytes()); }
   void record(std::uint64_t next_label, bool finishing);
@@ -342,8 +346,7 @@ void KeepStage::prepare() {
     const std::uint64_t keep_offsets = resumed_ ? state["keep"].at("offsets_bytes").get<std::uint64_t>() : 0;
     deferred_.emplace(context_.dir + "/" + kDeferredFile, keep_deferred);
     offsets_file_.emplace(context_.dir + "/" + kOffsetsFile, keep_offsets);
-    feeder_.emplace([this](std::vector<std::uint64_t>&& l,
-                           std::vector<std::uint16_t>&& c) { emit_frame(std::move(l), std::move(c)); },
+    feeder_.emplace([this](std::vector<std::uint64_t>& l, std::vector<std::uint16_t>& c) { emit_frame(l, c); },
                     s_.frame_tets);
     const int axis = view_.axis;
     deferred_from_ = labels_->box_points_before(
@@ -590,13 +593,20 @@ void KeepStage::write(const KeptTet& t) {
   feeder_->add(std::span<const KeptTet>(&t, 1));
 }
 
-void KeepStage::emit_frame(std::vector<std::uint64_t>&& labels, std::vector<std::uint16_t>&& codes) {
-  async_->add_tets(std::move(labels));
-  const std::span<const std::uint8_t> z = offsets_.add_frame(codes);
-  if (!context_.checkpoint) return;
-  const std::uint32_t sizes[2] = {std::uint32_t(codes.size()), std::uint32_t(z.size())};
-  offsets_file_->append(sizes, sizeof sizes);
-  offsets_file_->append(z.data(), z.size());
+// A frame to the writer's thread, which also compresses its offsets (in frame order:
+// POFS's, and the checkpoint's file of them) so the segments' thread does neither.
+void KeepStage::emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {
+  std::vector<std::uint64_t> next = async_->take_buffer();
+  next.reserve(4 * s_.frame_tets + 4096);  // a frame and a group's overrun
+  labels.swap(next);
+  async_->add_tets(std::move(next));
+  async_->add_task([this, codes = std::vector<std::uint16_t>(codes)](io::TetWriter&) {
+    const std::span<const std::uint8_t> z = offsets_.add_frame(codes);
+    if (!context_.checkpoint) return;
+    const std::uint32_t sizes[2] = {std::uint32_t(codes.size()), std::uint32_t(z.size())};
+    offsets_file_->append(sizes, sizeof sizes);
+    offsets_file_->append(z.data(), z.size());
+  });
 }
 
 // Records that the output holds every kept tet of the padded labels below
@@ -608,7 +618,6 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
   Checkpoint* checkpoint = context_.checkpoint;
   if (!checkpoint) return;
   deferred_->sync();
-  offsets_file_->sync();
   json& state = context_.state;
   const auto save_tets = [&](const char* kind, const std::vector<KeptTet>& tets) {
     const std::string name = std::string("periodic-") + kind + "-" + std::to_string(segments_done_) + ".tets";
@@ -635,24 +644,32 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
                    {"long_edges", long_edges_},
                    {"deferred_bytes", deferred_->bytes()},
                    {"deferred_crc32c", deferred_->crc()},
-                   {"offsets_bytes", offsets_file_->bytes()},
-                   {"offsets_crc32c", offsets_file_->crc()},
+                   {"offsets_bytes", 0},
+                   {"offsets_crc32c", 0},
                    {"finishing", finishing}};
   // A file of the new record with the name of an old one is the new one's (same segment count).
   const json& rec = state["keep"];
   std::erase_if(old, [&](const std::string& path) {
     return path == checkpoint->path(rec["pending"]["name"]) || path == checkpoint->path(rec["waiting"]["name"]);
   });
-  auto persist = [checkpoint, old, disk = context_.disk](json saved, std::uint64_t committed) {
+  // On the writer's thread (or after a drain): the frames' offsets written so far are
+  // those of the frames committed.
+  auto persist = [checkpoint, old, disk = context_.disk, offsets = &*offsets_file_](json saved,
+                                                                                    std::uint64_t committed) {
+    offsets->sync();
     saved["keep"]["committed"] = committed;
+    saved["keep"]["offsets_bytes"] = offsets->bytes();
+    saved["keep"]["offsets_crc32c"] = offsets->crc();
     checkpoint->save(std::move(saved));
     for (const std::string& path : old) remove_file(path);
     if (disk) disk->sample();
   };
   if (finishing) {
     const std::uint64_t committed = async_->checkpoint();  // drains first
-    state["keep"]["committed"] = committed;
     persist(state, committed);
+    state["keep"]["committed"] = committed;
+    state["keep"]["offsets_bytes"] = offsets_file_->bytes();
+    state["keep"]["offsets_crc32c"] = offsets_file_->crc();
   } else {
     async_->add_checkpoint([persist, saved = state](std::uint64_t committed) { persist(saved, committed); });
   }
@@ -696,8 +713,7 @@ void KeepStage::commit(std::uint64_t /*end_label*/) {
 void KeepStage::finish() {
   const auto t0 = StageClock::now();
   if (!done_) {
-    async_->add_task(
-        [payload = offsets_.payload()](io::TetWriter& w) { w.add_section(io::kTagPeriodicOffsets, payload); });
+    async_->add_task([this](io::TetWriter& w) { w.add_section(io::kTagPeriodicOffsets, offsets_.payload()); });
     async_->finish();
     output_bytes_ = writer_->bytes_written();
     result_.points = labels_->points();
