@@ -50,7 +50,7 @@ PeriodicBox parse_periodic_box(std::span<const std::uint8_t> payload, const std:
   return box;
 }
 
-void PeriodicOffsetsWriter::add_frame(std::span<const std::uint16_t> codes) {
+std::span<const std::uint8_t> PeriodicOffsetsWriter::add_frame(std::span<const std::uint16_t> codes) {
   std::vector<std::uint8_t> raw(2 * codes.size());
   for (std::size_t i = 0; i < codes.size(); ++i) {
     raw[2 * i] = std::uint8_t(codes[i]);
@@ -59,8 +59,13 @@ void PeriodicOffsetsWriter::add_frame(std::span<const std::uint16_t> codes) {
   std::vector<std::uint8_t> z(ZSTD_compressBound(raw.size()));
   const std::size_t n = ZSTD_compress(z.data(), z.size(), raw.data(), raw.size(), 3);
   if (ZSTD_isError(n)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(n));
-  entries_.push_back({data_.size(), std::uint32_t(n), std::uint32_t(codes.size())});
-  data_.insert(data_.end(), z.begin(), z.begin() + std::ptrdiff_t(n));
+  add_compressed(std::span<const std::uint8_t>(z.data(), n), std::uint32_t(codes.size()));
+  return std::span<const std::uint8_t>(data_).subspan(data_.size() - n);
+}
+
+void PeriodicOffsetsWriter::add_compressed(std::span<const std::uint8_t> bytes, std::uint32_t tets) {
+  entries_.push_back({data_.size(), std::uint32_t(bytes.size()), tets});
+  data_.insert(data_.end(), bytes.begin(), bytes.end());
 }
 
 std::vector<std::uint8_t> PeriodicOffsetsWriter::payload() const {

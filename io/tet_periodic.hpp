@@ -49,7 +49,10 @@ inline void tet_offset_codes(std::uint16_t code, int c[3]) {
 // Builds POFS: add each frame's codes in frame order, then payload().
 class PeriodicOffsetsWriter {
  public:
-  void add_frame(std::span<const std::uint16_t> codes);
+  // Returns the frame's compressed bytes (valid until the next add): a resumable job
+  // keeps them, and add_compressed() gives them back to a resumed writer.
+  std::span<const std::uint8_t> add_frame(std::span<const std::uint16_t> codes);
+  void add_compressed(std::span<const std::uint8_t> bytes, std::uint32_t tets);
   std::vector<std::uint8_t> payload() const;
 
  private:

@@ -170,6 +170,7 @@ void TetWriter::rebuild_frame_index(std::uint64_t from, std::uint64_t committed)
   std::vector<std::uint8_t> payload;
   auto read = [this](std::uint64_t offset, void* data, std::size_t n) { out_->read_at(offset, data, n); };
   for (std::uint64_t at = from; at < committed;) {
+    if (frames_.empty() && !fragment_ && (at = skip_leading_section(at, committed)) == committed) break;
     FrameHeader fh;
     const std::uint64_t len =
         read_frame_section(read, partial + " (before the checkpoint)", at, committed, frames_.size(), payload, fh);
@@ -177,6 +178,29 @@ void TetWriter::rebuild_frame_index(std::uint64_t from, std::uint64_t committed)
     tets_ += fh.tet_count;
     at += kSectionHeaderSize + len + kSectionTrailerSize;
   }
+}
+
+std::uint64_t TetWriter::skip_leading_section(std::uint64_t at, std::uint64_t committed) {
+  // A section the caller added between the points and the first frame (a periodic
+  // container's PBOX, docs/periodic.md): checked and kept in the index, as written.
+  if (at == committed) return at;
+  const std::string partial = path_ + ".partial";
+  std::uint8_t sh[kSectionHeaderSize];
+  if (committed - at < kSectionHeaderSize + kSectionTrailerSize)
+    throw InputError::at_byte(partial, at, "ends inside a section");
+  out_->read_at(at, sh, sizeof sh);
+  const std::uint32_t tag = get_u32(sh);
+  const std::uint64_t len = get_u64(sh + 8);
+  if (tag == kTagFrame) return at;
+  if (tag == kTagHead || tag == kTagPoints || tag == kTagIndex ||
+      len > committed - at - kSectionHeaderSize - kSectionTrailerSize)
+    throw InputError::at_byte(partial, at, "not a complete section before the frames");
+  std::vector<std::uint8_t> payload(len + kSectionTrailerSize);
+  out_->read_at(at + kSectionHeaderSize, payload.data(), payload.size());
+  if (crc32c(payload.data(), len) != get_u32(payload.data() + len))
+    throw InputError::at_byte(partial, at, "section before the frames: checksum mismatch");
+  sections_.push_back({tag, kSectionCritical, at, len});
+  return skip_leading_section(at + kSectionHeaderSize + len + kSectionTrailerSize, committed);
 }
 
 std::unique_ptr<TetWriter> TetWriter::fragment(std::string path, TetFileHeader header, TetWriterOptions options) {

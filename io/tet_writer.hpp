@@ -158,6 +158,9 @@ class TetWriter {
   template <class L>
   void add_tets_impl(std::span<const std::span<const L>> batches);
   void write_section_start(std::uint32_t tag, std::uint64_t length);
+  // The sections from `at` on that are not frames (before the first one), checked and
+  // indexed; returns where the frames start (or `committed`).
+  std::uint64_t skip_leading_section(std::uint64_t at, std::uint64_t committed);
   void rebuild_frame_index(std::uint64_t from, std::uint64_t committed);
 
   std::string path_;

@@ -102,7 +102,7 @@ void write_marker(const std::string& dir, const std::string& shown_path) {
 
 bool is_work_file_name(const std::string& name) {
   static const std::regex kNames(
-      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?|periodic-(points|images)\.f64(\.tmp)?|periodic-(padded|unwrapped)\.tets(\.partial)?)");
+      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?|periodic-(points|images)\.f64(\.tmp)?|periodic-(padded|unwrapped)\.tets(\.partial)?|periodic-(deferred|offsets)\.tets|periodic-(pending|waiting)-[0-9]+\.tets(\.tmp)?)");
   return std::regex_match(name, kNames);
 }
 
@@ -241,8 +241,7 @@ namespace {
 // The partial output a stale checkpoint's job kept for --resume (state.json names the
 // output): removed with the checkpoint, which alone could finish it. Only a regular
 // file of one link, this user's, that starts as a container or is still empty (the
-// job's claim made it and was killed before writing: a periodic job's output stays
-// empty until its keep step) and that no process holds locked (a live job's claim
+// job's claim made it and was killed before writing) and that no process holds locked (a live job's claim
 // holds its flock) is removed: an empty file holds nothing to lose.
 void remove_orphaned_partial(const std::string& dir) {
   std::string output;

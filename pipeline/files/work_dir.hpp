@@ -76,7 +76,8 @@ bool remove_stale_work_dir(const StaleWorkDir& stale);
 // sorted.points, hull.labels, stdin.f64, pending-S.tets, index.shared (the point index
 // on disk: the ranks of a job share it, and one process keeps it there with --index
 // disk), rank-R.progress (a rank's count for rank 0's progress
-// line), and the .tmp of each while it is written atomically.
+// line), a periodic job's files (periodic-*: docs/periodic.md), and the .tmp of each
+// while it is written atomically.
 bool is_work_file_name(const std::string& name);
 // The rank R of a work file that rank R of a job under mpirun wrote (rank-R.json,
 // rank-R.tets, rank-R-pending-S.tets, rank-R.progress, rank-R-NAME-K.run, ...); -1 for

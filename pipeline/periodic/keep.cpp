@@ -8,6 +8,7 @@
 #include "io/tet_writer.hpp"
 #include "pipeline/files/external_sort.hpp"
 #include "pipeline/util/memory_budget.hpp"
+#include "pipeline/periodic/keep_parts.hpp"
 #include "pipeline/periodic/kept_stream.hpp"
 #include "pipeline/periodic/tet_records.hpp"
 
@@ -30,7 +31,6 @@ namespace {
 
 constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
 constexpr std::size_t kChunk = std::size_t(1) << 16;
-constexpr std::uint64_t kCanonical = 8;  // PaddedMap::bits: the point's canonical image
 
 // What a label of the padded container is: its point's periodic label and its offset
 // (bit k: -1 on axis k), and whether it is the point's canonical image, in one word
@@ -74,46 +74,11 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
         bits = std::uint8_t(code & 7);
       }
       if (of_point[point] == kNone) throw std::logic_error("periodic: an image without its point");
-      bool canonical = true;
-      for (int a = 0; a < 3; ++a) {
-        const bool minus = bits >> a & 1;
-        const double p = minus ? xyz[3 * i + a] + in.period[a] : xyz[3 * i + a];  // exact: the image was
-        canonical = canonical && (minus == (p >= threshold[a]));
-      }
+      const bool canonical = is_canonical(&xyz[3 * i], bits, in.period, threshold);
       m.code[first + i] = of_point[point] << 4 | bits | (canonical ? kCanonical : 0);
     }
   }
   return m;
-}
-
-// The circumball of a padded tet lies inside the padded box (-M, L)^3, with the
-// circumsphere's proved error bounds and a relative slack for this test's own
-// roundings: every periodic point it could hold is then in the padded set.
-bool ball_inside(const double* p[4], const KeepInput& in, const double lower[3]) {
-  const core::Circumsphere s = core::circumsphere(p[0], p[1], p[2], p[3]);
-  if (!s.valid) return false;
-  const double reach = (s.radius + s.radius_error + s.center_error) * (1 + 0x1p-40);
-  for (int k = 0; k < 3; ++k) {
-    const double slack = std::fabs(s.center[k]) * 0x1p-50 + 0x1p-1000;
-    if (!(s.center[k] - reach - slack > lower[k]) || !(s.center[k] + reach + slack < in.period[k])) return false;
-  }
-  return std::isfinite(reach);
-}
-
-// CGAL's criterion for the 1-sheeted covering (Periodic_3_Delaunay_triangulation_3:
-// every edge shorter than sqrt(0.166) times the period): an edge at or past it,
-// conservatively, means this is not the triangulation CGAL defines in one sheet.
-bool long_edge(const double* p[4], const KeepInput& in) {
-  const double l = std::min({in.period[0], in.period[1], in.period[2]});
-  const double limit = 0.166 * l * l * (1 - 0x1p-40);
-  for (int i = 0; i < 4; ++i) {
-    for (int j = i + 1; j < 4; ++j) {
-      double d2 = 0;
-      for (int k = 0; k < 3; ++k) d2 += (p[i][k] - p[j][k]) * (p[i][k] - p[j][k]);
-      if (!(d2 < limit)) return true;
-    }
-  }
-  return false;
 }
 
 struct KeptFrame {
@@ -124,8 +89,8 @@ struct KeptFrame {
 // One frame of the padded container: every tet with a vertex at its canonical image
 // certified (its ball inside the padded box), and those whose smallest periodic label
 // sits at its canonical image kept, in stored form.
-void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in, const double lower[3],
-                std::vector<std::uint64_t>& t, KeptFrame& out) {
+void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
+                const std::array<double, 3>& lower, std::vector<std::uint64_t>& t, KeptFrame& out) {
   r.read_frame(f, t);
   out.kept.clear();
   out.failures = out.long_edges = 0;
@@ -153,7 +118,7 @@ void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, con
       label[j] = m.plabel(t[i + j]);
       for (int k = 0; k < 3; ++k) off[j][k] = -int(m.bits(t[i + j]) >> k & 1);
     }
-    if (!ball_inside(p, in, lower)) {
+    if (!ball_inside(p, in.period, lower)) {
       ++out.failures;
       continue;
     }
@@ -163,7 +128,7 @@ void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, con
       ++out.failures;
       continue;
     }
-    out.long_edges += long_edge(p, in);
+    out.long_edges += long_edge(p, in.period);
     out.kept.push_back(kt);
   }
   r.release_frame_pages(f);
@@ -197,58 +162,6 @@ class Frontier {
   const PaddedMap& m_;
   int axis_;
   std::uint64_t cursor_ = 0, count_ = 0;
-};
-
-// The kept tets to the writer in stored order, cut into frames at group boundaries,
-// each frame's offsets beside it in POFS; frames go to the writer `threads` at a time,
-// encoded together (the same bytes as one at a time).
-class FrameFeeder {
- public:
-  FrameFeeder(io::TetWriter& w, int threads, std::size_t frame_tets)
-      : w_(w), threads_(std::max(1, threads)), frame_tets_(frame_tets), labels_(1), codes_(1) {}
-
-  void add(std::span<const KeptTet> batch) {
-    for (const KeptTet& t : batch) {
-      if (codes_.back().size() >= frame_tets_ && t.v[0] != labels_.back()[labels_.back().size() - 4]) {
-        if (int(codes_.size()) >= threads_)
-          flush();
-        else
-          labels_.emplace_back(), codes_.emplace_back();
-      }
-      labels_.back().insert(labels_.back().end(), t.v, t.v + 4);
-      codes_.back().push_back(t.code);
-    }
-  }
-
-  // The last frames and the POFS section; the count of tets written.
-  std::uint64_t finish() {
-    flush();
-    const std::vector<std::uint8_t> payload = offsets_.payload();
-    w_.add_section(io::kTagPeriodicOffsets, payload);
-    return count_;
-  }
-
- private:
-  void flush() {
-    std::vector<std::span<const std::uint64_t>> batches(labels_.begin(), labels_.end());
-    if (batches.back().empty()) batches.pop_back();
-    w_.add_tets(std::span<const std::span<const std::uint64_t>>(batches));
-    for (const auto& c : codes_) {
-      if (c.empty()) continue;
-      offsets_.add_frame(c);
-      count_ += c.size();
-    }
-    labels_.assign(1, {});
-    codes_.assign(1, {});
-  }
-
-  io::TetWriter& w_;
-  int threads_;
-  std::size_t frame_tets_;
-  std::vector<std::vector<std::uint64_t>> labels_;
-  std::vector<std::vector<std::uint16_t>> codes_;
-  io::PeriodicOffsetsWriter offsets_;
-  std::uint64_t count_ = 0;
 };
 
 void write_points(const io::TetReader& r, const KeepInput& in, io::TetWriter& w) {
@@ -312,11 +225,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   const PaddedMap m = map_labels(r, in);
   r.release_point_pages(0, r.point_count());  // read once into the map: their pages go back
   spdlog::debug("periodic keep: labels mapped in {:.2f}s", since());
-  double lower[3];  // the padded box's lower corner, rounded up: -M, conservatively
-  for (int k = 0; k < 3; ++k) {
-    const double lo = (in.period[k] - in.margin[k]) - in.period[k];
-    lower[k] = std::nextafter(std::nextafter(lo, 0.0), 0.0);
-  }
+  const std::array<double, 3> lower = padded_lower(in.period, in.margin);
   const int label_bits = std::max(1, int(std::bit_width(m.points)));
 
   // The writer first (the points come before the tets): a failing certificate
@@ -343,7 +252,13 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   ExternalSorter<KeptTet, KeptTetLess> sorter(
       sort_options(std::size_t(shares.sort_bytes / 2), in.dir, "periodic-tets"));
   sorter.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
-  FrameFeeder feeder(w, threads, in.frame_tets);
+  io::PeriodicOffsetsWriter offsets;
+  FrameFeeder feeder(
+      [&w, &offsets](std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {
+        w.add_tets(labels);
+        offsets.add_frame(codes);
+      },
+      in.frame_tets);
   Frontier frontier(m, in.sort_axis);
   const std::uint64_t deferred_from = Frontier(m, in.sort_axis)
                                           .points_before(canonical_threshold(in.period[std::size_t(in.sort_axis)],
@@ -402,14 +317,11 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     w.discard();  // the next margin's writer starts the claimed file over
     return res;
   }
-  if (long_edges != 0) {
-    throw InputError(in.input + ": " + std::to_string(long_edges) +
-                     " Delaunay tets have an edge of sqrt(0.166) periods or longer: the 1-sheeted covering is not "
-                     "a triangulation of the torus by CGAL's criterion (too few points for the box; "
-                     "docs/periodic.md, \"When it refuses\")");
-  }
+  if (long_edges != 0) throw long_edges_error(in.input, long_edges);
   stream.finish();
-  res.tets = feeder.finish();
+  feeder.flush();
+  w.add_section(io::kTagPeriodicOffsets, offsets.payload());
+  res.tets = feeder.count();
   w.finish();
   spdlog::debug("periodic keep: written in {:.2f}s", since());
   res.output_bytes = w.bytes_written();

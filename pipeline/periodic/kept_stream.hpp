@@ -7,7 +7,8 @@
 // *frontier* F that no tet still to come goes below, and a tet is written once it is
 // below the frontier, sorted with the others written then. The tets from `deferred_from`
 // on (kept at an image below 0 on the sort axis: found among the first frames, the last
-// to be written) wait in the external sort, which spills. When the buffer of tets
+// to be written) wait in the external sort, which spills (or, in a resumable keep, in a
+// file that the external sort reads at the end). When the buffer of tets
 // waiting for the frontier outgrows its share (a shape whose tets come far out of
 // order), it and everything after go through the external sort, which then writes the
 // rest in order: the same sequence either way.
@@ -30,23 +31,37 @@ namespace tetstream::pipeline::periodic {
 class KeptStream {
  public:
   using Write = std::function<void(std::span<const KeptTet>)>;
+  // Where the tets that go through the external sort wait: `defer` takes them as they
+  // come, `merge(write)` hands them back sorted at the end.
+  using Defer = std::function<void(std::span<const KeptTet>)>;
+  using Merge = std::function<void(const Write&)>;
 
-  KeptStream(Write write, std::uint64_t deferred_from, std::size_t buffer_bytes,
-             ExternalSorter<KeptTet, KeptTetLess>& sorter, int label_bits)
+  KeptStream(Write write, std::uint64_t deferred_from, std::size_t buffer_bytes, Defer defer, Merge merge,
+             int label_bits)
       : write_(std::move(write)),
         deferred_from_(deferred_from),
         buffer_cap_(std::max<std::size_t>(buffer_bytes / sizeof(KeptTet), 1)),
-        sorter_(sorter),
+        defer_(std::move(defer)),
+        merge_(std::move(merge)),
         label_bits_(label_bits) {}
+  // The external sort itself as that store (the keep step after the padded job: keep.cpp).
+  KeptStream(Write write, std::uint64_t deferred_from, std::size_t buffer_bytes,
+             ExternalSorter<KeptTet, KeptTetLess>& sorter, int label_bits)
+      : KeptStream(
+            std::move(write), deferred_from, buffer_bytes, [&sorter](std::span<const KeptTet> t) { sorter.push(t); },
+            [&sorter](const Write& w) { sorter.merge([&w](std::span<const KeptTet> batch) { w(batch); }); },
+            label_bits) {}
 
   // A frame's kept tets; `frontier`: no tet to come has a smaller smallest label.
   void add(std::span<const KeptTet> kept, std::uint64_t frontier) {
+    deferred_.clear();
     for (const KeptTet& t : kept) {
       if (spilling_ || t.v[0] >= deferred_from_)
-        sorter_.push(t);
+        deferred_.push_back(t);
       else
         buffer_.push_back(t);
     }
+    if (!deferred_.empty()) defer_(deferred_);
     if (spilling_) return;
     ready_.clear();
     std::size_t keep = 0;
@@ -59,7 +74,7 @@ class KeptStream {
     buffer_.resize(keep);
     write(ready_);
     if (buffer_.size() > buffer_cap_) {
-      sorter_.push(std::span<const KeptTet>(buffer_));
+      defer_(buffer_);
       buffer_.clear();
       buffer_.shrink_to_fit();
       spilling_ = true;
@@ -70,10 +85,21 @@ class KeptStream {
   // The tets still waiting, then the external sort's.
   void finish() {
     write(buffer_);
-    sorter_.merge([&](std::span<const KeptTet> batch) { check_and_write(batch); });
+    merge_([this](std::span<const KeptTet> batch) { check_and_write(batch); });
   }
 
   bool spilled() const { return spilling_; }
+
+  // What a checkpoint keeps of the stream (keep_stage.cpp): the tets waiting for the
+  // frontier, the last smallest label written, whether it spills; and a resumed
+  // stream's state, from them.
+  const std::vector<KeptTet>& waiting() const { return buffer_; }
+  std::uint64_t last() const { return last_; }
+  void restore(std::vector<KeptTet> waiting, std::uint64_t last, bool spilling) {
+    buffer_ = std::move(waiting);
+    last_ = last;
+    spilling_ = spilling;
+  }
 
  private:
   void write(std::vector<KeptTet>& tets) {
@@ -94,9 +120,10 @@ class KeptStream {
   Write write_;
   std::uint64_t deferred_from_;
   std::size_t buffer_cap_;
-  ExternalSorter<KeptTet, KeptTetLess>& sorter_;
+  Defer defer_;
+  Merge merge_;
   int label_bits_;
-  std::vector<KeptTet> buffer_, ready_;
+  std::vector<KeptTet> buffer_, ready_, deferred_;
   std::uint64_t last_ = 0;
   bool spilling_ = false;
 };

@@ -11,9 +11,11 @@
 #include "pipeline/files/temp_files.hpp"
 #include "pipeline/run/run_internal.hpp"
 #include "pipeline/periodic/keep.hpp"
+#include "pipeline/periodic/keep_stage.hpp"
 #include "pipeline/periodic/pad.hpp"
 
 #include <nlohmann/json.hpp>
+#include <omp.h>
 #include <spdlog/spdlog.h>
 
 #include <chrono>
@@ -227,6 +229,60 @@ std::array<double, 3> parse_period(const std::string& text, const std::string& i
 }
 
 namespace {
+// One process: the padded job with the keep as its output stage (keep_stage.hpp), which
+// writes the periodic container as the segments finish. False when a ball leaves the
+// padded box (the output emptied; the margin doubles).
+bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& periodic, const std::string& dir, Root& job,
+                        const WrappedInput& points, const Images& images, const std::array<double, 3>& margin,
+                        bool resume, PeriodicSummary& sum) {
+  RunOptions inner = padded_job(options, dir, !images.code.empty());
+  inner.resume = resume;
+  KeepSetup setup;
+  setup.input_points = points.count;
+  setup.images = &images;
+  setup.period = periodic.period;
+  setup.margin = margin;
+  setup.input = options.input;
+  setup.output = options.output;
+  setup.claim = &job.claim();
+  setup.frame_tets = MemoryBudget::frame_tets_for(job.header_memory());
+  setup.options_json = header_options(job.header_memory(), periodic, margin);
+  // The tets waiting for the frontier are a slab a few spacings thick (ties on the sort
+  // axis, and the tets at the lower face that wait for the box's first points); past
+  // this share the stream spills (the same bytes, through the external sort).
+  setup.waiting_bytes = options.memory_bytes / 64;
+  setup.sort_bytes = options.memory_bytes / 4;  // after the triangulation: the windows are gone
+  // The keep's tables beside the padded job's shares: that job plans within the rest.
+  const std::uint64_t keep_bytes =
+      keep_stage_bytes(points.count + images.code.size(), points.count, images.code.size(), setup.waiting_bytes,
+                       options.threads > 0 ? options.threads : omp_get_max_threads());
+  // (Not below the 32M every job takes: a budget that small holds a small input, whose
+  // shares are its own needs, far below it.)
+  inner.memory_bytes =
+      std::max(options.memory_bytes - std::min(keep_bytes, options.memory_bytes / 4), std::uint64_t(32) << 20);
+  KeepResult kept;
+  const auto make = [&](const StageContext& context, const SortedPoints&, const SortedView& view,
+                        const TriangulateShares& shares,
+                        const io::OutputClaim*) { return make_keep_stage(context, view, shares, setup, kept); };
+  try {
+    sum.padded = detail::run_job(inner, make);
+  } catch (const BallsLeaveBox&) {
+    sum.ball_failures = 1;
+    return false;
+  }
+  // The padded job's partial output held its sorted points only: its tets were kept.
+  remove_file(inner.output + ".partial");
+  sum.points = kept.points;
+  sum.tets = kept.tets;
+  sum.output_bytes = kept.output_bytes;
+  sum.padded.memory_ceiling = options.memory_bytes;
+  auto& ledger = sum.padded.memory_shares;
+  ledger.push_back(
+      {"triangulate", "keep: label tables, offsets, waiting tets", std::min(keep_bytes, options.memory_bytes / 4)});
+  ledger.push_back({"keep", "sort", setup.sort_bytes});
+  return true;
+}
+
 // Pads, runs the padded job and keeps, doubling the margin until the certificate holds
 // (docs/periodic.md). Every rank runs the padded job; rank 0 (job) all else.
 void attempts(const RunOptions& options, const PeriodicOptions& periodic, Communicator& comm, const std::string& dir,
@@ -282,7 +338,20 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
     });
     a = Attempt::decode(comm.broadcast(root ? a.encode() : "", 0));
     bool complete = false;
-    if (a.corners_full) {
+    if (a.corners_full && comm.size() == 1) {
+      complete = padded_job_keeping(options, periodic, dir, *job, points, images, margin, a.resume, sum);
+      if (complete) {
+        sum.margin = margin;
+        // The keep's own time on the job's thread (its tables, the segments' hand-over,
+        // the end); its certificate ran in the zones, on their threads.
+        sum.seconds_keep = sum.padded.seconds_write;
+        job->state()["done"] = done_record(sum);
+      } else {
+        spdlog::info("periodic: a ball leaves the padded box at margin {:.4g}: doubling it", margin[0]);
+        discard_padded_job(dir);
+      }
+      job->save();
+    } else if (a.corners_full) {
       RunOptions inner = padded_job(options, dir, a.images);
       inner.resume = a.resume;
       if (!a.skip) {

@@ -125,8 +125,10 @@ using namespace detail;
 // state, the memory ledger and the thread count, which it hands to each stage.
 class Job {
  public:
-  Job(const RunOptions& options, std::string dir, Checkpoint* checkpoint, json state, const io::OutputClaim* claim)
-      : options_(options),
+  Job(const RunOptions& options, std::string dir, Checkpoint* checkpoint, json state, const io::OutputClaim* claim,
+      const OutputStageFactory& make_output)
+      : make_output_(make_output),
+        options_(options),
         dir_(std::move(dir)),
         checkpoint_(checkpoint),
         state_(std::move(state)),
@@ -136,6 +138,7 @@ class Job {
   RunSummary run();
 
  private:
+  const OutputStageFactory& make_output_;  // null: the write stage
   const RunOptions& options_;
   std::string dir_;
   Checkpoint* checkpoint_;        // null: not resumable
@@ -206,7 +209,10 @@ RunSummary Job::run() {
 
   // ---- write, started before the triangulation feeds it: the output, new or resumed ----
   // Declared before the triangulation that feeds it, so destroyed after it on a failure.
-  WriteStage write(context, sorted, index.view(), plan.shares, claim_);
+  const std::unique_ptr<OutputStage> output =
+      make_output_ ? make_output_(context, sorted, index.view(), plan.shares, claim_)
+                   : std::make_unique<WriteStage>(context, sorted, index.view(), plan.shares, claim_);
+  OutputStage& write = *output;
   write.prepare();
   write.run();
   disk.sample();
@@ -321,7 +327,9 @@ RunOptions capped_options(const RunOptions& requested) {
 }  // namespace detail
 using namespace detail;
 
-RunSummary run_job(const RunOptions& requested) {
+RunSummary run_job(const RunOptions& requested) { return run_job(requested, nullptr); }
+
+RunSummary detail::run_job(const RunOptions& requested, const OutputStageFactory& make_output) {
   RunOptions options = capped_options(requested);
   // The user's files before anything else (docs/safety.md): never the input as the
   // output, never through a link or into a device, and one job per output at a time
@@ -346,7 +354,7 @@ RunSummary run_job(const RunOptions& requested) {
     TempDir tmp(work_parent(options), "tetstream-run");
     RunSummary summary;
     try {
-      summary = Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr).run();
+      summary = Job(options, tmp.dir(), nullptr, json::object(), claim ? &*claim : nullptr, make_output).run();
     } catch (...) {
       // The sort may have written the points into the partial output before any
       // writer owned it: a job without a checkpoint leaves nothing behind.
@@ -362,8 +370,9 @@ RunSummary run_job(const RunOptions& requested) {
   if (opened.finished) return *opened.finished;
   try {
     RunSummary summary;
-    trusting_checkpoint(checkpoint,
-                        [&] { summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim).run(); });
+    trusting_checkpoint(checkpoint, [&] {
+      summary = Job(options, checkpoint.dir(), &checkpoint, opened.state, &*claim, make_output).run();
+    });
     checkpoint.remove();
     summary.disk_planned_bytes = opened.disk;
     return summary;
@@ -438,6 +447,10 @@ void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
     throw;
   } catch (const DamagedCheckpoint&) {
     throw;  // left for the user to inspect or --force away
+  } catch (const JobAbandoned&) {
+    checkpoint.remove();
+    remove_file(options.output + ".partial");
+    throw;
   } catch (const InputError&) {
     // Bad input: nothing to resume.
     checkpoint.remove();

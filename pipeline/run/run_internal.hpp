@@ -4,15 +4,30 @@
 // check, the stale directories of killed jobs. Internal to pipeline/.
 #include "io/output_file.hpp"
 #include "pipeline/files/checkpoint.hpp"
+#include "pipeline/run/output_stage.hpp"
 #include "pipeline/run/run.hpp"
+#include "pipeline/run/stage.hpp"
+#include "pipeline/sort/point_sort.hpp"
+#include "pipeline/util/memory_budget.hpp"
+#include "pipeline/window/sorted_view.hpp"
 
 #include <nlohmann/json.hpp>
 
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
 namespace tetstream::pipeline::detail {
+
+// Makes the stage that takes the triangulation's segments (output_stage.hpp) from what
+// the write stage is made of: run_job's is the write stage, a periodic job's its keep.
+using OutputStageFactory = std::function<std::unique_ptr<OutputStage>(
+    const StageContext&, const SortedPoints&, const SortedView&, const TriangulateShares&, const io::OutputClaim*)>;
+// run_job (run.hpp) with another output stage; null: the write stage.
+RunSummary run_job(const RunOptions& requested, const OutputStageFactory& make_output);
 
 // The options validated, --memory capped at the machine's physical memory (with a warning).
 RunOptions capped_options(const RunOptions& requested);
@@ -59,6 +74,13 @@ struct OpenedJob {
 // `ranks`: the job's processes (the disk plan: disk_plan.hpp).
 OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoint, const io::OutputClaim& claim,
                                 int ranks = 1);
+
+// Thrown by an output stage that gives the job up for its caller to run otherwise (a
+// periodic job whose certificate fails: its margin doubles). Nothing of it is worth
+// resuming: rethrow_job_failure removes the checkpoint and the partial output.
+struct JobAbandoned : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
 
 // In a catch block: rethrows the job's failure, after removing the checkpoint and the
 // partial output when nothing is worth resuming (bad input, a budget refused before

@@ -106,6 +106,7 @@ void TriangulateStage::run(SegmentSink& out) {
         auto& triangulator = triangulators[std::size_t(omp_get_thread_num())];
         if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool_, &shared_rim_);
         s = triangulator->run(plan, plan.zones[unit.zone], tets);
+        out.zone_done(std::size_t(i), tets);
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
         // process): the first failure is kept, the others stop, and it is rethrown

@@ -30,6 +30,12 @@ class SegmentSink {
   // `next_label` is now in.
   virtual void add_segment(const std::vector<ZoneTets>& parts, const SegmentStats& work, std::uint64_t points,
                            std::uint64_t next_label) = 0;
+  // A zone's tets as it emitted them, on the thread that triangulated it (zones run
+  // `threads` at a time), before they wait for their turn in add_segment: `unit` is the
+  // zone's place in the plan order (counted from the first zone this process runs).
+  // A sink may transform them here in parallel (a periodic job keeps and certifies its
+  // tets: pipeline/periodic/keep_stage.hpp); the write stage does nothing.
+  virtual void zone_done(std::size_t /*unit*/, ZoneTets& /*tets*/) {}
 
  protected:
   ~SegmentSink() = default;

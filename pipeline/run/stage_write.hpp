@@ -17,6 +17,7 @@
 #include "pipeline/write/frame_cutter.hpp"
 #include "pipeline/sort/point_sort.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
+#include "pipeline/run/output_stage.hpp"
 #include "pipeline/run/stage.hpp"
 #include "pipeline/run/stage_triangulate.hpp"
 
@@ -29,12 +30,6 @@
 
 namespace tetstream::pipeline {
 
-// The work of the segments written so far, this process's and earlier ones': the
-// record's "counters", so that a resumed job's summary describes the whole job.
-struct WrittenWork {
-  SegmentStats stats;
-  std::uint64_t segment_labels = 0;  // labels of the segments written (checkpoint key "zone_points")
-};
 nlohmann::json counters_json(const WrittenWork& w);
 WrittenWork counters_from(const nlohmann::json& j);
 // The summary's counters of the segments' work.
@@ -47,7 +42,7 @@ std::uint64_t header_memory(nlohmann::json& state, const RunOptions& options);
 // the points go straight into the output: pipeline/points_in_output.hpp).
 io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memory, const SortedPoints& sorted);
 
-class WriteStage final : public SegmentSink {
+class WriteStage final : public OutputStage {
  public:
   // `shares`: the writer's compression threads and its file buffer, its memory share
   // with the frames in flight (MemoryBudget::plan_triangulate). `claim`: the output, locked for this
@@ -73,10 +68,10 @@ class WriteStage final : public SegmentSink {
   // Opens the output: a new container, or the checkpoint's partial output reopened at
   // its last commit with the frame that was being filled and the counters
   // (DamagedCheckpoint when the partial file or the pending tets disagree with it).
-  void prepare();
+  void prepare() override;
   // Starts the writer's thread: the points section of a new output (a pass over the
   // sorted file, overlapped with the first zones), and the first record.
-  void run();
+  void run() override;
   // One more segment, its zones' tets in plan order: merged by minimum label into the
   // frames, its counters added, and the record says the labels below `next_label` are
   // written. The record is saved by the writer's thread once the frames before it are
@@ -86,7 +81,7 @@ class WriteStage final : public SegmentSink {
   // Every tet of the labels below `end_label` (all of them; a rank's: the end of its
   // range) is in: the last frame, the last record (waiting for the writer), and the
   // mark that only the container's index, footer and rename are left.
-  void commit(std::uint64_t end_label = ~std::uint64_t(0));
+  void commit(std::uint64_t end_label = ~std::uint64_t(0)) override;
   // After commit(), on the process that writes the container: flushes (and syncs) its
   // frames and returns the output's size, where the other ranks' frames go, their
   // label ranges in label order (io::place_fragment), before adopt_fragments()
@@ -95,21 +90,12 @@ class WriteStage final : public SegmentSink {
   // The frames others placed after fragments_offset(), `bytes` of them, in order.
   void adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes);
   // The index, footer and rename (a fragment: its rename). Nothing may follow it.
-  void finish();
+  void finish() override;
 
-  // From the record prepare read: the label the triangulation goes on from, and the
-  // segments an earlier process wrote.
-  std::uint64_t first_label() const { return first_label_; }
-  std::uint64_t segments_resumed() const { return segments_resumed_; }
-  std::uint64_t segments_done() const { return segments_done_; }
-  const WrittenWork& work() const { return work_; }
-  // The triangulation waiting on this stage (merges, records, a full queue) and the
-  // commit and finish: the summary's seconds_write.
-  double seconds() const { return seconds_; }
-  double busy_seconds() const { return async_->busy_seconds(); }
-  double producer_wait_seconds() const { return async_->producer_wait_seconds(); }
-  std::uint64_t bytes_written() const { return writer_->bytes_written(); }
-  std::uint64_t tet_bytes() const { return writer_->tet_bytes(); }
+  double busy_seconds() const override { return async_->busy_seconds(); }
+  double producer_wait_seconds() const override { return async_->producer_wait_seconds(); }
+  std::uint64_t bytes_written() const override { return writer_->bytes_written(); }
+  std::uint64_t tet_bytes() const override { return writer_->tet_bytes(); }
 
  private:
   void record(std::uint64_t next_label, bool wait);
@@ -122,12 +108,9 @@ class WriteStage final : public SegmentSink {
   const io::OutputClaim* claim_;
   std::string fragment_path_;  // write_fragment()
   std::string pending_prefix_ = "pending-";
-  bool resumed_ = false;           // the state held an "output" record
-  bool points_in_output_ = false;  // the sort merged the points into the partial output
-  std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
-  WrittenWork work_;
+  bool resumed_ = false;                // the state held an "output" record
+  bool points_in_output_ = false;       // the sort merged the points into the partial output
   std::vector<std::uint64_t> pending_;  // the resumed frame, until the cutter takes it
-  double seconds_ = 0;
   // In this order: the cutter feeds the queue, which feeds the writer, so on the way
   // out of a failure the queue is cancelled and its thread joined before the writer
   // goes.

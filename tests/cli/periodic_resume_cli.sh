@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # `run --periodic` killed with SIGKILL and resumed (docs/periodic.md, "Resume and
 # mpirun"): at random moments, inside the padded job (its checkpoint nested in the
-# periodic job's), during the keep step (the padded job recorded as complete), each
-# resumed with --resume, ends with the bytes of an uninterrupted run; a checkpoint is
+# periodic job's, the keep's record in it: the output written so far, the tets waiting,
+# the deferred ones), at its end (the keep finishing), each resumed with --resume, ends
+# with the bytes of an uninterrupted run; a checkpoint is
 # refused without --resume or --force, and with other periodic options; --force starts
 # over; another --memory resumes (its frames are the first budget's); a job that needs a
 # second margin resumes too; `clean --checkpoints` removes both checkpoints; nothing is
@@ -18,7 +19,7 @@ fail() { echo "FAIL: $*" >&2; exit 1; }
 ckpt=out.tets.ckpt
 nested=$ckpt/periodic-padded.tets.ckpt
 segments_done() { python3 -c "import json,sys
-try: print(json.load(open('$nested/state.json'))['output']['segments'])
+try: print(json.load(open('$nested/state.json'))['keep']['segments'])
 except Exception: print(-1)"; }
 
 # 2*10^4 points (and about as many images at this size), 50 segments of the padded job.
@@ -36,15 +37,9 @@ done
 for target in 5 23 41; do  # inside the padded job, between its segments
   kill_when "[ \"\$(segments_done)\" -ge $target ]" $((1 + target % 2))
 done
-before=$kills
-kill_when 'grep -q "\"padded\"" $ckpt/state.json 2>/dev/null' 2  # the keep step
-if [ $kills -gt $before ]; then
-  # Killed in the keep step: the padded job is complete and kept, only the keep redone.
-  grep -q '"padded"' $ckpt/state.json || fail "killed in the keep step, but no padded job recorded"
-  "$T" --threads 2 "${opts[@]:1}" --resume 2>resumed.err
-  grep -q "its padded job had finished" resumed.err || fail "the padded job was not kept: $(cat resumed.err)"
-  rm resumed.err
-fi
+# At the end: every segment in, the keep finishing (the deferred tets sorted, the
+# offsets and the index left), when the kill lands there.
+kill_when 'grep -q "\"finishing\":true" $nested/state.json 2>/dev/null' 2
 [ $kills -ge 4 ] || fail "only $kills of 7 kills landed before the job ended"
 if [ -e $ckpt ]; then "$T" "${opts[@]}" --resume; fi
 cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills kills"
@@ -89,7 +84,7 @@ rm out.tets
 pid=$!
 for _ in $(seq 1 3000); do
   if ! kill -0 $pid 2>/dev/null; then break; fi
-  if python3 -c "import json,sys; sys.exit(0 if json.load(open('$ckpt/state.json'))['attempts'] >= 2 and json.load(open('$nested/state.json'))['output']['segments'] >= 3 else 1)" 2>/dev/null; then
+  if python3 -c "import json,sys; sys.exit(0 if json.load(open('$ckpt/state.json'))['attempts'] >= 2 and json.load(open('$nested/state.json'))['keep']['segments'] >= 3 else 1)" 2>/dev/null; then
     kill -9 $pid && kills=$((kills + 1)); break
   fi
   sleep 0.005
@@ -99,7 +94,7 @@ wait $pid 2>/dev/null || true
 cmp reference.tets out.tets || fail "resumed in the second attempt: output differs"
 [ ! -e $ckpt ] || fail "checkpoint left"
 # `clean --checkpoints` removes a killed periodic job's checkpoint, the nested one in it,
-# and its partial output (still empty: the keep step writes it).
+# and its partial output (the keep's, written as the segments finish).
 rm out.tets
 kill_when '[ "$(segments_done)" -ge 5 ]' 1
 [ -e $nested/state.json ] || fail "no nested checkpoint after a kill"

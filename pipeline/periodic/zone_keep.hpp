@@ -1,0 +1,196 @@
+#pragma once
+// A zone's tets kept (keep_stage.hpp), on the thread that triangulated it: the
+// certificate of each tet with a vertex at its canonical image, the canonical copies
+// left in the zone's output, each turned to its stored rotation (m, a, b, c) and the
+// output put in the stored order of the format, so that a segment's zones only need
+// merging. The zone's output comes grouped by smallest padded label, and for almost
+// every kept tet that vertex is m (docs/periodic.md, "Why the padded order almost is
+// the periodic one"): those groups, each sorted, are already in the stored order. The
+// others (m is not the smallest padded vertex: an image across the sort axis' lower
+// face, or a tie on the sort axis) are sorted apart, and those kept at an image below
+// 0 on the sort axis (m at or past `deferred_from`, written last) put at the end:
+//
+//   tets = [ in order | sorted apart | deferred ]      (local ids, 4 a tet)
+#include "core/compiler.hpp"
+#include "pipeline/periodic/keep_parts.hpp"
+#include "pipeline/periodic/tet_records.hpp"
+#include "pipeline/window/zone_triangulator.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace tetstream::pipeline::periodic {
+
+struct ZoneKept {
+  std::vector<std::uint64_t> code;  // by local id: the code word of the window's point
+  std::size_t in_order_end = 0, sorted_end = 0;
+  std::uint64_t long_edges = 0;
+  std::uint64_t certified = 0, balls = 0;  // tets certified; of them, by their circumsphere
+};
+
+// The even rotation of a tet (its vertices v, code words c) that puts m (the smallest
+// periodic label) first and the smallest of the others second (tet_records.hpp,
+// stored_form). False when two of its periodic labels are equal (a tet across a whole
+// period: the certificate fails).
+inline bool rotate_stored(int v[4], const std::uint64_t c[4]) {
+  std::uint64_t l[4];
+  for (int j = 0; j < 4; ++j) l[j] = code_plabel(c[j]);
+  int mi = 0;
+  for (int j = 1; j < 4; ++j) mi = l[j] < l[mi] ? j : mi;
+  int ai = -1;
+  for (int j = 0; j < 4; ++j)
+    if (j != mi && (ai < 0 || l[j] < l[ai])) ai = j;
+  int rest[2], r = 0;
+  for (int j = 0; j < 4; ++j)
+    if (j != mi && j != ai) rest[r++] = j;
+  if (l[ai] == l[mi] || l[rest[0]] == l[rest[1]] || l[rest[0]] == l[ai] || l[rest[1]] == l[ai]) return false;
+  int p[4] = {mi, ai, rest[0], rest[1]};
+  int inversions = 0;
+  for (int i = 0; i < 4; ++i)
+    for (int j = i + 1; j < 4; ++j) inversions += p[i] > p[j];
+  if (inversions & 1) std::swap(p[2], p[3]);
+  const int w[4] = {v[p[0]], v[p[1]], v[p[2]], v[p[3]]};
+  std::copy(w, w + 4, v);
+  return true;
+}
+
+// A window point as the zone's certificate reads it: coordinates and code word in one
+// cache line, and whether its balls need no test (ball_grid.hpp).
+struct ZoneVertex {
+  double x[3];
+  std::uint64_t code;
+};
+
+// A kept tet's stored form from its rotated code words (no reads).
+inline KeptTet kept_tet_of(const std::uint64_t c[4]) {
+  KeptTet t;
+  int o[3], codes[3];
+  for (int j = 0; j < 4; ++j) t.v[j] = code_plabel(c[j]);
+  for (int j = 1; j < 4; ++j) {
+    for (int k = 0; k < 3; ++k) o[k] = int(code_bits(c[0]) >> k & 1) - int(code_bits(c[j]) >> k & 1);
+    codes[j - 1] = io::offset_code(o);
+  }
+  t.code = io::tet_offset_code(codes[0], codes[1], codes[2]);
+  std::fill(std::begin(t.pad), std::end(t.pad), 0);
+  return t;
+}
+
+// A kept tet's stored form from its rotated local ids and the zone's code words.
+inline KeptTet kept_tet(const std::uint32_t* q, const std::vector<std::uint64_t>& code) {
+  const std::uint64_t c[4] = {code[q[0]], code[q[1]], code[q[2]], code[q[3]]};
+  return kept_tet_of(c);
+}
+
+// The group being gathered (one m, in order): its stored forms and local ids as they
+// come, and their order, by insertion of indices (a group is a few tets).
+struct KeptGroup {
+  std::vector<KeptTet> form;
+  std::vector<std::array<std::uint32_t, 4>> quad;
+  std::vector<std::uint32_t> order;
+
+  bool empty() const { return order.empty(); }
+  void clear() {
+    form.clear();
+    quad.clear();
+    order.clear();
+  }
+  void add(const KeptTet& f, const std::array<std::uint32_t, 4>& q) {
+    const KeptTetLess less;
+    form.push_back(f);
+    quad.push_back(q);
+    std::size_t j = order.size();
+    order.push_back(std::uint32_t(j));
+    for (; j > 0 && less(f, form[order[j - 1]]); --j) order[j] = order[j - 1];
+    order[j] = std::uint32_t(form.size() - 1);
+  }
+  const KeptTet& first() const { return form[order.front()]; }
+  const KeptTet& last() const { return form[order.back()]; }
+};
+
+// Certifies and keeps a zone's tets in place (above). `vx` and `safe` by local id; the
+// sort axis decides which tets are in order: m strictly first on it is the tet's
+// smallest padded vertex (the padded labels are the lexicographic order). False at
+// the first tet that fails the certificate (its ball leaves the padded box): the
+// margin must double. `safe_edges`: a tet with a safe vertex (its ball smaller than the
+// grid's reach) has no edge as long as CGAL's limit. The last three are scratch.
+inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx,
+                      const std::vector<std::uint8_t>& safe, int axis, const std::array<double, 3>& period,
+                      const std::array<double, 3>& lower, std::uint64_t deferred_from, bool safe_edges,
+                      KeptGroup& group, std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
+                      std::vector<std::uint32_t>& deferred) {
+  apart.clear();
+  deferred.clear();
+  group.clear();
+  std::uint32_t* t = z.tets.data();
+  const std::size_t tets = z.size();
+  std::size_t kept = 0;
+  const KeptTetLess less;
+  const auto by_form = [&less](const auto& x, const auto& y) { return less(x.first, y.first); };
+  bool in_order = true;
+  KeptTet previous{};
+  // The group being gathered (one m, in order), sorted by insertion as it comes and
+  // written back where the kept tets go once the next group starts.
+  const auto flush_group = [&] {
+    if (group.empty()) return;
+    if (kept > 0 && !less(previous, group.first())) in_order = false;
+    previous = group.last();
+    for (const std::uint32_t j : group.order) std::copy(group.quad[j].begin(), group.quad[j].end(), t + 4 * kept++);
+    group.clear();
+  };
+  // A tet's vertices are read at random within a slab of the window (past the caches
+  // at 10^6 points and more): each tet asks for those of the tet kAhead places on.
+  constexpr std::size_t kAhead = 8;
+  for (std::size_t i = 0; i < tets; ++i) {
+    if (i + kAhead < tets)
+      for (int j = 0; j < 4; ++j) TS_PREFETCH(&vx[t[4 * (i + kAhead) + std::size_t(j)]]);
+    std::uint32_t v[4] = {t[4 * i], t[4 * i + 1], t[4 * i + 2], t[4 * i + 3]};
+    std::uint64_t c[4] = {vx[v[0]].code, vx[v[1]].code, vx[v[2]].code, vx[v[3]].code};
+    const Verdict verdict = judge(c);
+    if (!verdict.certify) continue;
+    const double* p[4] = {vx[v[0]].x, vx[v[1]].x, vx[v[2]].x, vx[v[3]].x};
+    const bool small = safe[v[0]] | safe[v[1]] | safe[v[2]] | safe[v[3]];
+    ++k.certified;
+    k.balls += !small;
+    if (!small && !ball_inside(p, period, lower)) return false;
+    if (!verdict.kept) continue;
+    int order[4] = {0, 1, 2, 3};
+    if (!rotate_stored(order, c)) return false;
+    if (!(small && safe_edges)) k.long_edges += long_edge(p, period);
+    const std::uint64_t rc[4] = {c[order[0]], c[order[1]], c[order[2]], c[order[3]]};
+    const std::array<std::uint32_t, 4> q = {v[order[0]], v[order[1]], v[order[2]], v[order[3]]};
+    const KeptTet form = kept_tet_of(rc);
+    const double xm = p[order[0]][axis];
+    const bool first_on_axis = xm < p[order[1]][axis] && xm < p[order[2]][axis] && xm < p[order[3]][axis];
+    if (form.v[0] >= deferred_from) {
+      deferred.insert(deferred.end(), q.begin(), q.end());
+    } else if (!first_on_axis) {
+      apart.push_back({form, q});
+    } else {
+      if (!group.empty() && group.first().v[0] != form.v[0]) flush_group();
+      group.add(form, q);
+    }
+  }
+  flush_group();
+  if (!in_order) {
+    // A tie on the sort axis broke the groups' order: all of them sorted apart.
+    for (std::size_t i = 0; i < kept; ++i) {
+      std::array<std::uint32_t, 4> q;
+      std::copy(t + 4 * i, t + 4 * i + 4, q.begin());
+      std::uint64_t c[4];
+      for (int j = 0; j < 4; ++j) c[j] = vx[q[std::size_t(j)]].code;
+      apart.push_back({kept_tet_of(c), q});
+    }
+    kept = 0;
+  }
+  std::sort(apart.begin(), apart.end(), by_form);
+  k.in_order_end = kept;
+  k.sorted_end = kept + apart.size();
+  z.tets.resize(4 * kept);
+  for (const auto& [form, q] : apart) z.tets.insert(z.tets.end(), q.begin(), q.end());
+  z.tets.insert(z.tets.end(), deferred.begin(), deferred.end());
+  return true;
+}
+
+}  // namespace tetstream::pipeline::periodic
