@@ -39,6 +39,16 @@ class ZoneWorker {
   // `with_hull`, also the global hull's vertices (only for a window too flat for a
   // triangulation of its own).
   void load_window(bool with_hull);
+  // Adds to the window the vertices of the shared tets with a point of this zone.
+  void seed_from_neighbours();
+  // Whether the point with this label is one of the zone's: a label of the segment's
+  // zone range and, with strips, a coordinate in this zone's strip.
+  bool zone_point(std::uint64_t label, const double* xyz) const {
+    return in_strip(xyz) && label >= plan_->label_begin && label < plan_->label_end;
+  }
+  bool in_strip(const double* xyz) const {
+    return zone_.axis < 0 || (xyz[zone_.axis] >= zone_.lo && xyz[zone_.axis] < zone_.hi);
+  }
   // One round: checks the rim tets not yet certified (collecting repair points) and
   // returns how many it left unproved (0: the rim holds, every zone vertex is final).
   std::size_t check_round(std::vector<std::uint64_t>& repairs);
@@ -220,37 +230,7 @@ void ZoneWorker::load_window(bool with_hull) {
     xyz_.insert(xyz_.end(), view_.hull_points[i].xyz, view_.hull_points[i].xyz + 3);
     labels_.push_back(view_.hull_points[i].original);
   }
-  // The finished zones' rim tets with a label of this zone's range: their vertices are
-  // the true neighbours of its points there (Lemma 7), which repairs would otherwise
-  // bring in one a query (on a surface, the far ends of the long edges across the
-  // zone's boundary). Held, as repair points are.
-  seeded_.clear();
-  if (shared_) {
-    // Only the tets with a point of this zone: a label of its range in its strip.
-    QueryScratch scratch;
-    shared_->for_each_touching(plan_->label_begin, plan_->label_end, [&](const SharedRim::Labels& t) {
-      const bool touches = std::any_of(t.begin(), t.end(), [&](std::uint64_t l) {
-        if (l < plan_->label_begin || l >= plan_->label_end) return false;
-        if (zone_.axis < 0) return true;
-        const double x = certificate_.read_point(l, scratch)[zone_.axis];
-        return x >= zone_.lo && x < zone_.hi;
-      });
-      if (touches) seeded_.insert(seeded_.end(), t.begin(), t.end());
-    });
-    std::sort(seeded_.begin(), seeded_.end());
-    seeded_.erase(std::unique(seeded_.begin(), seeded_.end()), seeded_.end());
-    std::size_t kept = 0;
-    for (std::uint64_t label : seeded_) {
-      const double* p = certificate_.read_point(label, scratch);
-      if (certificate_.in_window(label, p) || std::binary_search(held_.begin(), held_.end(), label)) continue;
-      xyz_.insert(xyz_.end(), p, p + 3);
-      labels_.push_back(label);
-      seeded_[kept++] = label;
-    }
-    seeded_.resize(kept);
-    held_.insert(held_.end(), seeded_.begin(), seeded_.end());
-    std::sort(held_.begin(), held_.end());
-  }
+  seed_from_neighbours();
   const std::size_t total = labels_.size();
   // Local ids in Hilbert order: the kernel touches coordinates by vertex id, and a
   // spatially coherent numbering keeps those accesses in cache (the labels, not the
@@ -267,6 +247,35 @@ void ZoneWorker::load_window(bool with_hull) {
   xyz_.swap(xyz);
   labels_.swap(labels);
   stats_.window_points = total;
+}
+
+// The finished zones' rim tets with a point of this zone: their vertices are the true
+// neighbours of its points there (Lemma 7), which repairs would otherwise bring in one a
+// query (on a surface, the far ends of the long edges across the zone's boundary). Held,
+// as repair points are; those the window has already are left out.
+void ZoneWorker::seed_from_neighbours() {
+  seeded_.clear();
+  if (!shared_) return;
+  QueryScratch scratch;
+  shared_->for_each_touching(plan_->label_begin, plan_->label_end, [&](const SharedRim::Labels& t) {
+    const bool touches = std::any_of(t.begin(), t.end(), [&](std::uint64_t l) {
+      return l >= plan_->label_begin && l < plan_->label_end && zone_point(l, certificate_.read_point(l, scratch));
+    });
+    if (touches) seeded_.insert(seeded_.end(), t.begin(), t.end());
+  });
+  std::sort(seeded_.begin(), seeded_.end());
+  seeded_.erase(std::unique(seeded_.begin(), seeded_.end()), seeded_.end());
+  std::size_t kept = 0;
+  for (std::uint64_t label : seeded_) {
+    const double* p = certificate_.read_point(label, scratch);
+    if (certificate_.in_window(label, p) || std::binary_search(held_.begin(), held_.end(), label)) continue;
+    xyz_.insert(xyz_.end(), p, p + 3);
+    labels_.push_back(label);
+    seeded_[kept++] = label;
+  }
+  seeded_.resize(kept);
+  held_.insert(held_.end(), seeded_.begin(), seeded_.end());
+  std::sort(held_.begin(), held_.end());
 }
 
 // Tet t of the rim (a zone vertex and another: finite, or a hull facet): its range
@@ -447,16 +456,16 @@ void ZoneWorker::publish_rim() {
   const std::size_t slots = dt_.num_tet_slots();
   for (std::size_t t = 0; t < slots; ++t) {
     if (!dt_.is_alive(TetId(t)) || dt_.is_infinite(TetId(t))) continue;
-    bool zone = false, later = false;
+    const TetKind k = kind(TetId(t));
+    if (k != TetKind::kBeyond && k != TetKind::kWall) continue;
+    bool later = false;
     SharedRim::Labels l;
     for (int i = 0; i < 4; ++i) {
       const VertexId v = dt_.vertex(TetId(t), i);
-      const bool in_zone = zone_of_[v] != kNoZone;
-      zone |= in_zone;
-      later |= !in_zone && labels_[v] >= plan_->label_begin;
+      later |= zone_of_[v] == kNoZone && labels_[v] >= plan_->label_begin;
       l[std::size_t(i)] = labels_[v];
     }
-    if (!zone || !later) continue;
+    if (!later) continue;
     std::sort(l.begin(), l.end());
     publish_.push_back(l);
     // In batches: the scratch stays small (a zone's rim is tens of thousands of tets).
@@ -596,15 +605,13 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   zone_of_.assign(labels_.size(), kNoZone);
   for (VertexId v = 0; v < labels_.size(); ++v) {
     const std::uint64_t l = labels_[v];
-    const bool in_strip = zone_.axis < 0 || (xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] >= zone_.lo &&
-                                             xyz_[3 * std::size_t(v) + std::size_t(zone_.axis)] < zone_.hi);
-    const bool in_range = l >= plan_->label_begin && l < plan_->label_end;
-    if (!in_range || !in_strip) {
+    const double* p = &xyz_[3 * std::size_t(v)];
+    if (!zone_point(l, p)) {
       if (std::binary_search(seeded_.begin(), seeded_.end(), l))
         ++stats_.neighbour_points;
       else if (std::binary_search(held_.begin(), held_.end(), l))
         ++stats_.hull_points;
-      else if (!in_strip)
+      else if (!in_strip(p))
         ++stats_.zone_buffer_points;
       else
         ++stats_.segment_buffer_points;
