@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <fstream>
 
 #include <cstdint>
@@ -197,6 +198,12 @@ void WorkDir::remove_owned(bool keep_lock_and_marker) const {
     if (special ? !keep_lock_and_marker : is_work_file_name(name)) names.push_back(name);
   }
   ::closedir(d);
+  // The state first (without it the directory is no checkpoint, only stale work
+  // files a later run removes), the marker last (until then the directory is
+  // recognisably ours).
+  const auto rank = [](const std::string& name) { return name == "state.json" ? 0 : name == kMarker ? 2 : 1; };
+  std::stable_sort(names.begin(), names.end(),
+                   [&](const std::string& a, const std::string& b) { return rank(a) < rank(b); });
   for (const std::string& name : names) {
     const std::string p = path(name);
     struct stat st {};
@@ -207,11 +214,36 @@ void WorkDir::remove_owned(bool keep_lock_and_marker) const {
 
 void WorkDir::clear() const { remove_owned(/*keep_lock_and_marker=*/true); }
 
+// Renames the directory to DIR.old-PID-N beside it (never onto anything: NOREPLACE),
+// so that what is emptied next is no longer at DIR. False if it could not.
+bool WorkDir::move_aside() noexcept {
+  for (unsigned attempt = 0; attempt < 64; ++attempt) {
+    const std::string aside = dir_ + ".old-" + std::to_string(::getpid()) + "-" + std::to_string(attempt);
+    if (::renameat2(AT_FDCWD, dir_.c_str(), AT_FDCWD, aside.c_str(), RENAME_NOREPLACE) == 0) {
+      dir_ = aside;
+      return true;
+    }
+    if (errno != EEXIST) return false;
+  }
+  return false;
+}
+
 bool WorkDir::remove() noexcept {
   if (dir_.empty()) return true;
+  // Out of the way first, then emptied: a process killed while removing its work
+  // directory leaves DIR whole or gone, never half removed (an unmarked DIR that
+  // --resume must refuse as not tetstream's, or a checkpoint naming files already
+  // gone). What such a kill leaves is a marked DIR.old-PID-N without a state, which
+  // the next run in that directory, or `tetstream clean`, removes. In place if the
+  // rename fails (the removal itself then fails the same way).
+  const std::string named = dir_;
+  const bool aside = move_aside();
   remove_owned(/*keep_lock_and_marker=*/false);
   if (lock_fd_ >= 0) ::close(lock_fd_), lock_fd_ = -1;
-  return ::rmdir(dir_.c_str()) == 0;
+  if (::rmdir(dir_.c_str()) == 0) return true;
+  // Something not ours is left in it: back where the user put it.
+  if (aside && ::renameat2(AT_FDCWD, dir_.c_str(), AT_FDCWD, named.c_str(), RENAME_NOREPLACE) == 0) dir_ = named;
+  return false;
 }
 
 std::vector<StaleWorkDir> find_stale_work_dirs(const std::string& parent) {

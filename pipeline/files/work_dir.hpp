@@ -17,8 +17,9 @@
 // Order of creation: directory, lock (taken), marker. A directory with a marker has
 // had its lock taken before, so `tetstream clean` cannot take a live job's directory
 // for a dead one. A named directory (open_or_create) is made so under PATH.new-XXXXXX
-// and renamed to PATH once marked: PATH never exists unmarked, whenever the process
-// is killed.
+// and renamed to PATH once marked, and removed by renaming it aside first
+// (DIR.old-PID-N), then state, files, lock, marker: PATH never exists unmarked or half
+// removed, whenever the process is killed.
 #include <string>
 #include <vector>
 
@@ -55,6 +56,7 @@ class WorkDir {
   explicit WorkDir(std::string dir) : dir_(std::move(dir)) {}
   void lock_or_refuse();
   void remove_owned(bool keep_lock_and_marker) const;
+  bool move_aside() noexcept;
 
   std::string dir_;
   int lock_fd_ = -1;

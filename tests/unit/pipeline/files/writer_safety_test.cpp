@@ -173,6 +173,34 @@ TEST_F(WriterSafety, ANamedWorkDirectoryAppearsMarkedAndReplacesNothing) {
   EXPECT_TRUE(std::filesystem::is_empty(mine));
 }
 
+// A named work directory disappears whole: removed under another name (PATH.old-PID-N),
+// so a kill while it is emptied leaves PATH intact or gone, never an unmarked PATH that
+// --resume would refuse. Removed, nothing is left beside it; with a file of the user's
+// in it, it stays at PATH with that file.
+TEST_F(WriterSafety, ANamedWorkDirectoryDisappearsWholeAndKeepsWhatIsNotOurs) {
+  const std::string ckpt = path("out.tets.ckpt");
+  {
+    pipeline::WorkDir w = pipeline::WorkDir::open_or_create(ckpt);
+    put("out.tets.ckpt/state.json", "{}");
+    put("out.tets.ckpt/sorted.points", "points");
+    EXPECT_TRUE(w.remove());
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dir_));
+  {
+    pipeline::WorkDir w = pipeline::WorkDir::open_or_create(ckpt);
+    put("out.tets.ckpt/state.json", "{}");
+    put("out.tets.ckpt/notes.txt", "mine");
+    EXPECT_FALSE(w.remove());
+    EXPECT_EQ(w.dir(), ckpt);
+  }
+  EXPECT_EQ(get("out.tets.ckpt/notes.txt"), "mine");
+  struct stat st {};
+  EXPECT_NE(::lstat(path("out.tets.ckpt/state.json").c_str(), &st), 0);
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+  EXPECT_EQ(names, std::vector<std::string>{"out.tets.ckpt"});
+}
+
 TEST_F(WriterSafety, AMissingParentOfTheWorkDirectoryIsSaid) {
   try {
     pipeline::WorkDir::open_or_create(path("missing/out.tets.ckpt"));
