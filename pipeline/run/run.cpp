@@ -365,7 +365,10 @@ RunSummary detail::run_job(const RunOptions& requested, const OutputStageFactory
     return summary;
   }
 
-  Checkpoint checkpoint(checkpoint_directory(options));
+  const std::string checkpoint_dir = checkpoint_directory(options);
+  // What a job killed while removing its checkpoint left beside it (DIR.old-PID-N).
+  remove_stale_temporary_dirs(std::filesystem::path(checkpoint_dir).parent_path().string());
+  Checkpoint checkpoint(checkpoint_dir);
   OpenedJob opened = open_checkpointed_job(options, checkpoint, *claim);
   if (opened.finished) return *opened.finished;
   try {
