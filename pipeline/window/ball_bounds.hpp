@@ -19,19 +19,32 @@ inline double conservative_square(double r) { return r * r * (1 + 1e-12); }
 // (A NaN distance may reach: the exact test that follows decides.)
 inline bool may_reach(double d2, double r2) { return !(d2 > r2 + 0x1p-1060); }
 
+// The square of the distance from c to the interval [lo, hi] along one axis: the term
+// each axis adds to a box's squared distance (box_meets_ball).
+inline double axis_gap_square(double lo, double hi, double c) {
+  double d = 0;
+  if (c < lo)
+    d = lo - c;
+  else if (c > hi)
+    d = c - hi;
+  return d * d;
+}
+
 // Whether the box [lo, hi] meets the closed ball (c, r). Any finite or infinite box
 // and ball.
 inline bool box_meets_ball(const double* lo, const double* hi, const double* c, double r) {
   double d2 = 0;
-  for (int k = 0; k < 3; ++k) {
-    double d = 0;
-    if (c[k] < lo[k])
-      d = lo[k] - c[k];
-    else if (c[k] > hi[k])
-      d = c[k] - hi[k];
-    d2 += d * d;
-  }
+  for (int k = 0; k < 3; ++k) d2 += axis_gap_square(lo[k], hi[k], c[k]);
   return may_reach(d2, conservative_square(r));
 }
+
+// A ball as the point index's region (PointIndex::for_each_candidate_where): the
+// index knows it is a ball and tests a leaf's cells axis by axis (the same sums,
+// from tables: the same answers as box_meets_ball).
+struct BallRegion {
+  const double* center;
+  double radius;
+  bool operator()(const double* lo, const double* hi) const { return box_meets_ball(lo, hi, center, radius); }
+};
 
 }  // namespace tetstream::pipeline

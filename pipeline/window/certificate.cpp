@@ -200,9 +200,7 @@ std::uint64_t Certificate::query(const core::Delaunay& dt, TetId t, const RangeT
     // NaN, also when the squares overflow).
     return conflicts ? d2 : std::numeric_limits<double>::quiet_NaN();
   };
-  auto may_meet = [&](const double* box_lo, const double* box_hi) {
-    return box_meets_ball(box_lo, box_hi, ball.center, ball.radius);
-  };
+  const BallRegion may_meet{ball.center, ball.radius};
   return best_missing_conflict(may_meet, conflict, range.lo, range.hi, range.outside_clear, range.strip_clear, stats);
 }
 

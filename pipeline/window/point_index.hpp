@@ -48,6 +48,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -138,8 +139,7 @@ class PointIndex {
   template <class Visit, class Stop>
   void for_each_candidate(const double* center, double radius, std::uint64_t first, std::uint64_t last, Visit&& visit,
                           Stop&& stop, const ExcludedSlab& exclude = {}) const {
-    for_each_candidate_where([&](const double* lo, const double* hi) { return box_meets_ball(lo, hi, center, radius); },
-                             first, last, visit, stop, exclude);
+    for_each_candidate_where(BallRegion{center, radius}, first, last, visit, stop, exclude);
   }
 
   // The same for any region: may_meet(lo, hi) says whether the box [lo, hi] may hold
@@ -261,14 +261,24 @@ class PointIndex {
       // itself: a terrain's queries read 17 points each past the coarse cells, of
       // which 3 were in the ball.
       const CellGrid coarse(lo, hi, kSlices), fine(lo, hi, kSlices * kSlices);
+      // For a ball, the coarse cells' test from tables: each axis' 16 slices' squared
+      // gaps, summed in box_meets_ball's order (the same answer), and whether the
+      // excluded slab holds each slice. A leaf a huge ball grazes is scanned whole
+      // for the few points near the sphere: on `hills` 10^6, 760 entries a query.
+      [[maybe_unused]] CoarseTable table;
+      if constexpr (kIsBall<MayMeet>) table.fill(coarse, may_meet, exclude);
       for (std::uint32_t j = node.begin; j < node.end; ++j) {
         const std::uint32_t entry = entries_[base + j];
         const std::uint64_t label = base + (entry & kOffsetMask);
         if (label < first || label >= last) continue;
         double cell_lo[3], cell_hi[3];
         const std::uint32_t cell = entry >> kOffsetBits;
-        coarse.cell(cell, cell_lo, cell_hi);
-        if (!may_meet(cell_lo, cell_hi) || exclude.contains(cell_lo, cell_hi)) continue;
+        if constexpr (kIsBall<MayMeet>) {
+          if (!table.may_meet(cell)) continue;
+        } else {
+          coarse.cell(cell, cell_lo, cell_hi);
+          if (!may_meet(cell_lo, cell_hi) || exclude.contains(cell_lo, cell_hi)) continue;
+        }
         fine.cell(fine_cell(cell, fine_[base + j]), cell_lo, cell_hi);
         if (may_meet(cell_lo, cell_hi) && !exclude.contains(cell_lo, cell_hi)) visit(label);
       }
@@ -349,6 +359,44 @@ class PointIndex {
     int bits;            // of a slice number
     std::uint32_t mask;  // slices - 1
     double lo[3], step[3], first_hi[3], pad[3];
+  };
+  template <class MayMeet>
+  static constexpr bool kIsBall = std::is_same_v<std::remove_cvref_t<MayMeet>, BallRegion>;
+  // A ball's test of one leaf's coarse cells (scan_block): by axis and slice, the
+  // squared gap from the centre to the cell's extent, and whether the excluded slab
+  // holds the slice (its axis only decides).
+  struct CoarseTable {
+    double gap2[3][kSlices];
+    bool excluded[kSlices];
+    double r2;
+    int exclude_axis;
+    // The slices' bounds as CellGrid::cell computes them.
+    void fill(const CellGrid& grid, const BallRegion& ball, const ExcludedSlab& exclude) {
+      for (int k = 0; k < 3; ++k) {
+        const double lo = grid.lo[k], first_hi = grid.first_hi[k], step = grid.step[k], pad = grid.pad[k],
+                     c = ball.center[k];
+        for (std::uint32_t s = 0; s < kSlices; ++s)
+          gap2[k][s] = axis_gap_square(lo + double(s) * step - pad, first_hi + double(s) * step + pad, c);
+      }
+      exclude_axis = exclude.axis;
+      if (exclude_axis >= 0) {
+        const int k = exclude_axis;
+        for (std::uint32_t s = 0; s < kSlices; ++s)
+          excluded[s] = grid.lo[k] + double(s) * grid.step[k] - grid.pad[k] >= exclude.lo &&
+                        grid.first_hi[k] + double(s) * grid.step[k] + grid.pad[k] <= exclude.hi;
+      }
+      r2 = conservative_square(ball.radius);
+    }
+    bool may_meet(std::uint32_t cell) const {
+      const std::uint32_t s0 = cell & (kSlices - 1), s1 = cell >> kSliceBits & (kSlices - 1),
+                          s2 = cell >> 2 * kSliceBits & (kSlices - 1);
+      double d2 = 0;
+      d2 += gap2[0][s0];
+      d2 += gap2[1][s1];
+      d2 += gap2[2][s2];
+      if (!may_reach(d2, r2)) return false;
+      return exclude_axis < 0 || !excluded[cell >> kSliceBits * exclude_axis & (kSlices - 1)];
+    }
   };
   // Builds block b (its entries, fine cells and nodes) over typed records; `entries`
   // and `fine` point at the block's first point's.

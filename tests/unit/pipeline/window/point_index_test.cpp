@@ -92,6 +92,41 @@ TEST(PointIndex, CandidatesCoverEveryPointOfTheBall) {
   }
 }
 
+// A ball's leaf cells are tested from per-axis tables (PointIndex::CoarseTable): the
+// same candidates, in the same order, as the generic region test of the same ball,
+// with and without an excluded slab, near the origin and far from it.
+TEST(PointIndex, ABallsTablesAnswerAsTheGenericRegionTest) {
+  for (const double offset : {0.0, 1e6}) {
+    for (const bool coarse : {false, true}) {
+      const int axis = 0;
+      std::vector<SortedPoint> p = sorted_points(20000, axis, coarse, 11);
+      for (SortedPoint& q : p)
+        for (double& x : q.xyz) x += offset;
+      PointIndex index;
+      index.build(records_of(p.data()), p.size(), axis, 1000u);
+      std::mt19937_64 rng(3);
+      std::uniform_real_distribution<double> u(-1.2, 1.2);
+      std::uniform_int_distribution<std::uint64_t> label(0, p.size());
+      for (int q = 0; q < 300; ++q) {
+        const double c[3] = {offset + u(rng), offset + 3 * u(rng), offset + u(rng)};
+        const double r = q % 10 == 0 ? 2.0 : 0.02 + 0.3 * std::abs(u(rng));
+        std::uint64_t first = label(rng), last = label(rng);
+        if (first > last) std::swap(first, last);
+        ExcludedSlab exclude;
+        if (q % 2 == 0) exclude = ExcludedSlab{1 + q % 4 / 2, offset + u(rng) - 0.3, offset + u(rng) + 0.3};
+        std::vector<std::uint64_t> tables, generic;
+        index.for_each_candidate_where(
+            BallRegion{c, r}, first, last, [&](std::uint64_t l) { tables.push_back(l); }, [] { return false; },
+            exclude);
+        index.for_each_candidate_where([&](const double* lo, const double* hi) { return box_meets_ball(lo, hi, c, r); },
+                                       first, last, [&](std::uint64_t l) { generic.push_back(l); },
+                                       [] { return false; }, exclude);
+        ASSERT_EQ(tables, generic) << "query " << q << (coarse ? ", coarse" : "") << ", offset " << offset;
+      }
+    }
+  }
+}
+
 // The index built in parts (the ranks of a job, each its blocks), written into one file
 // and mapped, answers every query as the index built whole: the same labels in the same
 // order, whatever the parts (one block, uneven parts, an empty part).
