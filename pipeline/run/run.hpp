@@ -80,6 +80,7 @@ struct RunSummary {
   std::uint64_t rim_published = 0;        // rim tets finished zones handed to the running ones
   std::uint64_t rim_from_neighbours = 0;  // rim tets the running zones found there (no ball, no query)
   std::uint64_t rim_rechecks = 0;         // rim tets left unproved by a round, checked again in the next
+  std::uint64_t queries_spared = 0;       // queued tets in conflict with a repair point the round had found (no query)
   // 2 MiB regions of the sorted file that the queries' reads mapped and that were
   // handed back to keep them within their share of the budget (this process's)
   std::uint64_t query_region_releases = 0;

@@ -44,6 +44,7 @@ constexpr Counter kCounters[] = {
     {"tets_by_wall", &SegmentStats::tets_by_wall, &RunSummary::tets_by_wall, true},
     {"tets_by_rim", &SegmentStats::tets_by_rim, &RunSummary::tets_by_rim, true},
     {"rim_rechecks", &SegmentStats::rim_rechecks, &RunSummary::rim_rechecks, true},
+    {"queries_spared", &SegmentStats::queries_spared, &RunSummary::queries_spared, true},
     {"tets_by_neighbour", &SegmentStats::tets_by_neighbour, &RunSummary::tets_by_neighbour, true},
     {"rim_published", &SegmentStats::rim_published, &RunSummary::rim_published, true},
     {"rim_from_neighbours", &SegmentStats::rim_from_neighbours, &RunSummary::rim_from_neighbours, true},

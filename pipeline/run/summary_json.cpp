@@ -37,6 +37,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
         {"by_rim", s.tets_by_rim},
         {"by_neighbour", s.tets_by_neighbour}}},
       {"rim_rechecks", s.rim_rechecks},
+      {"queries_spared", s.queries_spared},
       {"rim_published", s.rim_published},
       {"rim_from_neighbours", s.rim_from_neighbours},
       {"output_bytes", s.output_bytes},

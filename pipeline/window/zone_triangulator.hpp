@@ -45,6 +45,7 @@ struct SegmentStats {
   std::uint64_t rim_published = 0;              // rim tets handed to the zones still running (SharedRim)
   std::uint64_t rim_from_neighbours = 0;        // rim tets certified by finding them there
   std::uint64_t rim_rechecks = 0;               // rim tets left unproved by a round, checked again
+  std::uint64_t queries_spared = 0;             // queued tets in conflict with a repair point already found
   std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
   double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
 
@@ -55,7 +56,7 @@ struct SegmentStats {
     hull_points += o.hull_points, neighbour_points += o.neighbour_points;
     queries += o.queries, query_points += o.query_points, rounds = std::max(rounds, o.rounds), tets += o.tets;
     tets_by_query += o.tets_by_query, tets_by_wall += o.tets_by_wall, tets_by_rim += o.tets_by_rim,
-        rim_rechecks += o.rim_rechecks;
+        rim_rechecks += o.rim_rechecks, queries_spared += o.queries_spared;
     tets_by_neighbour += o.tets_by_neighbour, rim_published += o.rim_published,
         rim_from_neighbours += o.rim_from_neighbours;
     kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
