@@ -23,8 +23,9 @@ struct BestConflict {
   static constexpr std::uint64_t kEnough = 16;
   std::uint64_t found = 0, label = Certificate::kNone;
   double score = std::numeric_limits<double>::infinity();
-  void offer(std::uint64_t l, double s) {
-    if (found++ == 0 || s < score) score = s, label = l;
+  double xyz[3] = {0, 0, 0};  // the best point's
+  void offer(std::uint64_t l, double s, const double* p) {
+    if (found++ == 0 || s < score) score = s, label = l, std::copy(p, p + 3, xyz);
   }
   bool enough() const { return found >= kEnough; }
 };
@@ -139,13 +140,14 @@ RangeTest Certificate::range_test(const core::Delaunay& dt, TetId t) const {
 
 template <class MayMeet, class Conflict>
 std::uint64_t Certificate::best_missing_conflict(MayMeet&& may_meet, Conflict&& conflict, double lo, double hi,
-                                                 bool outside_clear, bool strip_clear, SegmentStats& stats) {
+                                                 bool outside_clear, bool strip_clear, SegmentStats& stats,
+                                                 double* best_xyz) {
   ++stats.queries;
   BestConflict best;
   QueryScratch scratch;
   auto offer = [&](std::uint64_t label, const double* xyz) {
     const double score = conflict(label, xyz);
-    if (!std::isnan(score)) best.offer(label, score);
+    if (!std::isnan(score)) best.offer(label, score, xyz);
   };
   auto visit = [&](std::uint64_t label) {
     if (!held(label)) offer(label, read_point(label, scratch));
@@ -179,29 +181,34 @@ std::uint64_t Certificate::best_missing_conflict(MayMeet&& may_meet, Conflict&& 
     search(std::max(first, plan_->window_begin), std::min(last, plan_->window_end), visit_outside_strip,
            ExcludedSlab{zone_.axis, zone_.window_lo, zone_.window_hi});
   }
+  if (best_xyz && best.found > 0) std::copy(best.xyz, best.xyz + 3, best_xyz);
   return best.label;
 }
 
-std::uint64_t Certificate::query(const core::Delaunay& dt, TetId t, const RangeTest& range, SegmentStats& stats) {
-  const ConflictBall& ball = range.ball;
+double conflict_score(const core::Delaunay& dt, TetId t, const ConflictBall& ball, std::uint64_t label, const double* p,
+                      std::uint64_t* tested) {
+  double d2 = 0;
+  for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
+  if (!may_reach(d2, conservative_square(ball.radius))) return std::numeric_limits<double>::quiet_NaN();
+  if (tested) ++*tested;
   VertexId v[4];
   for (int i = 0; i < 4; ++i) v[i] = dt.vertex(t, i);
-  const double r2 = conservative_square(ball.radius);
+  const bool conflicts = core::insphere_sos(dt.point(v[0]), dt.point(v[1]), dt.point(v[2]), dt.point(v[3]), p,
+                                            dt.label(v[0]), dt.label(v[1]), dt.label(v[2]), dt.label(v[3]), label) > 0;
+  // The score ranks points within one query, where the ball is fixed: d2 alone (never
+  // NaN, also when the squares overflow).
+  return conflicts ? d2 : std::numeric_limits<double>::quiet_NaN();
+}
+
+std::uint64_t Certificate::query(const core::Delaunay& dt, TetId t, const RangeTest& range, SegmentStats& stats,
+                                 double* found_xyz) {
   // The deepest conflicting point: the one nearest the enclosing ball's centre.
   auto conflict = [&](std::uint64_t label, const double* p) {
-    double d2 = 0;
-    for (int k = 0; k < 3; ++k) d2 += (p[k] - ball.center[k]) * (p[k] - ball.center[k]);
-    if (!may_reach(d2, r2)) return std::numeric_limits<double>::quiet_NaN();
-    ++stats.query_points;
-    const bool conflicts =
-        core::insphere_sos(dt.point(v[0]), dt.point(v[1]), dt.point(v[2]), dt.point(v[3]), p, dt.label(v[0]),
-                           dt.label(v[1]), dt.label(v[2]), dt.label(v[3]), label) > 0;
-    // The score ranks points within this one query, where r2 is fixed: d2 alone (never
-    // NaN, also when the squares overflow).
-    return conflicts ? d2 : std::numeric_limits<double>::quiet_NaN();
+    return conflict_score(dt, t, range.ball, label, p, &stats.query_points);
   };
-  const BallRegion may_meet{ball.center, ball.radius};
-  return best_missing_conflict(may_meet, conflict, range.lo, range.hi, range.outside_clear, range.strip_clear, stats);
+  const BallRegion may_meet{range.ball.center, range.ball.radius};
+  return best_missing_conflict(may_meet, conflict, range.lo, range.hi, range.outside_clear, range.strip_clear, stats,
+                               found_xyz);
 }
 
 bool Certificate::hull_facet_range_test(const core::Delaunay& dt, TetId t) const {
@@ -259,7 +266,7 @@ std::uint64_t Certificate::hull_facet_query(const core::Delaunay& dt, TetId t, S
     if (core::infinite_conflict_sos(a, b, c, h.xyz, la, lb, lc, label) <= 0) return;
     double d2 = 0;
     for (int k = 0; k < 3; ++k) d2 += (h.xyz[k] - centroid[k]) * (h.xyz[k] - centroid[k]);
-    nearest.offer(label, d2);
+    nearest.offer(label, d2, h.xyz);
   };
   view_.hull_index->for_each_candidate_where(
       [&](const double* box_lo, const double* box_hi) { return plane.box_may_reach(box_lo, box_hi); }, 0,

@@ -58,6 +58,14 @@ struct RangeTest {
   bool clears() const { return bounded && (lo > hi || (outside_clear && strip_clear)); }
 };
 
+// Whether point p (label) conflicts with finite tet t of `dt`, whose conflict ball is
+// `ball`: NaN when it does not (the ball's distance test first, then insphere_sos),
+// else its squared distance to the ball's centre (a query's score). `tested`, when
+// given, counts the exact tests. The queries' test, and ZoneWorker's for the repair
+// points a round has already found.
+double conflict_score(const core::Delaunay& dt, core::TetId t, const ConflictBall& ball, std::uint64_t label,
+                      const double* p, std::uint64_t* tested);
+
 // One point read by a query: its record as copied from the file, and its coordinates.
 struct QueryScratch {
   alignas(8) std::byte record[32];
@@ -89,8 +97,9 @@ class Certificate {
   RangeTest range_test(const core::Delaunay& dt, core::TetId t) const;
   // The emptiness query of finite tet t, which failed `range`: kNone when no missing
   // point conflicts with it, else the deepest (nearest the ball's centre) of the first
-  // few conflicting points found.
-  std::uint64_t query(const core::Delaunay& dt, core::TetId t, const RangeTest& range, SegmentStats& stats);
+  // few conflicting points found, whose coordinates go to found_xyz when given.
+  std::uint64_t query(const core::Delaunay& dt, core::TetId t, const RangeTest& range, SegmentStats& stats,
+                      double* found_xyz = nullptr);
 
   // The range test of infinite tet t (a hull facet of the window): true when the
   // closed half-space beyond its facet misses every place a missing point can be.
@@ -114,7 +123,7 @@ class Certificate {
   // when it conflicts (lower: a better repair), NaN otherwise.
   template <class MayMeet, class Conflict>
   std::uint64_t best_missing_conflict(MayMeet&& may_meet, Conflict&& conflict, double lo, double hi, bool outside_clear,
-                                      bool strip_clear, SegmentStats& stats);
+                                      bool strip_clear, SegmentStats& stats, double* best_xyz = nullptr);
   bool held(std::uint64_t label) const;
 
   const SortedView& view_;

@@ -2,9 +2,7 @@
 
 #include "core/error.hpp"
 #include "core/huge_pages.hpp"
-#include "core/predicates.hpp"
 #include "core/spatial_sort.hpp"
-#include "pipeline/window/ball_bounds.hpp"
 #include "pipeline/window/certificate.hpp"
 #include "pipeline/window/shared_rim.hpp"
 
@@ -332,17 +330,14 @@ bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repai
     ++stats_.queries_spared;
     return false;
   }
-  const std::uint64_t deepest = certificate_.query(dt_, q.tet, q.range, stats_);
+  RecentRepair& r = recent_[recent_next_];
+  const std::uint64_t deepest = certificate_.query(dt_, q.tet, q.range, stats_, r.xyz);
   if (deepest == Certificate::kNone) {
     proved_empty_[q.tet] = kProved;
     return true;
   }
   repairs.push_back(deepest);
-  RecentRepair& r = recent_[recent_next_];
-  QueryScratch scratch;
-  const double* xyz = certificate_.read_point(deepest, scratch);
   r.label = deepest;
-  std::copy(xyz, xyz + 3, r.xyz);
   recent_next_ = (recent_next_ + 1) % kRecent;
   recent_count_ = std::min(recent_count_ + 1, kRecent);
   return false;
@@ -355,21 +350,9 @@ bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repai
 // queries found a conflict for 297 k repair points). The newest first: the queue runs
 // along the sort axis, and the last repair is the nearest.
 bool ZoneWorker::conflicts_with_recent(const QueuedTet& q) const {
-  if (recent_count_ == 0) return false;
-  VertexId v[4];
-  for (int i = 0; i < 4; ++i) v[i] = dt_.vertex(q.tet, i);
-  const ConflictBall& ball = q.range.ball;
-  const double r2 = conservative_square(ball.radius);
   for (std::size_t k = 1; k <= recent_count_; ++k) {
     const RecentRepair& r = recent_[(recent_next_ + kRecent - k) % kRecent];
-    if (q.range.bounded) {
-      double d2 = 0;
-      for (int i = 0; i < 3; ++i) d2 += (r.xyz[i] - ball.center[i]) * (r.xyz[i] - ball.center[i]);
-      if (!may_reach(d2, r2)) continue;
-    }
-    if (core::insphere_sos(dt_.point(v[0]), dt_.point(v[1]), dt_.point(v[2]), dt_.point(v[3]), r.xyz, dt_.label(v[0]),
-                           dt_.label(v[1]), dt_.label(v[2]), dt_.label(v[3]), r.label) > 0)
-      return true;
+    if (!std::isnan(conflict_score(dt_, q.tet, q.range.ball, r.label, r.xyz, nullptr))) return true;
   }
   return false;
 }
