@@ -4,11 +4,13 @@
 // unfiltered, whose infinite tets touch the boundary points.
 #include "core/delaunay.hpp"
 #include "pipeline/sort/hull.hpp"
+#include "pipeline/sort/point_sort_detail.hpp"
 #include "test_points.hpp"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <unordered_set>
 #include <array>
 #include <string>
 #include <vector>
@@ -78,6 +80,33 @@ TEST(HullCandidates, EqualTheKernelsHullOnEveryShape) {
   // A grid: every point of the six faces is on the boundary.
   expect_same_hull(test::grid(20), "grid 20^3");
   expect_same_hull(test::coplanar_layers(5000, 4, 9, 8), "coplanar layers");
+}
+
+// A sorted run's candidates come from pieces of it, one kernel each (the sort's
+// hull share): the union of the pieces' candidates holds every boundary point of the
+// run, whatever the number of pieces.
+TEST(HullCandidates, ARunInPiecesKeepsItsBoundaryPoints) {
+  for (const std::size_t piece : {std::size_t(20000), std::size_t(4096), std::size_t(1000), std::size_t(97)}) {
+    const Points p = test::uniform_cube(20000, 5);
+    std::vector<pipeline::SortedPoint> run(test::count(p));
+    for (std::size_t i = 0; i < run.size(); ++i) {
+      std::copy_n(&p[3 * i], 3, run[i].xyz);
+      run[i].original = 1000 + i;  // an original index, not the position in the run
+    }
+    pipeline::SortShares shares;
+    shares.hull_piece_points = piece;
+    shares.hull_threads = 2;
+    std::vector<double> xyz;
+    std::vector<std::uint64_t> hull;
+    std::unordered_set<std::uint64_t> all;
+    pipeline::sort_detail::sort_run_and_find_hull(run, 0, shares, xyz, hull, all);
+    std::vector<std::uint32_t> got;
+    for (std::uint64_t o : hull) got.push_back(std::uint32_t(o - 1000));
+    const std::vector<std::uint32_t> expected = unfiltered_hull(p);
+    std::sort(got.begin(), got.end());
+    EXPECT_TRUE(std::includes(got.begin(), got.end(), expected.begin(), expected.end())) << "pieces of " << piece;
+    EXPECT_EQ(all.size(), hull.size());
+  }
 }
 
 TEST(HullCandidates, FewPointsAreAllReturned) {
