@@ -81,6 +81,10 @@ struct RunSummary {
   std::uint64_t rim_from_neighbours = 0;  // rim tets the running zones found there (no ball, no query)
   std::uint64_t rim_rechecks = 0;         // rim tets left unproved by a round, checked again in the next
   std::uint64_t queries_spared = 0;       // queued tets in conflict with a repair point the round had found (no query)
+  // The queries that found no conflict, by how far their balls reached past the
+  // window's keys (SegmentStats): none, under half a segment, one, two, farther.
+  std::uint64_t empty_reach_none = 0, empty_reach_half = 0, empty_reach_one = 0, empty_reach_two = 0,
+                empty_reach_farther = 0;
   // 2 MiB regions of the sorted file that the queries' reads mapped and that were
   // handed back to keep them within their share of the budget (this process's)
   std::uint64_t query_region_releases = 0;

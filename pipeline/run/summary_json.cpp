@@ -38,6 +38,14 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
         {"by_neighbour", s.tets_by_neighbour}}},
       {"rim_rechecks", s.rim_rechecks},
       {"queries_spared", s.queries_spared},
+      // The queries that found no conflict, by how far past the window's keys along
+      // the sort axis their tets' clipped balls reached, in segment widths.
+      {"empty_query_reach",
+       {{"within_window_keys", s.empty_reach_none},
+        {"under_half_segment", s.empty_reach_half},
+        {"under_one_segment", s.empty_reach_one},
+        {"under_two_segments", s.empty_reach_two},
+        {"farther", s.empty_reach_farther}}},
       {"rim_published", s.rim_published},
       {"rim_from_neighbours", s.rim_from_neighbours},
       {"output_bytes", s.output_bytes},

@@ -94,6 +94,18 @@ void Certificate::start_zone(const SegmentPlan& plan, const Zone& zone, const st
   held_ = &held;
   clear_lo_ = plan.window_begin == 0 ? -std::numeric_limits<double>::infinity() : view_.key(plan.window_begin - 1);
   clear_hi_ = plan.window_end == view_.count ? std::numeric_limits<double>::infinity() : view_.key(plan.window_end);
+  segment_width_ = plan.label_end > plan.label_begin ? view_.key(plan.label_end - 1) - view_.key(plan.label_begin) : 0;
+}
+
+double Certificate::reach_past_window(const RangeTest& range) const {
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  if (!range.bounded) return kInfinity;
+  const bool right = range.hi >= clear_hi_, left = range.lo <= clear_lo_;
+  if (!right && !left) return 0;
+  const double past = std::max(right ? range.hi - clear_hi_ : 0.0, left ? clear_lo_ - range.lo : 0.0);
+  if (!(segment_width_ > 0)) return kInfinity;
+  // A ball that reaches a missing key exactly is past the window: never 0.
+  return std::max(past / segment_width_, std::numeric_limits<double>::denorm_min());
 }
 
 bool Certificate::held(std::uint64_t label) const { return std::binary_search(held_->begin(), held_->end(), label); }

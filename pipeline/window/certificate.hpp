@@ -95,6 +95,13 @@ class Certificate {
 
   // The range test of finite tet t.
   RangeTest range_test(const core::Delaunay& dt, core::TetId t) const;
+  // How far the clipped ball of a tet that failed `range` reaches past the window's
+  // keys along the sort axis, in widths of the zone's segment (the keys of its first
+  // and last labels): 0 when it stays between them (only the strip's window was too
+  // narrow), infinite for a ball without a bound or a segment of one key. The
+  // distance a certificate that waits for later (or looks back at earlier) segments
+  // would have to see: --json's empty_query_reach.
+  double reach_past_window(const RangeTest& range) const;
   // The emptiness query of finite tet t, which failed `range`: kNone when no missing
   // point conflicts with it, else the deepest (nearest the ball's centre) of the first
   // few conflicting points found, whose coordinates go to found_xyz when given.
@@ -136,6 +143,7 @@ class Certificate {
   // Along the sort axis, the missing points left of the window's label range have
   // coordinates <= clear_lo_, those right of it >= clear_hi_ (infinite: none).
   double clear_lo_ = 0, clear_hi_ = 0;
+  double segment_width_ = 0;  // key(label_end - 1) - key(label_begin)
 };
 
 }  // namespace tetstream::pipeline

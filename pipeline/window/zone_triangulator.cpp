@@ -333,6 +333,7 @@ bool ZoneWorker::query_tet(const QueuedTet& q, std::vector<std::uint64_t>& repai
   RecentRepair& r = recent_[recent_next_];
   const std::uint64_t deepest = certificate_.query(dt_, q.tet, q.range, stats_, r.xyz);
   if (deepest == Certificate::kNone) {
+    stats_.count_empty_query(certificate_.reach_past_window(q.range));
     proved_empty_[q.tet] = kProved;
     return true;
   }

@@ -135,6 +135,11 @@ TEST_F(PipelineTest, ZooManySegments) {
     // left for its insertion, without a query (the tets still equal the kernel's).
     EXPECT_GT(s.queries_spared, 0u) << io::to_string(d);
     EXPECT_LE(s.tets_by_query + s.tets_by_wall + s.tets_by_rim + s.tets_by_neighbour, s.tets) << io::to_string(d);
+    // The queries that found no conflict, by how far their balls reached past the
+    // window's keys: at most the queries, and on a surface some reach past them.
+    const std::uint64_t past = s.empty_reach_half + s.empty_reach_one + s.empty_reach_two + s.empty_reach_farther;
+    EXPECT_LE(s.empty_reach_none + past, s.queries) << io::to_string(d);
+    EXPECT_GT(past, 0u) << io::to_string(d);
   }
 }
 

@@ -212,6 +212,42 @@ TEST(Certificate, RangeTestIsConservativeAndQueryIsExact) {
   }
 }
 
+// The reach of a failed range test (--json's empty_query_reach): 0 exactly when the
+// clipped ball stays between the window's missing keys (only the strip's window was
+// too narrow), otherwise how far past them it reaches, in widths of the segment.
+TEST(Certificate, ReachPastTheWindowIsInSegmentWidths) {
+  std::size_t within = 0, past = 0;
+  for (const Case& c : cases()) {
+    SCOPED_TRACE(c.name());
+    ZoneCase setup(c);
+    const Job& job = setup.job;
+    Window& w = setup.w;
+    const SegmentPlan& plan = w.plan;
+    auto key = [&](std::uint64_t l) { return job.points[l].xyz[0]; };
+    const double clear_lo = plan.window_begin == 0 ? -INFINITY : key(plan.window_begin - 1);
+    const double clear_hi = plan.window_end == job.view.count ? INFINITY : key(plan.window_end);
+    const double width = key(plan.label_end - 1) - key(plan.label_begin);
+    for (TetId t = 0; t < w.dt.num_tet_slots(); ++t) {
+      if (!w.dt.is_alive(t) || w.dt.is_infinite(t)) continue;
+      const RangeTest r = setup.cert.range_test(w.dt, t);
+      if (r.clears() || !r.bounded) continue;
+      const double reach = setup.cert.reach_past_window(r);
+      ASSERT_EQ(reach == 0, r.outside_clear) << "tet " << t;
+      if (reach == 0) {
+        ++within;
+        EXPECT_FALSE(r.strip_clear);
+        continue;
+      }
+      ++past;
+      const double expected =
+          std::max(r.hi >= clear_hi ? r.hi - clear_hi : 0.0, r.lo <= clear_lo ? clear_lo - r.lo : 0.0);
+      EXPECT_NEAR(reach * width, expected, 1e-12 * (1 + expected)) << "tet " << t;
+    }
+  }
+  EXPECT_GT(within, 0u);
+  EXPECT_GT(past, 0u);
+}
+
 // The global hull's facets from its boundary points alone are those of the kernel's
 // triangulation of every point (flat faces of the lattice included, cut by the same
 // perturbation).
