@@ -100,9 +100,9 @@ void Certificate::start_zone(const SegmentPlan& plan, const Zone& zone, const st
 double Certificate::reach_past_window(const RangeTest& range) const {
   constexpr double kInfinity = std::numeric_limits<double>::infinity();
   if (!range.bounded) return kInfinity;
-  const bool right = range.hi >= clear_hi_, left = range.lo <= clear_lo_;
-  if (!right && !left) return 0;
-  const double past = std::max(right ? range.hi - clear_hi_ : 0.0, left ? clear_lo_ - range.lo : 0.0);
+  if (range.outside_clear) return 0;
+  const double past =
+      std::max(range.hi >= clear_hi_ ? range.hi - clear_hi_ : 0.0, range.lo <= clear_lo_ ? clear_lo_ - range.lo : 0.0);
   if (!(segment_width_ > 0)) return kInfinity;
   // A ball that reaches a missing key exactly is past the window: never 0.
   return std::max(past / segment_width_, std::numeric_limits<double>::denorm_min());

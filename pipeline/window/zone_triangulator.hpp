@@ -31,21 +31,23 @@ struct SegmentStats {
   // segment into zones adds (everything outside the strip: the price of parallel
   // zones), and the hull's vertices from elsewhere.
   std::uint64_t segment_buffer_points = 0, zone_buffer_points = 0, hull_points = 0;
-  std::uint64_t neighbour_points = 0;     // held from the start: finished zones' rim tets' vertices (SharedRim)
-  std::uint64_t repair_points = 0;        // inserted by the emptiness queries
-  std::uint64_t range_failures = 0;       // star tets the range test could not clear
-  std::uint64_t queries = 0;              // emptiness queries run
-  std::uint64_t query_points = 0;         // points the queries examined
-  std::uint64_t rounds = 0;               // check/repair rounds
-  std::uint64_t tets = 0;                 // tets emitted
-  std::uint64_t tets_by_query = 0;        // of those, certified by a query
-  std::uint64_t tets_by_wall = 0;         // of those, by the wall
-  std::uint64_t tets_by_rim = 0;          // of those, by the rim
-  std::uint64_t tets_by_neighbour = 0;    // of those, by a finished zone (the rest: by the range test)
-  std::uint64_t rim_published = 0;        // rim tets handed to the zones still running (SharedRim)
-  std::uint64_t rim_from_neighbours = 0;  // rim tets certified by finding them there
-  std::uint64_t rim_rechecks = 0;         // rim tets left unproved by a round, checked again
-  std::uint64_t queries_spared = 0;       // queued tets in conflict with a repair point already found
+  std::uint64_t neighbour_points = 0;           // held from the start: finished zones' rim tets' vertices (SharedRim)
+  std::uint64_t repair_points = 0;              // inserted by the emptiness queries
+  std::uint64_t range_failures = 0;             // star tets the range test could not clear
+  std::uint64_t queries = 0;                    // emptiness queries run
+  std::uint64_t query_points = 0;               // points the queries examined
+  std::uint64_t rounds = 0;                     // check/repair rounds
+  std::uint64_t tets = 0;                       // tets emitted
+  std::uint64_t tets_by_query = 0;              // of those, certified by a query
+  std::uint64_t tets_by_wall = 0;               // of those, by the wall
+  std::uint64_t tets_by_rim = 0;                // of those, by the rim
+  std::uint64_t tets_by_neighbour = 0;          // of those, by a finished zone (the rest: by the range test)
+  std::uint64_t rim_published = 0;              // rim tets handed to the zones still running (SharedRim)
+  std::uint64_t rim_from_neighbours = 0;        // rim tets certified by finding them there
+  std::uint64_t rim_rechecks = 0;               // rim tets left unproved by a round, checked again
+  std::uint64_t queries_spared = 0;             // queued tets in conflict with a repair point already found
+  std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
+  double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
   // The queries that found no conflict (the rim's true Delaunay tets), by how far the
   // tet's clipped ball reaches past the window's keys (Certificate::reach_past_window):
   // not at all, under half the segment's width, under one, under two, farther.
@@ -58,8 +60,6 @@ struct SegmentStats {
        : reach < 2   ? empty_reach_two
                      : empty_reach_farther);
   }
-  std::uint64_t kernel_bytes = 0;               // the kernel's arrays at the end
-  double seconds_build = 0, seconds_check = 0;  // check includes repairs and emission
 
   // Sums another worker's counters into these (rounds: the larger).
   SegmentStats& operator+=(const SegmentStats& o) {

@@ -10,9 +10,9 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
-#include <unordered_set>
 #include <array>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 namespace tetstream {
