@@ -63,24 +63,31 @@ class RankedBits {
   std::vector<std::uint64_t> words_, before_;
 };
 
-// The padded labels' periodic labels, from one pass over the sorted points: a padded
-// label is a point of the box when its original index is below N, and its periodic
-// label is then the number of the box's points before it (the periodic labels keep the
-// padded job's lexicographic order); an image's is its point's, kept for the points
-// that have images. So a code word (keep_parts.hpp) costs two rank reads, not a map of
-// every padded label.
+// The padded labels' code words (keep_parts.hpp), from one pass over the sorted
+// points: a padded label is a point of the box when its original index is below N,
+// and its periodic label is then the number of the box's points before it (the
+// periodic labels keep the padded job's lexicographic order); an image takes its
+// point's. Held as a bit a padded label (a point of the box), the box's points
+// counted before each word, a bit a padded label (at its canonical image), and each
+// image's word in padded order (found by the images before it: the label less the
+// box's points before it). So a zone's code words cost reads of these tables alone,
+// near one another for a window's labels, and no read of the sorted file.
 class PeriodicLabels {
  public:
   PeriodicLabels(const SortedView& view, const KeepSetup& s, io::TetFileHeader& header, BallGrid& grid)
-      : s_(s), box_(view.count), has_images_(s.input_points) {
-    for (std::uint64_t code : s.images->code) has_images_.set(code >> 3);
-    has_images_.count();
-    image_point_label_.assign(has_images_.rank(s.input_points), 0);
+      : box_(view.count), canonical_(view.count) {
+    // Each point with images, by its rank among them: its periodic label, once met.
+    RankedBits has_images(s.input_points);
+    for (std::uint64_t code : s.images->code) has_images.set(code >> 3);
+    has_images.count();
+    std::vector<std::uint64_t> image_point_label(has_images.rank(s.input_points), 0);
+    double threshold[3];
     for (int k = 0; k < 3; ++k) {
-      threshold_[k] = canonical_threshold(s.period[std::size_t(k)], s.margin[std::size_t(k)]);
+      threshold[k] = canonical_threshold(s.period[std::size_t(k)], s.margin[std::size_t(k)]);
       header.bbox_min[k] = std::numeric_limits<double>::infinity();
       header.bbox_max[k] = -std::numeric_limits<double>::infinity();
     }
+    image_code_.reserve(view.count > s.input_points ? view.count - s.input_points : 0);
     view.points.visit([&](const auto* records) {
       ReleaseBehind behind(view.points, 0, view.query_regions != nullptr);
       for (std::uint64_t label = 0; label < view.count; ++label) {
@@ -88,45 +95,46 @@ class PeriodicLabels {
         double p[3];
         records[label].xyz(p);
         grid.mark(p);
+        unsigned bits = 0;
         if (original < s.input_points) {
           box_.set(label);
-          if (has_images_.test(original)) image_point_label_[has_images_.rank(original)] = points_;
+          if (has_images.test(original)) image_point_label[has_images.rank(original)] = points_;
           for (int k = 0; k < 3; ++k) {
             header.bbox_min[k] = std::min(header.bbox_min[k], p[k]);
             header.bbox_max[k] = std::max(header.bbox_max[k], p[k]);
           }
           ++points_;
+        } else {
+          // Its point's periodic label may come later in the padded order (an image
+          // below 0 comes before its point): its rank among the points with images
+          // for now.
+          const std::uint64_t c = s.images->code[original - s.input_points];
+          bits = unsigned(c & 7);
+          image_code_.push_back(has_images.rank(c >> 3) << 3 | bits);
         }
+        if (is_canonical(p, bits, s.period, threshold)) canonical_.set(label);
         if (label % 4096 == 0) behind.reached(label);
       }
     });
     box_.count();
+    for (std::uint64_t& c : image_code_) c = image_point_label[c >> 3] << 4 | (c & 7);
   }
 
   std::uint64_t points() const { return points_; }
   // The box's points among the padded labels below `label`.
   std::uint64_t box_points_before(std::uint64_t label) const { return box_.rank(label); }
 
-  std::uint64_t code(std::uint64_t label, std::uint64_t original, const double* xyz) const {
-    std::uint64_t plabel = 0;
-    unsigned bits = 0;
-    if (original < s_.input_points) {
-      plabel = box_.rank(label);
-    } else {
-      const std::uint64_t c = s_.images->code[original - s_.input_points];
-      bits = unsigned(c & 7);
-      plabel = image_point_label_[has_images_.rank(c >> 3)];
-    }
-    return plabel << 4 | bits | (is_canonical(xyz, bits, s_.period, threshold_) ? kCanonical : 0);
+  std::uint64_t code(std::uint64_t label) const {
+    const std::uint64_t before = box_.rank(label);
+    const std::uint64_t word = box_.test(label) ? before << 4 : image_code_[label - before];
+    return word | (canonical_.test(label) ? kCanonical : 0);
   }
 
-  std::uint64_t bytes() const { return box_.bytes() + has_images_.bytes() + 8 * image_point_label_.size(); }
+  std::uint64_t bytes() const { return box_.bytes() + canonical_.bytes() + 8 * image_code_.size(); }
 
  private:
-  const KeepSetup& s_;
-  RankedBits box_, has_images_;
-  std::vector<std::uint64_t> image_point_label_;
-  double threshold_[3];
+  RankedBits box_, canonical_;  // canonical_: tested only, never ranked
+  std::vector<std::uint64_t> image_code_;
   std::uint64_t points_ = 0;
 };
 
@@ -451,23 +459,14 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   kept.code.resize(n);
   vx.resize(n);
   safe.resize(n);
-  std::uint64_t lo = ~std::uint64_t(0), hi = 0;
-  view_.points.visit([&](const auto* records) {
-    constexpr std::size_t kAhead = 16;  // the records of a strip's window: a stride, not a run
-    for (std::size_t i = 0; i < n; ++i) {
-      if (i + kAhead < n) TS_PREFETCH(&records[z.labels[i + kAhead]]);
-      const std::uint64_t label = z.labels[i];
-      records[label].xyz(vx[i].x);
-      vx[i].code = kept.code[i] = labels_->code(label, records[label].original(), vx[i].x);
-      safe[i] = grid_->safe(vx[i].x);
-      lo = std::min(lo, label);
-      hi = std::max(hi, label);
-    }
-  });
-  // The window's records were just read again: their pages go back (the zone's own
-  // reads handed them back behind it already).
-  if (n > 0 && view_.query_regions != nullptr)
-    release_mapped_pages(view_.points.record(lo), std::size_t(hi - lo + 1) * view_.points.record_bytes());
+  // The window's coordinates are the zone worker's (ZoneTets::xyz), read in order.
+  if (z.xyz.size() < 3 * n) throw std::logic_error("periodic keep: a zone came without its coordinates");
+  const double* xyz = z.xyz.data();
+  for (std::size_t i = 0; i < n; ++i) {
+    std::copy_n(xyz + 3 * i, 3, vx[i].x);
+    vx[i].code = kept.code[i] = labels_->code(z.labels[i]);
+    safe[i] = grid_->safe(vx[i].x);
+  }
   if (!keep_zone(z, kept, vx, safe, view_.axis, s_.period, lower_, deferred_from_, safe_edges_, scratch.group,
                  scratch.apart, scratch.deferred)) {
     abandoned_ = true;
@@ -738,14 +737,16 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
                                std::uint64_t waiting_bytes, int threads) {
-  // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the image
-  // points' labels, the waiting tets (twice: the merge makes the next list beside the
-  // last), the offsets (compressed: a tenth of a byte a tet, 7 tets a point), the ball
-  // grid (two bytes a cell of about 16 points), the zones' code tables held for their
-  // segment (8 bytes a window point: about a byte a padded point), and each zone
-  // thread's buffers (33 bytes a window point, a window taken as a 32nd of the points).
-  return padded_points / 4 + input_points / 4 + 8 * images + 2 * waiting_bytes + padded_points / 2 + padded_points / 8 +
-         padded_points + std::uint64_t(std::max(threads, 1)) * 33 * padded_points / 32 + (1 << 20);
+  // The rank tables (a bit and a count a word of 64: 1/4 byte a position; the
+  // canonical bits, an eighth of a byte), the images' code words and, while they are
+  // made, the labels of the points with images (8 bytes an image each), the waiting tets (twice: the merge makes the
+  // next list beside the last), the offsets (compressed: a tenth of a byte a tet, 7 tets a point), the ball grid (two
+  // bytes a cell of about 16 points), the zones' code tables held for their segment (8 bytes a window point: about a
+  // byte a padded point), and each zone thread's buffers (33 bytes a window point, a window taken as a 32nd of the
+  // points).
+  return padded_points / 4 + padded_points / 8 + input_points / 4 + 16 * images + 2 * waiting_bytes +
+         padded_points / 2 + padded_points / 8 + padded_points +
+         std::uint64_t(std::max(threads, 1)) * 33 * padded_points / 32 + (1 << 20);
 }
 
 }  // namespace tetstream::pipeline::periodic

@@ -107,6 +107,7 @@ void TriangulateStage::run(SegmentSink& out) {
         if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool_, &shared_rim_);
         s = triangulator->run(plan, plan.zones[unit.zone], tets);
         out.zone_done(std::size_t(i), tets);
+        tets.xyz = {};  // the worker's, refilled by its next zone
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
         // process): the first failure is kept, the others stop, and it is rethrown

@@ -602,6 +602,7 @@ void ZoneWorker::emit(ZoneTets& out) {
   // The local ids' labels go with the tets (the worker's table is refilled by the
   // next zone's load_window anyway).
   out.labels.swap(labels_);
+  out.xyz = std::span<const double>(xyz_.data(), xyz_.size());
 }
 
 SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets& out) {

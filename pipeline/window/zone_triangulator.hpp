@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -87,6 +88,10 @@ struct SegmentStats {
 struct ZoneTets {
   std::vector<std::uint32_t> tets;    // 4 local ids per tet
   std::vector<std::uint64_t> labels;  // local id -> label
+  // The window's coordinates by local id (3 a point): the zone worker's own, valid
+  // until it starts its next zone, so for SegmentSink::zone_done only (the periodic
+  // keep's code words and balls read them there instead of the sorted file).
+  std::span<const double> xyz;
   std::size_t size() const { return tets.size() / 4; }
   std::uint64_t label(std::size_t tet, int i) const { return labels[tets[4 * tet + std::size_t(i)]]; }
   std::uint64_t min_label(std::size_t tet) const {
