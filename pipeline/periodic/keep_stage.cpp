@@ -737,13 +737,14 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
                                std::uint64_t waiting_bytes, int threads) {
-  // The rank tables (a bit and a count a word of 64: 1/4 byte a position; the
-  // canonical bits, an eighth of a byte), the images' code words and, while they are
-  // made, the labels of the points with images (8 bytes an image each), the waiting tets (twice: the merge makes the
-  // next list beside the last), the offsets (compressed: a tenth of a byte a tet, 7 tets a point), the ball grid (two
-  // bytes a cell of about 16 points), the zones' code tables held for their segment (8 bytes a window point: about a
-  // byte a padded point), and each zone thread's buffers (33 bytes a window point, a window taken as a 32nd of the
-  // points).
+  // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the
+  // canonical bits (1/8 byte a position), the images' code words and, while they are
+  // made, the labels of the points with images (8 bytes an image each), the waiting
+  // tets (twice: the merge makes the next list beside the last), the offsets
+  // (compressed: a tenth of a byte a tet, 7 tets a point), the ball grid (two bytes a
+  // cell of about 16 points), the zones' code tables held for their segment (8 bytes a
+  // window point: about a byte a padded point), and each zone thread's buffers (33
+  // bytes a window point, a window taken as a 32nd of the points).
   return padded_points / 4 + padded_points / 8 + input_points / 4 + 16 * images + 2 * waiting_bytes +
          padded_points / 2 + padded_points / 8 + padded_points +
          std::uint64_t(std::max(threads, 1)) * 33 * padded_points / 32 + (1 << 20);
