@@ -659,16 +659,18 @@ SegmentStats ZoneWorker::run(const SegmentPlan& plan, const Zone& zone, ZoneTets
   mark_beyond(0, VertexId(labels_.size()));
   std::vector<std::uint64_t> repairs;
   // (round: its work as check_round counted it; inserted, seconds: the repairs after it.
-  // A zone that is its whole segment spans (-inf, inf) across.)
+  // A zone that is its whole segment spans (-inf, inf) across, on no axis ('-'). The
+  // strip's bounds exactly, so that a zone's points can be found again from the log:
+  // scripts/bench/zoo/cross-zone-facets.)
   const double inf = std::numeric_limits<double>::infinity();
   const double strip_lo = zone_.axis >= 0 ? zone_.lo : -inf, strip_hi = zone_.axis >= 0 ? zone_.hi : inf;
   auto log_round = [&](std::size_t inserted, double seconds) {
     spdlog::debug(
-        "zone [{}, {}) strip [{:g}, {:g}) round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
+        "zone [{}, {}) strip [{}, {}) on {} round {}: {} tets checked ({:.3f} s), {} queued, {} queries "
         "({} found a conflict, {:.3f} s), wall {}, {} rim tets left, {} repair points inserted ({:.3f} s)",
-        plan_->label_begin, plan_->label_end, strip_lo, strip_hi, stats_.rounds, round_.checked, round_.seconds_range,
-        round_.queued, round_.queries, round_.conflicts, round_.seconds_queries, round_.wall_held ? "held" : "broken",
-        round_.unproved, inserted, seconds);
+        plan_->label_begin, plan_->label_end, strip_lo, strip_hi, zone_.axis >= 0 ? "xyz"[zone_.axis] : '-',
+        stats_.rounds, round_.checked, round_.seconds_range, round_.queued, round_.queries, round_.conflicts,
+        round_.seconds_queries, round_.wall_held ? "held" : "broken", round_.unproved, inserted, seconds);
   };
   for (;;) {
     ++stats_.rounds;
