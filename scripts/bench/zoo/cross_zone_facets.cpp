@@ -68,9 +68,8 @@ int main(int argc, char** argv) {
                          std::strtod(m[4].str().c_str(), nullptr), a == '-' ? -1 : a - 'x'});
       }
   }
-  std::sort(zones.begin(), zones.end(), [](const Zone& a, const Zone& b) {
-    return a.begin != b.begin ? a.begin < b.begin : a.lo < b.lo;
-  });
+  std::sort(zones.begin(), zones.end(),
+            [](const Zone& a, const Zone& b) { return a.begin != b.begin ? a.begin < b.begin : a.lo < b.lo; });
   zones.erase(std::unique(zones.begin(), zones.end(),
                           [](const Zone& a, const Zone& b) { return a.begin == b.begin && a.lo == b.lo; }),
               zones.end());
@@ -114,7 +113,7 @@ int main(int argc, char** argv) {
       "{\"points\": %zu, \"tets\": %zu, \"zones\": %zu, \"unplaced_points\": %ld, \"interior_facets\": %llu, "
       "\"hull_facets\": %llu, \"cross_zone_facets\": %llu, \"cross_zone_facets_per_point\": %.4f, "
       "\"tets_with_a_cross_zone_facet\": %ld}\n",
-      n, t, zones.size(), unplaced, (unsigned long long)interior, (unsigned long long)hull,
-      (unsigned long long)cross, double(cross) / double(std::max<std::size_t>(n, 1)), with_cross);
+      n, t, zones.size(), unplaced, (unsigned long long)interior, (unsigned long long)hull, (unsigned long long)cross,
+      double(cross) / double(std::max<std::size_t>(n, 1)), with_cross);
   return 0;
 }
