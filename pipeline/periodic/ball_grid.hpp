@@ -17,6 +17,7 @@
 // rounding of (x - lower) / c); otherwise it marks nothing and is not safe.
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <vector>
@@ -47,10 +48,10 @@ class BallGrid {
     marked_.assign(std::size_t(n_[0] * n_[1] * n_[2]), 0);
   }
 
-  // A padded point: its cell marked.
+  // A padded point: its cell marked (by any number of threads at once).
   void mark(const double* p) {
     std::int64_t c[3];
-    if (cell_of(p, c)) marked_[index(c)] = 1;
+    if (cell_of(p, c)) std::atomic_ref<std::uint8_t>(marked_[index(c)]).store(1, std::memory_order_relaxed);
   }
 
   // After every point is marked: the safe cells (all within kReach marked and inside).

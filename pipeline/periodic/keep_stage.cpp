@@ -82,42 +82,84 @@ class PeriodicLabels {
     has_images.count();
     std::vector<std::uint64_t> image_point_label(has_images.rank(s.input_points), 0);
     double threshold[3];
-    for (int k = 0; k < 3; ++k) {
-      threshold[k] = canonical_threshold(s.period[std::size_t(k)], s.margin[std::size_t(k)]);
-      header.bbox_min[k] = std::numeric_limits<double>::infinity();
-      header.bbox_max[k] = -std::numeric_limits<double>::infinity();
-    }
+    for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(s.period[std::size_t(k)], s.margin[std::size_t(k)]);
+    Bounds bounds;
+    // (Duplicates merged leave fewer labels than points and images: the images' slots
+    // grow a wave at a time.)
     image_code_.reserve(view.count > s.input_points ? view.count - s.input_points : 0);
+    // On every thread, a wave of blocks at a time (a block's bits are whole words, so
+    // no two threads write one): the box's points of each block counted first, for
+    // the labels and image slots each block starts at, then the block's words.
+    const int threads = std::max(1, omp_get_max_threads());
+    const std::uint64_t blocks = (view.count + kBlock - 1) / kBlock;
+    const std::uint64_t wave = 4 * std::uint64_t(threads);
+    std::vector<std::uint64_t> box_in(wave);
     view.points.visit([&](const auto* records) {
       ReleaseBehind behind(view.points, 0, view.query_regions != nullptr);
-      for (std::uint64_t label = 0; label < view.count; ++label) {
-        const std::uint64_t original = records[label].original();
-        double p[3];
-        records[label].xyz(p);
-        grid.mark(p);
-        unsigned bits = 0;
-        if (original < s.input_points) {
-          box_.set(label);
-          if (has_images.test(original)) image_point_label[has_images.rank(original)] = points_;
-          for (int k = 0; k < 3; ++k) {
-            header.bbox_min[k] = std::min(header.bbox_min[k], p[k]);
-            header.bbox_max[k] = std::max(header.bbox_max[k], p[k]);
-          }
-          ++points_;
-        } else {
-          // Its point's periodic label may come later in the padded order (an image
-          // below 0 comes before its point): its rank among the points with images
-          // for now.
-          const std::uint64_t c = s.images->code[original - s.input_points];
-          bits = unsigned(c & 7);
-          image_code_.push_back(has_images.rank(c >> 3) << 3 | bits);
+      const auto block_end = [&](std::uint64_t b) { return std::min(view.count, (b + 1) * kBlock); };
+      for (std::uint64_t first = 0; first < blocks; first += wave) {
+        const std::int64_t n = std::int64_t(std::min(wave, blocks - first));
+#pragma omp parallel for schedule(static) num_threads(threads)
+        for (std::int64_t i = 0; i < n; ++i) {
+          const std::uint64_t b = first + std::uint64_t(i);
+          std::uint64_t in = 0;
+          for (std::uint64_t label = b * kBlock; label < block_end(b); ++label)
+            in += records[label].original() < s.input_points;
+          box_in[std::size_t(i)] = in;
         }
-        if (is_canonical(p, bits, s.period, threshold)) canonical_.set(label);
-        if (label % 4096 == 0) behind.reached(label);
+        std::vector<std::uint64_t> points_before(static_cast<std::size_t>(n));
+        for (std::int64_t i = 0; i < n; ++i) {
+          points_before[std::size_t(i)] = points_;
+          points_ += box_in[std::size_t(i)];
+        }
+        image_code_.resize(block_end(first + std::uint64_t(n) - 1) - points_);
+#pragma omp parallel num_threads(threads)
+        {
+          Bounds mine;
+#pragma omp for schedule(static)
+          for (std::int64_t i = 0; i < n; ++i) {
+            const std::uint64_t b = first + std::uint64_t(i);
+            std::uint64_t point = points_before[std::size_t(i)];
+            std::uint64_t image = b * kBlock - point;  // the images before the block
+            for (std::uint64_t label = b * kBlock; label < block_end(b); ++label) {
+              const std::uint64_t original = records[label].original();
+              double p[3];
+              records[label].xyz(p);
+              grid.mark(p);
+              unsigned bits = 0;
+              if (original < s.input_points) {
+                box_.set(label);
+                if (has_images.test(original)) image_point_label[has_images.rank(original)] = point;
+                mine.add(p);
+                ++point;
+              } else {
+                // Its point's periodic label may come later in the padded order (an
+                // image below 0 comes before its point): its rank among the points
+                // with images for now.
+                const std::uint64_t c = s.images->code[original - s.input_points];
+                bits = unsigned(c & 7);
+                image_code_[image++] = has_images.rank(c >> 3) << 3 | bits;
+              }
+              if (is_canonical(p, bits, s.period, threshold)) canonical_.set(label);
+            }
+          }
+#pragma omp critical(periodic_labels_bounds)
+          bounds.add(mine);
+        }
+        behind.reached(block_end(first + std::uint64_t(n) - 1) - 1);
       }
     });
     box_.count();
-    for (std::uint64_t& c : image_code_) c = image_point_label[c >> 3] << 4 | (c & 7);
+    const std::int64_t images = std::int64_t(image_code_.size());
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (std::int64_t i = 0; i < images; ++i) {
+      std::uint64_t& c = image_code_[std::size_t(i)];
+      c = image_point_label[c >> 3] << 4 | (c & 7);
+    }
+    for (int k = 0; k < 3; ++k) {
+      header.bbox_min[k] = bounds.min[k];
+      header.bbox_max[k] = bounds.max[k];
+    }
   }
 
   std::uint64_t points() const { return points_; }
@@ -133,6 +175,18 @@ class PeriodicLabels {
   std::uint64_t bytes() const { return box_.bytes() + canonical_.bytes() + 8 * image_code_.size(); }
 
  private:
+  static constexpr std::uint64_t kBlock = std::uint64_t(1) << 16;  // labels a thread takes at once: whole words
+  // The box's points' bounding box.
+  struct Bounds {
+    double min[3] = {kInf, kInf, kInf}, max[3] = {-kInf, -kInf, -kInf};
+    static constexpr double kInf = std::numeric_limits<double>::infinity();
+    void add(const double* p) {
+      for (int k = 0; k < 3; ++k) min[k] = std::min(min[k], p[k]), max[k] = std::max(max[k], p[k]);
+    }
+    void add(const Bounds& o) {
+      for (int k = 0; k < 3; ++k) min[k] = std::min(min[k], o.min[k]), max[k] = std::max(max[k], o.max[k]);
+    }
+  };
   RankedBits box_, canonical_;  // canonical_: tested only, never ranked
   std::vector<std::uint64_t> image_code_;
   std::uint64_t points_ = 0;
@@ -266,7 +320,7 @@ class KeepStage final : public OutputStage {
   // The kept tets at or past the frontier, sorted, waiting for the next segments; past
   // waiting_cap_ of them everything goes through the deferred file (spilling_).
   std::vector<KeptTet> waiting_, still_waiting_;
-  std::size_t waiting_cap_ = 1;
+  std::size_t waiting_cap_ = 1, peak_waiting_ = 0;
   bool spilling_ = false;
   std::uint64_t last_ = 0;  // the last m written (a wrong frontier is refused, never written)
   // Each zone thread's buffers (by omp_get_thread_num()), kept from zone to zone:
@@ -506,7 +560,8 @@ void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSta
     }
   }
   next_unit_ += parts.size();
-  // The runs to merge: [begin, end) of a zone's tets, and the waiting tets.
+  // The runs to merge: [begin, end) of a zone's tets, and the waiting tets (part
+  // null: waiting_ from `at`), each with its head, the next tet it gives.
   struct Run {
     const ZoneTets* part;
     const ZoneKept* kept;
@@ -520,35 +575,49 @@ void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSta
       if (bounds[r] < bounds[r + 1]) runs.push_back({&parts[p], &kept[p], bounds[r], bounds[r + 1], {}});
   }
   for (Run& r : runs) r.head = kept_tet(&r.part->tets[4 * r.at], r.kept->code);
-  std::size_t w = 0;  // the next waiting tet
+  if (!waiting_.empty()) runs.push_back({nullptr, nullptr, 0, waiting_.size(), waiting_[0]});
   const std::uint64_t f = frontier(next_label);
   const KeptTetLess less;
   still_waiting_.clear();
+  // The run with the smallest head gives its tets while they stay below every other
+  // run's head (the zones' runs are long stretches of labels): one comparison a tet,
+  // and a search of the heads only where the run changes.
   for (;;) {
     Run* best = nullptr;
-    for (Run& r : runs)
-      if (r.at < r.end && (!best || less(r.head, best->head))) best = &r;
-    const bool from_waiting = w < waiting_.size() && (!best || less(waiting_[w], best->head));
-    if (!best && !from_waiting) break;
-    const KeptTet& t = from_waiting ? waiting_[w] : best->head;
-    if (!spilling_ && t.v[0] < f)
-      write(t);
-    else
-      still_waiting_.push_back(t);
-    if (from_waiting) {
-      ++w;
-    } else if (++best->at < best->end) {
+    const KeptTet* bound = nullptr;  // the smallest head of the others
+    for (Run& r : runs) {
+      if (r.at >= r.end) continue;
+      if (!best || less(r.head, best->head)) {
+        if (best) bound = &best->head;
+        best = &r;
+      } else if (!bound || less(r.head, *bound)) {
+        bound = &r.head;
+      }
+    }
+    if (!best) break;
+    do {
+      const KeptTet& t = best->head;
+      if (!spilling_ && t.v[0] < f)
+        write(t);
+      else
+        still_waiting_.push_back(t);
+      if (++best->at >= best->end) break;
+      if (!best->part) {
+        best->head = waiting_[best->at];
+        continue;
+      }
       const std::uint32_t* q = &best->part->tets[4 * best->at];
       if (best->at + 8 < best->end)
         for (int j = 0; j < 4; ++j) TS_PREFETCH(&best->kept->code[q[32 + j]]);
       best->head = kept_tet(q, best->kept->code);
-    }
+    } while (!bound || less(best->head, *bound));
   }
   if (spilling_) {
     defer(still_waiting_);
     still_waiting_.clear();
   }
   waiting_.swap(still_waiting_);
+  peak_waiting_ = std::max(peak_waiting_, waiting_.size());
   if (!spilling_ && waiting_.size() > waiting_cap_) {
     // Tets far out of order (a shape this frontier does not suit): they and all the
     // rest go through the external sort, which then writes them in order.
@@ -723,8 +792,9 @@ void KeepStage::finish() {
   seconds_ += seconds_since(t0);
   spdlog::debug(
       "periodic keep: {:.2f}s in the zones (summed over threads), {:.2f}s in the segments and the end; {} tets "
-      "certified, {} of them by their circumsphere (the others by the ball grid)",
-      zone_seconds_.load(), seconds_, certified_, balls_);
+      "certified, {} of them by their circumsphere (the others by the ball grid); at most {} tets waited for the "
+      "frontier (room for {})",
+      zone_seconds_.load(), seconds_, certified_, balls_, peak_waiting_, waiting_cap_);
 }
 
 }  // namespace

@@ -26,11 +26,13 @@ bool exact_difference(double x, double l, double& out) {
 namespace {
 constexpr std::size_t kChunk = std::size_t(1) << 16;
 
-// A file written through PATH.tmp: fsynced, then PATH replaced unless it already holds
+// A file written through PATH.tmp: fsynced when `durable` (a checkpointed job's, which
+// a later start may find after a crash), then PATH replaced unless it already holds
 // exactly these bytes (then it is left untouched, its modification time too).
 class ReplacedFile {
  public:
-  explicit ReplacedFile(std::string path) : path_(std::move(path)), file_(path_ + ".tmp", "wb") {}
+  ReplacedFile(std::string path, bool durable)
+      : path_(std::move(path)), file_(path_ + ".tmp", "wb"), durable_(durable) {}
   void write(const double* data, std::size_t n) {
     file_.write(data, sizeof(double), n);
     crc_ = io::crc32c(data, n * sizeof(double), crc_);
@@ -38,7 +40,7 @@ class ReplacedFile {
   }
   // True when PATH was replaced (its bytes were not these).
   bool close() {
-    file_.close(/*sync=*/true);
+    file_.close(durable_);
     if (file_matches(path_, bytes_, crc_)) {
       remove_file(path_ + ".tmp");
       return false;
@@ -51,6 +53,7 @@ class ReplacedFile {
  private:
   std::string path_;
   BinaryFile file_;
+  bool durable_;
   std::uint32_t crc_ = 0;
   std::uint64_t bytes_ = 0;
 };
@@ -77,11 +80,11 @@ bool wrap_coordinate(double& x, double l) {
 }  // namespace
 
 WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
-                           const std::array<double, 3>& period, bool wrap, const std::string& dir) {
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable) {
   WrappedInput out;
   out.path = dir + "/periodic-points.f64";
   auto reader = io::open_points(input, read);
-  ReplacedFile file(out.path);
+  ReplacedFile file(out.path, durable);
   std::vector<double> xyz(3 * kChunk);
   static const char* kAxis[3] = {"x", "y", "z"};
   while (const std::size_t n = reader->read(xyz.data(), kChunk)) {
@@ -111,11 +114,11 @@ WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions&
 }
 
 Images write_images(const WrappedInput& points, const std::array<double, 3>& period,
-                    const std::array<double, 3>& margin, const std::string& dir) {
+                    const std::array<double, 3>& margin, const std::string& dir, bool durable) {
   Images out;
   out.path = dir + "/periodic-images.f64";
   BinaryFile in(points.path, "rb");
-  ReplacedFile file(out.path);
+  ReplacedFile file(out.path, durable);
   std::vector<double> xyz(3 * kChunk), img;
   std::uint64_t first = 0;
   double threshold[3];

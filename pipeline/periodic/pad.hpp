@@ -34,9 +34,10 @@ struct WrappedInput {
 };
 
 // Reads the input once and writes it wrapped (wrap) or refuses a point outside the
-// box with its file and offset (InputError). A wrap is exact or refused.
+// box with its file and offset (InputError). A wrap is exact or refused. `durable`:
+// synced before it replaces an earlier one (a checkpointed job's; the same for images).
 WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
-                           const std::array<double, 3>& period, bool wrap, const std::string& dir);
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable);
 
 struct Images {
   std::string path;                 // periodic-images.f64
@@ -49,7 +50,7 @@ struct Images {
 
 // The images of the wrapped points within `margin` of the upper faces.
 Images write_images(const WrappedInput& points, const std::array<double, 3>& period,
-                    const std::array<double, 3>& margin, const std::string& dir);
+                    const std::array<double, 3>& margin, const std::string& dir, bool durable);
 
 // The canonical threshold t_k = L_k - M_k/2 (rounded once, here): a point at or past it
 // on axis k has its canonical image at offset -1 (keep.hpp).

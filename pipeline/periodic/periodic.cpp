@@ -293,7 +293,8 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
   together(comm, [&] {
     if (!root) return;
     const auto t = std::chrono::steady_clock::now();
-    points = write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir);
+    points =
+        write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir, job->checkpoint() != nullptr);
     sum.input_points = points.count;
     sum.wrapped = points.wrapped;
     margin = first_margin(periodic, points.count);
@@ -312,7 +313,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
       if (!root) return;
       const auto t = std::chrono::steady_clock::now();
       ++sum.attempts;
-      images = write_images(points, periodic.period, margin, dir);
+      images = write_images(points, periodic.period, margin, dir, job->checkpoint() != nullptr);
       sum.images = images.code.size();
       // The padded job's work in the checkpoint: its nested checkpoint resumes, its
       // output (recorded with its fingerprint once complete) is kept; any other is redone.
