@@ -62,6 +62,16 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
     for (std::size_t z = 0; z < plans_[s].zones.size(); ++z) units_.push_back({s, z});
   spdlog::debug("windows measured: largest ~{} points, {} (the plan's share {})", cut.largest_window,
                 human_bytes(window_bytes_), human_bytes(plan_.available));
+  // No cut fits the windows' share (a slab through a dense cluster is mostly buffers,
+  // which smaller segments do not thin): the job goes on with the smallest one, and
+  // says before it starts that it may pass its budget, and by how much at most.
+  if (plan_.available > 0 && window_bytes_ > plan_.available)
+    spdlog::warn(
+        "memory: the windows measured (the largest ~{} points) need {}, over their share of the budget ({}): this job "
+        "may take up "
+        "to {} more than its budget",
+        cut.largest_window, human_bytes(window_bytes_), human_bytes(plan_.available),
+        human_bytes(window_bytes_ - plan_.available));
   spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
                plans_.size(), plans_.empty() ? 0 : plans_[0].label_end - plans_[0].label_begin, units_.size(),
                plans_.empty() ? 0 : (plans_[0].label_end - plans_[0].label_begin) / plans_[0].zones.size(),
