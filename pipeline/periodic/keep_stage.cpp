@@ -84,8 +84,8 @@ class PeriodicLabels {
     double threshold[3];
     for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(s.period[std::size_t(k)], s.margin[std::size_t(k)]);
     Bounds bounds;
-    // (Duplicates merged leave fewer labels than points and images: the images' slots
-    // grow a wave at a time.)
+    // (The images' slots grow a wave at a time: merged duplicates leave fewer labels
+    // than points and images, so their count is known only as the waves go.)
     image_code_.reserve(view.count > s.input_points ? view.count - s.input_points : 0);
     // On every thread, a wave of blocks at a time (a block's bits are whole words, so
     // no two threads write one): the box's points of each block counted first, for
@@ -93,7 +93,7 @@ class PeriodicLabels {
     const int threads = std::max(1, omp_get_max_threads());
     const std::uint64_t blocks = (view.count + kBlock - 1) / kBlock;
     const std::uint64_t wave = 4 * std::uint64_t(threads);
-    std::vector<std::uint64_t> box_in(wave);
+    std::vector<std::uint64_t> box_in(wave);  // a block's box points, then those before it
     view.points.visit([&](const auto* records) {
       ReleaseBehind behind(view.points, 0, view.query_regions != nullptr);
       const auto block_end = [&](std::uint64_t b) { return std::min(view.count, (b + 1) * kBlock); };
@@ -107,10 +107,10 @@ class PeriodicLabels {
             in += records[label].original() < s.input_points;
           box_in[std::size_t(i)] = in;
         }
-        std::vector<std::uint64_t> points_before(static_cast<std::size_t>(n));
-        for (std::int64_t i = 0; i < n; ++i) {
-          points_before[std::size_t(i)] = points_;
-          points_ += box_in[std::size_t(i)];
+        for (std::int64_t i = 0; i < n; ++i) {  // each block's count becomes the box's points before it
+          const std::uint64_t in = box_in[std::size_t(i)];
+          box_in[std::size_t(i)] = points_;
+          points_ += in;
         }
         image_code_.resize(block_end(first + std::uint64_t(n) - 1) - points_);
 #pragma omp parallel num_threads(threads)
@@ -119,7 +119,7 @@ class PeriodicLabels {
 #pragma omp for schedule(static)
           for (std::int64_t i = 0; i < n; ++i) {
             const std::uint64_t b = first + std::uint64_t(i);
-            std::uint64_t point = points_before[std::size_t(i)];
+            std::uint64_t point = box_in[std::size_t(i)];
             std::uint64_t image = b * kBlock - point;  // the images before the block
             for (std::uint64_t label = b * kBlock; label < block_end(b); ++label) {
               const std::uint64_t original = records[label].original();

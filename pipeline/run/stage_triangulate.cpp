@@ -67,9 +67,8 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
   // says before it starts that it may pass its budget, and by how much at most.
   if (plan_.available > 0 && window_bytes_ > plan_.available)
     spdlog::warn(
-        "memory: the windows measured (the largest ~{} points) need {}, over their share of the budget ({}): this job "
-        "may take up "
-        "to {} more than its budget",
+        "memory: the windows measured (the largest ~{} points) need {}, over their share of the budget ({}): "
+        "this job may take up to {} more than its budget",
         cut.largest_window, human_bytes(window_bytes_), human_bytes(plan_.available),
         human_bytes(window_bytes_ - plan_.available));
   spdlog::info("{} segments of ~{} points in {} zones of ~{} points, buffer {:.3g} ({} spacings), {} hull vertices",
