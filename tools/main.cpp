@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <iostream>
@@ -110,6 +111,24 @@ std::string unknown_subcommand(const CLI::App& app, int argc, char** argv) {
 // Whether standard output is a pipe or socket whose reader has gone (`| head`): a
 // write to it failed with EPIPE, which for a filter is the end of the job, not an
 // error (cat and seq stop quietly). Linux's poll() reports POLLERR for such a pipe.
+void write_all_to_stderr(const char* data, std::size_t size) {
+  std::size_t done = 0;
+  while (done < size) {
+    const ssize_t n = ::write(STDERR_FILENO, data + done, size - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) return;  // nowhere left to say it
+    done += static_cast<std::size_t>(n);
+  }
+}
+
+// The job's error line, in one write(2): under mpirun every rank's stderr is a pipe the
+// launcher merges, and a line written in pieces (what `std::cerr <<` does, unbuffered)
+// can be split by another rank's warning.
+void print_error_line(const std::string& message) {
+  const std::string line = "tetstream: error: " + message + "\n";
+  write_all_to_stderr(line.data(), line.size());
+}
+
 bool stdout_reader_gone() {
   struct stat st {};
   if (::fstat(STDOUT_FILENO, &st) != 0 || !(S_ISFIFO(st.st_mode) || S_ISSOCK(st.st_mode))) return false;
@@ -142,7 +161,7 @@ int main(int argc, char** argv) {
   try {
     world_session.emplace(argc, argv);
   } catch (const Error& e) {
-    std::cerr << "tetstream: error: " << e.what() << '\n';
+    print_error_line(e.what());
     return static_cast<int>(e.code());
   }
   const bool other_rank = world().rank() != 0;
@@ -210,8 +229,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     // One line, like every other error (CLI11 would add a second, "Run with --help").
     const std::string unknown = unknown_subcommand(app, argc, argv);
-    std::cerr << "tetstream: error: " << (unknown.empty() ? std::string(e.what()) : unknown)
-              << " (see tetstream --help)\n";
+    print_error_line((unknown.empty() ? std::string(e.what()) : unknown) + " (see tetstream --help)");
     return static_cast<int>(ExitCode::kUsage);
   } catch (const pipeline::PeerFailed& e) {
     return static_cast<int>(e.code());  // the failing rank printed the job's error line
@@ -220,13 +238,14 @@ int main(int argc, char** argv) {
     // job has unwound through its cleanup; nothing more to say.
     if (ctx.stdout_is_data && e.code() == ExitCode::kIoFailure && stdout_reader_gone()) return 0;
     std::fflush(stdout);
-    std::cerr << "tetstream: error: " << e.what() << '\n';
+    print_error_line(e.what());
     return static_cast<int>(e.code());
   } catch (const std::bad_alloc&) {
-    std::cerr << "tetstream: error: out of memory\n";
+    static constexpr char kOutOfMemory[] = "tetstream: error: out of memory\n";  // no allocation here
+    write_all_to_stderr(kOutOfMemory, sizeof kOutOfMemory - 1);
     return static_cast<int>(ExitCode::kIoFailure);
   } catch (const std::exception& e) {
-    std::cerr << "tetstream: error: " << e.what() << '\n';
+    print_error_line(e.what());
     return static_cast<int>(ExitCode::kIoFailure);
   }
   try {
@@ -238,7 +257,7 @@ int main(int argc, char** argv) {
       (ctx.stdout_is_data ? std::cerr : std::cout) << ctx.summary.dump(2) << std::endl;
     }
   } catch (const Error& e) {
-    std::cerr << "tetstream: error: --json-file: " << e.what() << '\n';
+    print_error_line(std::string("--json-file: ") + e.what());
     return static_cast<int>(e.code());
   }
   return 0;

@@ -7,6 +7,7 @@
 #include "io/tet_reader.hpp"
 #include "pipeline/files/checkpoint.hpp"
 #include "pipeline/run/disk_plan.hpp"
+#include "pipeline/util/communicator.hpp"
 #include "pipeline/util/memory_budget.hpp"
 #include "pipeline/util/progress.hpp"
 #include "pipeline/run/run_internal.hpp"
@@ -445,6 +446,12 @@ OpenedJob open_checkpointed_job(const RunOptions& options, Checkpoint& checkpoin
   return opened;
 }
 
+namespace {
+void say_progress_is_kept(const Checkpoint& checkpoint) {
+  spdlog::warn("the job's progress is kept in {}: run the same command with --resume to continue", checkpoint.dir());
+}
+}  // namespace
+
 void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
   try {
     throw;
@@ -456,6 +463,16 @@ void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
     throw;
   } catch (const InputError&) {
     // Bad input: nothing to resume.
+    checkpoint.remove();
+    remove_file(options.output + ".partial");
+    throw;
+  } catch (const PeerFailed& e) {
+    // Under mpirun, another rank found bad input in its range: as in one process,
+    // nothing to resume. Any other failure of a peer keeps the work, as below.
+    if (e.code() != ExitCode::kBadInput) {
+      say_progress_is_kept(checkpoint);
+      throw;
+    }
     checkpoint.remove();
     remove_file(options.output + ".partial");
     throw;
@@ -474,7 +491,7 @@ void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
                   "; the work so far is kept in " + checkpoint.dir() +
                   ": free memory, or rerun with a smaller --memory and --resume");
   } catch (...) {
-    spdlog::warn("the job's progress is kept in {}: run the same command with --resume to continue", checkpoint.dir());
+    say_progress_is_kept(checkpoint);
     throw;
   }
 }

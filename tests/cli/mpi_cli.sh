@@ -284,6 +284,9 @@ grep 'tetstream: error:' nan.err >nan.line
 cmp nan-1p.line nan.line || { cat nan-1p.err nan.err >&2; fail "a NaN: 3 ranks report another line than one process"; }
 grep -q "byte $((24 * 190000 + 8))" nan.line || fail "a NaN: the line does not name its byte"
 [ ! -e nan.tets ] && [ ! -e nan.tets.partial ] || fail "a NaN left an output"
+# Bad input leaves nothing to resume, on any rank it is found.
+[ ! -e nan.tets.ckpt ] || fail "a NaN found by the last rank left a checkpoint (one process leaves none)"
+grep -q "progress is kept" nan.err && fail "a NaN: rank 0 says the job can be resumed"
 
 # Bad input (every rank sees it at the start): exit 1, one line naming the file and the offset.
 head -c 1000 uniform.f64 >truncated.f64
