@@ -517,12 +517,12 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   if (z.xyz.size() < 3 * n) throw std::logic_error("periodic keep: a zone came without its coordinates");
   const double* xyz = z.xyz.data();
   for (std::size_t i = 0; i < n; ++i) {
-    std::copy_n(xyz + 3 * i, 3, vx[i].x);
     vx[i].code = kept.code[i] = labels_->code(z.labels[i]);
-    safe[i] = grid_->safe(vx[i].x);
+    vx[i].axis = xyz[3 * i + std::size_t(view_.axis)];
+    safe[i] = grid_->safe(xyz + 3 * i);
   }
-  if (!keep_zone(z, kept, vx, safe, view_.axis, s_.period, lower_, deferred_from_, safe_edges_, scratch.group,
-                 scratch.apart, scratch.deferred)) {
+  if (!keep_zone(z, kept, vx, safe, xyz, s_.period, lower_, deferred_from_, safe_edges_, scratch.group, scratch.apart,
+                 scratch.deferred)) {
     abandoned_ = true;
     throw BallsLeaveBox(s_.input + ": a Delaunay ball at a canonical image leaves the padded box");
   }
@@ -813,11 +813,12 @@ std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_
   // tets (twice: the merge makes the next list beside the last), the offsets
   // (compressed: a tenth of a byte a tet, 7 tets a point), the ball grid (two bytes a
   // cell of about 16 points), the zones' code tables held for their segment (8 bytes a
-  // window point: about a byte a padded point), and each zone thread's buffers (33
-  // bytes a window point, a window taken as a 32nd of the points).
+  // window point: about a byte a padded point), and each zone thread's buffers (17
+  // bytes a window point, a window taken as a 32nd of the points: its code word and sort
+  // axis coordinate, and whether it is safe).
   return padded_points / 4 + padded_points / 8 + input_points / 4 + 16 * images + 2 * waiting_bytes +
          padded_points / 2 + padded_points / 8 + padded_points +
-         std::uint64_t(std::max(threads, 1)) * 33 * padded_points / 32 + (1 << 20);
+         std::uint64_t(std::max(threads, 1)) * 17 * padded_points / 32 + (1 << 20);
 }
 
 }  // namespace tetstream::pipeline::periodic

@@ -56,24 +56,32 @@ inline bool rotate_stored(int v[4], const std::uint64_t c[4]) {
   return true;
 }
 
-// A window point as the zone's certificate reads it: coordinates and code word in one
-// cache line, and whether its balls need no test (ball_grid.hpp).
+// A window point as the zone's certificate reads it for every tet: its code word and
+// its coordinate on the sort axis, 16 bytes (the rest of its coordinates only for the
+// tets whose balls are computed, from the worker's window).
 struct ZoneVertex {
-  double x[3];
   std::uint64_t code;
+  double axis;
 };
+
+// The offsets' code of a tet whose four vertices are at offset 0.
+inline constexpr std::uint16_t kNoOffsets = std::uint16_t(729 * 13 + 27 * 13 + 13);
 
 // A kept tet's stored form from its rotated code words (no reads).
 inline KeptTet kept_tet_of(const std::uint64_t c[4]) {
   KeptTet t;
   int o[3], codes[3];
   for (int j = 0; j < 4; ++j) t.v[j] = code_plabel(c[j]);
+  std::fill(std::begin(t.pad), std::end(t.pad), 0);
+  if (((c[0] | c[1] | c[2] | c[3]) & 7) == 0) {  // the box's interior: most tets
+    t.code = kNoOffsets;
+    return t;
+  }
   for (int j = 1; j < 4; ++j) {
     for (int k = 0; k < 3; ++k) o[k] = int(code_bits(c[0]) >> k & 1) - int(code_bits(c[j]) >> k & 1);
     codes[j - 1] = io::offset_code(o);
   }
   t.code = io::tet_offset_code(codes[0], codes[1], codes[2]);
-  std::fill(std::begin(t.pad), std::end(t.pad), 0);
   return t;
 }
 
@@ -109,14 +117,15 @@ struct KeptGroup {
   const KeptTet& last() const { return form[order.back()]; }
 };
 
-// Certifies and keeps a zone's tets in place (above). `vx` and `safe` by local id; the
+// Certifies and keeps a zone's tets in place (above). `vx` and `safe` by local id, and
+// `xyz` the window's coordinates (3 a point); the
 // sort axis decides which tets are in order: m strictly first on it is the tet's
 // smallest padded vertex (the padded labels are the lexicographic order). False at
 // the first tet that fails the certificate (its ball leaves the padded box): the
 // margin must double. `safe_edges`: a tet with a safe vertex (its ball smaller than the
 // grid's reach) has no edge as long as CGAL's limit. The last three are scratch.
 inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx,
-                      const std::vector<std::uint8_t>& safe, int axis, const std::array<double, 3>& period,
+                      const std::vector<std::uint8_t>& safe, const double* xyz, const std::array<double, 3>& period,
                       const std::array<double, 3>& lower, std::uint64_t deferred_from, bool safe_edges,
                       KeptGroup& group, std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
                       std::vector<std::uint32_t>& deferred) {
@@ -149,10 +158,11 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     std::uint64_t c[4] = {vx[v[0]].code, vx[v[1]].code, vx[v[2]].code, vx[v[3]].code};
     const Verdict verdict = judge(c);
     if (!verdict.certify) continue;
-    const double* p[4] = {vx[v[0]].x, vx[v[1]].x, vx[v[2]].x, vx[v[3]].x};
     const bool small = safe[v[0]] | safe[v[1]] | safe[v[2]] | safe[v[3]];
     ++k.certified;
     k.balls += !small;
+    const double* p[4] = {xyz + 3 * std::size_t(v[0]), xyz + 3 * std::size_t(v[1]), xyz + 3 * std::size_t(v[2]),
+                          xyz + 3 * std::size_t(v[3])};
     if (!small && !ball_inside(p, period, lower)) return false;
     if (!verdict.kept) continue;
     int order[4] = {0, 1, 2, 3};
@@ -161,8 +171,8 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     const std::uint64_t rc[4] = {c[order[0]], c[order[1]], c[order[2]], c[order[3]]};
     const std::array<std::uint32_t, 4> q = {v[order[0]], v[order[1]], v[order[2]], v[order[3]]};
     const KeptTet form = kept_tet_of(rc);
-    const double xm = p[order[0]][axis];
-    const bool first_on_axis = xm < p[order[1]][axis] && xm < p[order[2]][axis] && xm < p[order[3]][axis];
+    const double xm = vx[q[0]].axis;
+    const bool first_on_axis = xm < vx[q[1]].axis && xm < vx[q[2]].axis && xm < vx[q[3]].axis;
     if (form.v[0] >= deferred_from) {
       deferred.insert(deferred.end(), q.begin(), q.end());
     } else if (!first_on_axis) {
