@@ -108,9 +108,6 @@ std::string unknown_subcommand(const CLI::App& app, int argc, char** argv) {
   return "";
 }
 
-// Whether standard output is a pipe or socket whose reader has gone (`| head`): a
-// write to it failed with EPIPE, which for a filter is the end of the job, not an
-// error (cat and seq stop quietly). Linux's poll() reports POLLERR for such a pipe.
 void write_all_to_stderr(const char* data, std::size_t size) {
   std::size_t done = 0;
   while (done < size) {
@@ -129,6 +126,9 @@ void print_error_line(const std::string& message) {
   write_all_to_stderr(line.data(), line.size());
 }
 
+// Whether standard output is a pipe or socket whose reader has gone (`| head`): a
+// write to it failed with EPIPE, which for a filter is the end of the job, not an
+// error (cat and seq stop quietly). Linux's poll() reports POLLERR for such a pipe.
 bool stdout_reader_gone() {
   struct stat st {};
   if (::fstat(STDOUT_FILENO, &st) != 0 || !(S_ISFIFO(st.st_mode) || S_ISSOCK(st.st_mode))) return false;

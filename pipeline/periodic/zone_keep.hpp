@@ -125,12 +125,12 @@ struct KeptGroup {
 };
 
 // Certifies and keeps a zone's tets in place (above). `vx` and `safe` by local id, and
-// `xyz` the window's coordinates (3 a point); the
-// sort axis decides which tets are in order: m strictly first on it is the tet's
-// smallest padded vertex (the padded labels are the lexicographic order). False at
-// the first tet that fails the certificate (its ball leaves the padded box): the
-// margin must double. `safe_edges`: a tet with a safe vertex (its ball smaller than the
-// grid's reach) has no edge as long as CGAL's limit. The last three are scratch.
+// `xyz` the window's coordinates (3 a point); the sort axis decides which tets are in
+// order: m strictly first on it is the tet's smallest padded vertex (the padded labels
+// are the lexicographic order). False at the first tet that fails the certificate (its
+// ball leaves the padded box): the margin must double. `safe_edges`: a tet with a safe
+// vertex (its ball smaller than the grid's reach) has no edge as long as CGAL's limit.
+// The last three are scratch.
 inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx,
                       const std::vector<std::uint8_t>& safe, const double* xyz, const std::array<double, 3>& period,
                       const std::array<double, 3>& lower, std::uint64_t deferred_from, bool safe_edges,
