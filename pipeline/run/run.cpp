@@ -453,33 +453,31 @@ void say_progress_is_kept(const Checkpoint& checkpoint) {
 }  // namespace
 
 void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
+  // Nothing worth resuming: the checkpoint and the partial output go.
+  const auto discard = [&] {
+    checkpoint.remove();
+    remove_file(options.output + ".partial");
+  };
   try {
     throw;
   } catch (const DamagedCheckpoint&) {
     throw;  // left for the user to inspect or --force away
   } catch (const JobAbandoned&) {
-    checkpoint.remove();
-    remove_file(options.output + ".partial");
+    discard();
     throw;
   } catch (const InputError&) {
-    // Bad input: nothing to resume.
-    checkpoint.remove();
-    remove_file(options.output + ".partial");
+    discard();  // bad input
     throw;
   } catch (const PeerFailed& e) {
     // Under mpirun, another rank found bad input in its range: as in one process,
     // nothing to resume. Any other failure of a peer keeps the work, as below.
-    if (e.code() != ExitCode::kBadInput) {
+    if (e.code() == ExitCode::kBadInput)
+      discard();
+    else
       say_progress_is_kept(checkpoint);
-      throw;
-    }
-    checkpoint.remove();
-    remove_file(options.output + ".partial");
     throw;
   } catch (const BudgetTooSmall&) {
-    // Refused after the first pass: nothing was written worth resuming.
-    checkpoint.remove();
-    remove_file(options.output + ".partial");
+    discard();  // refused after the first pass: nothing was written worth resuming
     throw;
   } catch (const UsageError& e) {
     // A budget too small for the sorted input: the sort's work is kept, and a resume

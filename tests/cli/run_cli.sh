@@ -170,4 +170,16 @@ if command -v taskset >/dev/null; then
   [ ! -s unbound.err ] || fail "a warning for --threads 1: $(cat unbound.err)"
   cmp bound.tets unbound.tets || fail "one core and two threads wrote other bytes"
 fi
+# A budget whose windows no segment cut fits (a slab through dense clusters is mostly
+# buffers): one warning before the zones, shown under -q, saying by how much the job
+# may pass it; the job goes on and its output verifies. Uniform points at the same
+# budget fit and say nothing.
+"$T" -q gen --dist clusters --n 200000 --seed 4 -o dense.f64
+"$T" -q run dense.f64 -o dense.tets --memory 40M --no-checkpoint 2>dense.err || fail "clusters at 40M: exit $?"
+[ "$(grep -c 'over their share of the budget' dense.err)" = 1 ] || fail "clusters at 40M: not one budget warning: $(cat dense.err)"
+grep -q "this job may take up to .* more than its budget" dense.err || fail "the warning does not say by how much"
+"$T" -q verify dense.tets >/dev/null || fail "clusters at 40M: the output does not verify"
+"$T" -q gen --dist uniform --n 200000 --seed 3 -o even.f64
+"$T" -q run even.f64 -o even.tets --memory 40M --no-checkpoint 2>even.err || fail "uniform at 40M: exit $?"
+[ ! -s even.err ] || fail "uniform at 40M: a warning: $(cat even.err)"
 echo "run_cli: all checks passed"

@@ -51,10 +51,10 @@ TEST(ZoneKeep, TheRotationAndOffsetsAreTheStoredFormInEveryVertexOrder) {
                                        << got.v[2] << " " << got.v[3] << " code " << got.code << ", expected "
                                        << expected.v[0] << " " << expected.v[1] << " " << expected.v[2] << " "
                                        << expected.v[3] << " code " << expected.code;
-      interior += got.code == kNoOffsets;
+      interior += ((c[0] | c[1] | c[2] | c[3]) & 7) == 0;  // kept_tet_of's constant path
     } while (std::next_permutation(perm, perm + 4));
   }
-  EXPECT_GT(interior, 24 * 400);  // the constant's path was taken
+  EXPECT_GT(interior, 24 * 400);  // the tets without offsets took it
 }
 
 TEST(ZoneKeep, TwoVerticesOfOneLabelAreRefused) {
