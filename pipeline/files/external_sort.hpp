@@ -204,9 +204,14 @@ class ExternalSorter {
   // ExternalSortOptions::give_back_runs, decided once the runs are written.
   void set_give_back_runs(bool give_back) { opt_.give_back_runs = give_back; }
   // Replaces the comparison sort of the runs (e.g. by a radix sort for integer keys);
-  // it must order the records as `Less` does.
+  // it must order the records as `Less` does. `scratch_bytes` a record: what the sort
+  // allocates beside the run (a radix sort's copy, sizeof(T)), within the budget too,
+  // so the run buffer holds fewer records. Set before the first push.
   using RunSort = std::function<void(T* first, std::size_t n)>;
-  void set_run_sort(RunSort s) { run_sort_ = std::move(s); }
+  void set_run_sort(RunSort s, std::size_t scratch_bytes = 0) {
+    run_sort_ = std::move(s);
+    max_records_ = std::max<std::size_t>(opt_.memory_bytes / (sizeof(T) + scratch_bytes), 1024);
+  }
 
   void push(const T& r) {
     if (buf_.size() == buf_.capacity()) make_room();

@@ -251,7 +251,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   // external sort of those written last.
   ExternalSorter<KeptTet, KeptTetLess> sorter(
       sort_options(std::size_t(shares.sort_bytes / 2), in.dir, "periodic-tets"));
-  sorter.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); });
+  sorter.set_run_sort([label_bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, label_bits); }, sizeof(KeptTet));
   io::PeriodicOffsetsWriter offsets;
   FrameFeeder feeder(
       [&w, &offsets](std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {

@@ -18,6 +18,7 @@
 #include "pipeline/write/async_tet_writer.hpp"
 
 #include <fcntl.h>
+#include <malloc.h>
 #include <omp.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -95,7 +96,11 @@ class PeriodicLabels {
     const std::uint64_t wave = 4 * std::uint64_t(threads);
     std::vector<std::uint64_t> box_in(wave);  // a block's box points, then those before it
     view.points.visit([&](const auto* records) {
-      ReleaseBehind behind(view.points, 0, view.query_regions != nullptr);
+      // The padded job's sorted file is mapped read-only (as for the index's scans):
+      // its pages are handed back behind the pass, which runs before the triangulation
+      // sets the view's query tracker (a whole 10^6-point file mapped at once went 22%
+      // past a 60M budget).
+      ReleaseBehind behind(view.points, 0, true);
       const auto block_end = [&](std::uint64_t b) { return std::min(view.count, (b + 1) * kBlock); };
       for (std::uint64_t first = 0; first < blocks; first += wave) {
         const std::int64_t n = std::int64_t(std::min(wave, blocks - first));
@@ -287,6 +292,7 @@ class KeepStage final : public OutputStage {
                    std::uint64_t next_label) override;
   void commit(std::uint64_t end_label) override;
   void finish() override;
+  std::uint64_t end_sort_bytes() const;
 
   double busy_seconds() const override { return async_ ? async_->busy_seconds() : 0; }
   double producer_wait_seconds() const override { return async_ ? async_->producer_wait_seconds() : 0; }
@@ -472,7 +478,7 @@ void KeepStage::run() {
     std::vector<double> xyz;
     std::vector<std::uint64_t> ids;
     view_.points.visit([&](const auto* records) {
-      ReleaseBehind behind(view_.points, 0, view_.query_regions != nullptr);
+      ReleaseBehind behind(view_.points, 0, true);  // the mapped sorted file (PeriodicLabels)
       for (std::uint64_t first = 0; first < view_.count; first += kPoints) {
         const std::uint64_t end = std::min<std::uint64_t>(view_.count, first + kPoints);
         xyz.clear();
@@ -745,11 +751,19 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
 
 // The deferred tets (kept at an image below 0 on the sort axis, and all after a
 // spill), sorted by the external sort from their file, to the output after the rest.
+// The tets kept at images below 0 on the sort axis, sorted and written last. After the
+// triangulation: in what its windows, query pages and shared rim gave back (at a small
+// budget those are less than the setup's share), and never less than the sorter's 4 MiB.
+std::uint64_t KeepStage::end_sort_bytes() const {
+  const std::uint64_t freed = std::uint64_t(shares_.window_bytes) + shares_.query_page_bytes + shares_.shared_rim_bytes;
+  return std::max<std::uint64_t>(std::min(s_.sort_bytes, freed), 4 << 20);
+}
+
 void KeepStage::merge_deferred() {
   ExternalSorter<KeptTet, KeptTetLess> sorter(
-      sort_options(std::size_t(std::max<std::uint64_t>(s_.sort_bytes, 4 << 20)), context_.dir, "periodic-tets"));
+      sort_options(std::size_t(end_sort_bytes()), context_.dir, "periodic-tets"));
   const int bits = label_bits_;
-  sorter.set_run_sort([bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, bits); });
+  sorter.set_run_sort([bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, bits); }, sizeof(KeptTet));
   std::vector<KeptTet> block(kBlockTets);
   const std::uint64_t count = deferred_->bytes() / sizeof(KeptTet);
   for (std::uint64_t first = 0; first < count; first += block.size()) {
@@ -766,6 +780,10 @@ void KeepStage::commit(std::uint64_t /*end_label*/) {
   const auto t0 = StageClock::now();
   if (done_ || finishing_) return;
   if (long_edges_ != 0) throw long_edges_error(s_.input, long_edges_);
+  // The zones are over: their tables go before the last sort takes its share.
+  spare_codes_ = {};
+  for (Scratch& scratch : scratch_) scratch = Scratch{};
+  malloc_trim(0);
   for (const KeptTet& t : waiting_) write(t);
   waiting_.clear();
   merge_deferred();
@@ -788,6 +806,7 @@ void KeepStage::finish() {
     result_.tets = writer_->tets_written();
   }
   result_.output_bytes = output_bytes_;
+  result_.memory_shares = {{"keep", "sort", end_sort_bytes()}};
   result_.complete = true;
   seconds_ += seconds_since(t0);
   spdlog::debug(

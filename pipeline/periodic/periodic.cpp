@@ -251,7 +251,7 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   // axis, and the tets at the lower face that wait for the box's first points); past
   // this share the stream spills (the same bytes, through the external sort).
   setup.waiting_bytes = options.memory_bytes / 64;
-  setup.sort_bytes = options.memory_bytes / 4;  // after the triangulation: the windows are gone
+  setup.sort_bytes = options.memory_bytes / 4;  // at most: after the triangulation, in what it gave back
   // The keep's tables beside the padded job's shares: that job plans within the rest.
   const std::uint64_t keep_bytes =
       keep_stage_bytes(points.count + images.code.size(), points.count, images.code.size(), setup.waiting_bytes,
@@ -260,6 +260,9 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   // shares are its own needs, far below it.)
   inner.memory_bytes =
       std::max(options.memory_bytes - std::min(keep_bytes, options.memory_bytes / 4), std::uint64_t(32) << 20);
+  inner.nested = true;
+  inner.memory_stated = options.memory_bytes;
+  inner.memory_reserved = keep_bytes;
   KeepResult kept;
   const auto make = [&](const StageContext& context, const SortedPoints&, const SortedView& view,
                         const TriangulateShares& shares,
@@ -279,7 +282,7 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   auto& ledger = sum.padded.memory_shares;
   ledger.push_back(
       {"triangulate", "keep: label tables, offsets, waiting tets", std::min(keep_bytes, options.memory_bytes / 4)});
-  ledger.push_back({"keep", "sort", setup.sort_bytes});
+  ledger.insert(ledger.end(), kept.memory_shares.begin(), kept.memory_shares.end());
   return true;
 }
 

@@ -458,6 +458,11 @@ void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
     checkpoint.remove();
     remove_file(options.output + ".partial");
   };
+  // What is kept is said once, by the job the user ran (a nested job's checkpoint lies
+  // inside its caller's, which says it).
+  const auto say_kept = [&] {
+    if (!options.nested) say_progress_is_kept(checkpoint);
+  };
   try {
     throw;
   } catch (const DamagedCheckpoint&) {
@@ -474,7 +479,7 @@ void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
     if (e.code() == ExitCode::kBadInput)
       discard();
     else
-      say_progress_is_kept(checkpoint);
+      say_kept();
     throw;
   } catch (const BudgetTooSmall&) {
     discard();  // refused after the first pass: nothing was written worth resuming
@@ -482,14 +487,16 @@ void rethrow_job_failure(Checkpoint& checkpoint, const RunOptions& options) {
   } catch (const UsageError& e) {
     // A budget too small for the sorted input: the sort's work is kept, and a resume
     // may take another --memory (the message names the one that works).
+    if (options.nested) throw;
     throw UsageError(std::string(e.what()) + "; the work so far is kept in " + checkpoint.dir() +
                      ": add --resume with the new --memory");
   } catch (const std::bad_alloc&) {
+    if (options.nested) throw;
     throw IoError("out of memory at --memory " + human_bytes(double(options.memory_bytes)) +
                   "; the work so far is kept in " + checkpoint.dir() +
                   ": free memory, or rerun with a smaller --memory and --resume");
   } catch (...) {
-    say_progress_is_kept(checkpoint);
+    say_kept();
     throw;
   }
 }

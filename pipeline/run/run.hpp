@@ -30,6 +30,11 @@ struct RunOptions {
   std::string output;  // the .tets container
   io::PointReadOptions read;
   std::uint64_t memory_bytes = std::uint64_t(1) << 30;
+  // A job run inside another (a periodic job's padded job): its caller tells the user
+  // what is kept and how to resume; the user's --memory, and what the caller holds
+  // beside this job, name the figures of a refusal (PlanOptions).
+  bool nested = false;
+  std::uint64_t memory_stated = 0, memory_reserved = 0;
   std::string tmpdir;  // empty: the output's directory
   int threads = 0;     // 0: all cores
   // Buffer thickness in point spacings. Thinner buffers insert fewer redundant points
@@ -65,7 +70,9 @@ struct RunOptions {
   // Whether a job of `points` points keeps its point index on disk (`index`, above).
   bool index_on_disk(std::uint64_t points) const;
   // What the zone plan reads of these options (pipeline/window/zone_plan.hpp).
-  PlanOptions plan_options() const { return {memory_bytes, buffer_spacings, segment_points, zones}; }
+  PlanOptions plan_options() const {
+    return {memory_bytes, buffer_spacings, segment_points, zones, memory_stated, memory_reserved};
+  }
 };
 
 struct RunSummary {

@@ -144,6 +144,13 @@ void TriangulateStage::run(SegmentSink& out) {
       malloc_trim(0);  // hand any freed heap back, so resident memory tracks the windows
     }
   }
+  // The windows' and the query pages' shares are free from here: what the output stage
+  // does at its end (a periodic job's last sort) is planned in them, so the zones'
+  // buffers and the held regions of the sorted file go now.
+  triangulators.clear();
+  output_pool_.clear();
+  query_regions_.release_all();
+  malloc_trim(0);
   if (failure) {
     try {
       std::rethrow_exception(failure);

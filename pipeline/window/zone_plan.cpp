@@ -122,9 +122,10 @@ ZonePlan plan_for_budget(const PlanInputs& in, const PlanOptions& o, int threads
     const std::uint64_t mid = lo + (hi - lo) / 2;
     (works(mid) ? hi : lo) = mid;
   }
-  const std::uint64_t need_mib = (hi + (std::uint64_t(1) << 20) - 1) >> 20;
-  throw UsageError("--memory " + human_bytes(double(o.memory_bytes)) + " is too small for this input (" +
-                   std::to_string(in.points) + " points): use --memory " + std::to_string(need_mib) + "M or more");
+  const std::uint64_t need_mib = (hi + o.reserved_bytes + (std::uint64_t(1) << 20) - 1) >> 20;
+  throw UsageError("--memory " + human_bytes(double(o.stated_bytes != 0 ? o.stated_bytes : o.memory_bytes)) +
+                   " is too small for this input (" + std::to_string(in.points) + " points): use --memory " +
+                   std::to_string(need_mib) + "M or more");
 }
 
 namespace {

@@ -47,6 +47,10 @@ struct PlanOptions {
   double buffer_spacings = 0;
   std::uint64_t segment_points = 0;
   int zones = 0;
+  // A refusal names the user's --memory: `stated_bytes` (0: memory_bytes), when the
+  // job's caller gave it less (a periodic job keeps its tables beside the padded job),
+  // and suggests what the job needs plus `reserved_bytes`, what that caller holds.
+  std::uint64_t stated_bytes = 0, reserved_bytes = 0;
 };
 
 // What the plan is made from: the sorted view and its index once they exist, or,

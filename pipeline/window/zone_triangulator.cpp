@@ -725,6 +725,11 @@ void OutputPool::give(ZoneTets&& v) {
   spare_.push_back(std::move(v));
 }
 
+void OutputPool::clear() {
+  std::lock_guard lock(mutex_);
+  spare_ = {};
+}
+
 ZoneTriangulator::ZoneTriangulator(const SortedView& view, OutputPool* pool, SharedRim* shared)
     : worker_(std::make_unique<ZoneWorker>(view, pool, shared)) {}
 ZoneTriangulator::~ZoneTriangulator() = default;

@@ -106,6 +106,7 @@ class OutputPool {
  public:
   ZoneTets take();  // empty, with the capacity of a given-back one if any
   void give(ZoneTets&& v);
+  void clear();  // the given-back buffers freed (the triangulation is over)
 
  private:
   std::mutex mutex_;

@@ -89,4 +89,20 @@ set +e
 "$T" -q run u.f64 -o x.tets --periodic 0 2> err.txt; rc=$?
 set -e
 [ $rc = 2 ] || fail "--periodic 0: rc $rc $(cat err.txt)"
+
+# A budget the padded job cannot hold: the refusal names the user's --memory (not the
+# share the padded job plans in beside the keep's tables), asks for more than it, and
+# says once where the work is kept (the job's checkpoint, not the one nested in it).
+"$T" -q gen --dist uniform --n 1000000 --seed 4 -o big.f64
+set +e
+"$T" -q run big.f64 -o small.tets --periodic 1 --memory 50M 2> err.txt; rc=$?
+set -e
+[ $rc = 2 ] && grep -q "^tetstream: error: --memory 50.0 MiB is too small for this input" err.txt ||
+  fail "a small budget: rc $rc $(cat err.txt)"
+need=$(sed -n 's/.*use --memory \([0-9]*\)M or more.*/\1/p' err.txt)
+[ -n "$need" ] && [ "$need" -gt 50 ] || fail "the budget asked for: $(cat err.txt)"
+[ "$(grep -o "the work so far is kept in [^:]*" err.txt)" = "the work so far is kept in ./small.tets.ckpt" ] ||
+  fail "where the work is kept: $(cat err.txt)"
+[ "$(wc -l < err.txt)" = 1 ] || fail "more than the error line: $(cat err.txt)"
+[ ! -e small.tets ] && [ ! -e small.tets.partial ] || fail "a refused job left an output: $(ls)"
 echo "periodic_cli: ok"
