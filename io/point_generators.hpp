@@ -20,6 +20,7 @@ namespace tetstream::io {
 
 class LidarTile;
 class IndoorScan;
+class CosmicWeb;
 
 enum class Distribution {
   kUniform,
@@ -39,7 +40,9 @@ enum class Distribution {
   kStrips,
   kScanLines,
   kSurvey,
-  kIndoor
+  kIndoor,
+  // A periodic box with an N-body snapshot's haloes, filaments and voids (io/point_cosmic.hpp).
+  kCosmic
 };
 
 const char* to_string(Distribution d);
@@ -98,6 +101,7 @@ class PointGenerator {
   // the zoo
   std::shared_ptr<const LidarTile> tile_;
   std::shared_ptr<const IndoorScan> indoor_;
+  std::shared_ptr<const CosmicWeb> cosmic_;
 };
 
 }  // namespace tetstream::io

@@ -118,7 +118,8 @@ void setup_gen(CLI::App& app, Context& ctx) {
   cmd->footer(io::distribution_help());
   cmd->add_option("--dist", args->dist,
                   "Distribution: uniform, ball, ellipsoid-shell, mixed, clusters, grid, sphere, terrain, two-plates;\n"
-                  "the surface zoo: hills, roofs, canopy, water, strips, scan-lines, survey, indoor")
+                  "the surface zoo: hills, roofs, canopy, water, strips, scan-lines, survey, indoor;\n"
+                  "a periodic box: cosmic")
       ->capture_default_str();
   cmd->add_option("-n,--n", args->gen.n, "Number of points, e.g. 1000000 or 1e6 (grid: rounded to the nearest cube)")
       ->transform(scientific_count())

@@ -1,7 +1,9 @@
 // Generators: reproducible by seed, independent of chunking, and the documented shapes
 // (io/point_generators.hpp, docs/inputs.md). A failing test prints its seed.
 #include "core/error.hpp"
+#include "io/point_cosmic.hpp"
 #include "io/point_generators.hpp"
+#include "io/point_rng.hpp"
 #include "io/point_zoo.hpp"
 
 #include <gtest/gtest.h>
@@ -35,7 +37,7 @@ const Distribution kAll[] = {Distribution::kUniform, Distribution::kBall,     Di
                              Distribution::kSphere,  Distribution::kTerrain,  Distribution::kTwoPlates,
                              Distribution::kHills,   Distribution::kRoofs,    Distribution::kCanopy,
                              Distribution::kWater,   Distribution::kStrips,   Distribution::kScanLines,
-                             Distribution::kSurvey,  Distribution::kIndoor};
+                             Distribution::kSurvey,  Distribution::kIndoor,   Distribution::kCosmic};
 
 // The airborne members of the zoo, whose tile's side follows n.
 bool is_tile(Distribution d) {
@@ -531,4 +533,52 @@ TEST(GeneratorsZoo, IndoorScanIsPlanesAroundScanners) {
   // Per square metre (rings of areas 0.75 pi and 2.75 pi), the near ring is denser
   // (whatever walls cut the far one).
   EXPECT_GT(double(near_floor) / 0.75, 3 * double(far_floor) / 2.75);
+}
+
+TEST(Generators, CosmicIsAPeriodicWebOfHaloesFilamentsAndVoids) {
+  constexpr std::uint64_t n = 200000;
+  const auto p = gen(Distribution::kCosmic, n);
+  const CosmicWeb web(kSeed);
+  ASSERT_EQ(web.voids().size(), 40u);
+  ASSERT_EQ(web.haloes().size(), 4096u);
+  ASSERT_GT(web.filaments().size(), 64u);
+  // Every point in the box, as a snapshot's wrapped positions are.
+  for (double v : p) ASSERT_TRUE(v >= 0.0 && v < 1.0) << v;
+  // The voids: their volume's share of the box (by sampling), and the points in them,
+  // about 30% of the field's and filaments' share of it.
+  rng::PointRng r(7, 0);
+  std::uint64_t hits = 0;
+  constexpr int kSamples = 200000;
+  for (int s = 0; s < kSamples; ++s) {
+    const double q[3] = {r.uniform(), r.uniform(), r.uniform()};
+    hits += web.in_void(q);
+  }
+  const double void_volume = double(hits) / kSamples;
+  std::uint64_t in_voids = 0;
+  for (std::uint64_t i = 0; i < n; ++i) in_voids += web.in_void(&p[3 * i]);
+  const double expected = 0.5 * void_volume * CosmicWeb::kVoidDensity;  // the field and filaments thinned
+  EXPECT_GT(void_volume, 0.05);
+  EXPECT_LT(double(in_voids) / double(n), 2.5 * expected + 0.002) << void_volume;
+  // The haloes: half the points within their radii of a centre, far above the share of
+  // the box the haloes fill.
+  std::uint64_t in_haloes = 0;
+  for (std::uint64_t i = 0; i < n; i += 20) {
+    const double* q = &p[3 * i];
+    const bool in = std::any_of(web.haloes().begin(), web.haloes().end(), [&](const CosmicWeb::Halo& h) {
+      double d2 = 0;
+      for (int k = 0; k < 3; ++k) {
+        double d = std::fabs(q[k] - h.centre[k]);
+        d = std::min(d, 1 - d);
+        d2 += d * d;
+      }
+      return d2 <= h.radius * h.radius;
+    });
+    in_haloes += in;
+  }
+  EXPECT_GT(double(in_haloes) / double(n / 20), CosmicWeb::kHaloFraction * 0.98);
+  // Periodic: haloes that straddle a face put points near both of its sides.
+  std::uint64_t low = 0, high = 0;
+  for (std::uint64_t i = 0; i < n; ++i) low += p[3 * i]<0.01, high += p[3 * i]> 0.99;
+  EXPECT_GT(low, 0u);
+  EXPECT_GT(high, 0u);
 }
