@@ -25,7 +25,7 @@ struct RunArgs {
   std::string memory = "1G";
   std::string periodic;  // --periodic: L, Lx,Ly,Lz or auto; empty: not periodic
   std::string outside = "wrap";
-  double margin = 8.0;
+  double margin = 0;           // 0: the default first margin (PeriodicOptions)
   std::string index = "auto";  // --index
 };
 
@@ -35,7 +35,7 @@ void run_periodic(RunArgs& args, Context& ctx) {
   pipeline::periodic::PeriodicOptions p;
   p.period = pipeline::periodic::parse_period(args.periodic, o.input);
   p.wrap = args.outside == "wrap";
-  p.margin_spacings = args.margin;
+  if (args.margin > 0) p.margin_spacings = args.margin, p.margin_from_density = false;
   // Under mpirun every rank runs the padded job (the same bytes); rank 0 reports.
   pipeline::Communicator& comm = world();
   const auto s = pipeline::periodic::run_periodic(o, p, comm);
@@ -176,8 +176,8 @@ void setup_run(CLI::App& app, Context& ctx) {
       ->check(CLI::IsMember({"wrap", "refuse"}))
       ->capture_default_str();
   cmd->add_option("--periodic-margin", args->margin,
-                  "First margin of images, in mean point spacings (doubled until the certificate holds)")
-      ->capture_default_str()
+                  "First margin of images, in mean point spacings (doubled until the certificate holds; by default 8, "
+                  "raised where the points near the faces are sparse)")
       ->group("");
   add_point_input_options(cmd, args->options.read);
   cmd->callback([args, &ctx] { run_run(*args, ctx); });

@@ -12,6 +12,7 @@
 #include "pipeline/run/run_internal.hpp"
 #include "pipeline/periodic/keep.hpp"
 #include "pipeline/periodic/keep_stage.hpp"
+#include "pipeline/periodic/margin.hpp"
 #include "pipeline/periodic/pad.hpp"
 
 #include <nlohmann/json.hpp>
@@ -35,16 +36,6 @@ double seconds_since(std::chrono::steady_clock::time_point t) {
 }
 
 constexpr const char* kPadded = "periodic-padded.tets";
-
-// The first margin: `spacings` mean spacings of the box's N points, at most half a
-// period (where every image is exact by Sterbenz's lemma).
-std::array<double, 3> first_margin(const PeriodicOptions& p, std::uint64_t n) {
-  const double volume = p.period[0] * p.period[1] * p.period[2];
-  const double spacing = std::cbrt(volume / double(std::max<std::uint64_t>(n, 1)));
-  std::array<double, 3> m;
-  for (int k = 0; k < 3; ++k) m[k] = std::min(p.margin_spacings * spacing, 0.5 * p.period[k]);
-  return m;
-}
 
 // The ordinary job on the padded points in the job's directory `dir`: the same options
 // but for the files. Checkpointed when the periodic job is, its checkpoint nested in
@@ -300,12 +291,26 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
         write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir, job->checkpoint() != nullptr);
     sum.input_points = points.count;
     sum.wrapped = points.wrapped;
-    margin = first_margin(periodic, points.count);
+    bool recorded = false;
     if (job->checkpoint()) {
       detail::trusting_checkpoint(*job->checkpoint(), [&] {
-        if (job->state().contains("margin")) margin = job->state()["margin"].get<std::array<double, 3>>();
+        recorded = job->state().contains("margin");
+        if (recorded) margin = job->state()["margin"].get<std::array<double, 3>>();
         sum.attempts = job->state().value("attempts", std::uint64_t(0));
       });
+    }
+    if (!recorded) {
+      margin = mean_spacing_margin(periodic, points.count);
+      if (periodic.margin_from_density) {
+        const DensityMargin d =
+            margin_for_density(points.path, points.count, periodic.period, margin, options.memory_bytes);
+        if (d.margin != margin)
+          spdlog::info(
+              "periodic: the first margin {:.4g} (not {:.4g}): the points near the faces are as sparse as "
+              "{:.2g} of the mean",
+              d.margin[0], margin[0], *std::min_element(d.sparsest.begin(), d.sparsest.end()));
+        margin = d.margin;
+      }
     }
     sum.seconds_pad += seconds_since(t);
   });

@@ -1,0 +1,44 @@
+#pragma once
+// The periodic job's first margin (docs/periodic.md, "The first margin"): a number of
+// mean spacings, raised where the points near the box's faces are sparser than the
+// mean. A void at a face holds Delaunay balls several mean spacings wide, which the
+// first margin must cover (its certificate needs the balls at canonical images inside
+// the padded box): without the density's word the first attempt fails there and the
+// job runs again at twice the margin. An estimate, not a proof: the certificate still
+// decides, and the margin still doubles where it fails.
+#include "pipeline/periodic/periodic.hpp"
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+namespace tetstream::pipeline::periodic {
+
+// `spacings` mean spacings of the box's n points on each axis, at most half a period
+// (where every image is exact by Sterbenz's lemma).
+std::array<double, 3> mean_spacing_margin(const PeriodicOptions& p, std::uint64_t n);
+
+struct DensityMargin {
+  std::array<double, 3> margin{};
+  std::array<double, 3> sparsest{1, 1, 1};  // per axis: the mean density over the sparsest near its faces
+  std::uint64_t cells = 0;                  // the count grid's cells
+};
+
+// Counts the wrapped points (raw float64, `count` of them, in [0, L)) on a periodic grid
+// of about 8 points a cell, sums each cell's neighbourhood (at least ~1000 points of
+// the mean density), and over the cells near each axis' faces (within the band the
+// balls at canonical images reach, docs/periodic.md) takes the sparsest: its spacing
+// over the mean's, when above kSlack, multiplies `margin` on that axis. The grid takes
+// at most `memory_bytes` / 4 (8 bytes a cell).
+DensityMargin margin_for_density(const std::string& points_path, std::uint64_t count,
+                                 const std::array<double, 3>& period, std::array<double, 3> margin,
+                                 std::uint64_t memory_bytes);
+
+// The mean-spacing margin already holds the balls of a density a little below the
+// mean: its 8 spacings hold balls up to 2 spacings in radius, and the largest empty
+// ball among 10^7 uniform points is about 1.65 spacings (Poisson: n (4/3) pi r^3 ~
+// ln n + ln ln n). A sparsest neighbourhood's spacing up to this factor of the mean
+// leaves the margin as it is, which keeps uniform points' margin where it was.
+inline constexpr double kSlack = 1.2;
+
+}  // namespace tetstream::pipeline::periodic
