@@ -16,8 +16,7 @@ namespace {
 
 // n uniform points of [0, 1)^3, those within `radius` of `centre` (periodically) kept
 // with probability `keep`, written as raw float64.
-std::uint64_t write_points(const std::string& path, std::uint64_t n, const double* centre, double radius,
-                           double keep) {
+std::uint64_t write_points(const std::string& path, std::uint64_t n, const double* centre, double radius, double keep) {
   io::rng::PointRng r(42, 0);
   std::vector<double> xyz;
   while (xyz.size() < 3 * n) {
