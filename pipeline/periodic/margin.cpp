@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 namespace tetstream::pipeline::periodic {
@@ -36,7 +37,8 @@ void box_sum(std::vector<std::uint32_t>& cells, const std::array<std::int64_t, 3
     std::uint64_t sum = 0;
     for (std::int64_t d = -h; d < -h + width; ++d) sum += line[std::size_t(((d % len) + len) % len)];
     for (std::int64_t i = 0; i < len; ++i) {
-      cells[std::size_t(base + i * stride)] = std::uint32_t(sum);
+      // Saturated: a neighbourhood past 2^32 points (a halo of 10^10) reads as dense.
+      cells[std::size_t(base + i * stride)] = std::uint32_t(std::min<std::uint64_t>(sum, UINT32_MAX));
       if (width == len) continue;  // the whole line: every cell the same sum
       sum += line[std::size_t(((i - h + width) % len + len) % len)];
       sum -= line[std::size_t(((i - h) % len + len) % len)];
@@ -74,7 +76,8 @@ DensityMargin margin_for_density(const std::string& points_path, std::uint64_t c
           at += std::max<std::int64_t>(c, 0) * stride;
           stride *= n[std::size_t(k)];
         }
-        ++grid[std::size_t(at)];
+        std::uint32_t& cell = grid[std::size_t(at)];
+        cell += cell != UINT32_MAX;
       }
     }
   }
