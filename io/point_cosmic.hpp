@@ -2,7 +2,7 @@
 // `gen --dist cosmic`: a periodic box [0, 1)^3 with what an N-body snapshot at low
 // redshift has, for the periodic job (docs/periodic.md): haloes with cuspy profiles over
 // three decades of mass, filaments between the nodes of a web, and voids (about a tenth
-// of the volume, each up to a quarter of the box across) at 15% of the mean density.
+// of the volume, each up to a quarter of the box across) at about 6% of the mean density.
 // Large empty balls where voids
 // meet the box's faces are what make a periodic margin grow; dense haloes make windows
 // uneven. Counter-based like the other generators: point i is a pure function of the
