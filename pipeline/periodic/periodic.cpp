@@ -254,6 +254,7 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   inner.nested = true;
   inner.memory_stated = options.memory_bytes;
   inner.memory_reserved = keep_bytes;
+  inner.points_stated = points.count;
   KeepResult kept;
   const auto make = [&](const StageContext& context, const SortedPoints&, const SortedView& view,
                         const TriangulateShares& shares,

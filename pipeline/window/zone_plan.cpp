@@ -123,9 +123,13 @@ ZonePlan plan_for_budget(const PlanInputs& in, const PlanOptions& o, int threads
     (works(mid) ? hi : lo) = mid;
   }
   const std::uint64_t need_mib = (hi + o.reserved_bytes + (std::uint64_t(1) << 20) - 1) >> 20;
+  const std::string points =
+      o.stated_points != 0 && o.stated_points < in.points
+          ? std::to_string(o.stated_points) + " points and " + std::to_string(in.points - o.stated_points) + " images"
+          : std::to_string(in.points) + " points";
   throw UsageError("--memory " + human_bytes(double(o.stated_bytes != 0 ? o.stated_bytes : o.memory_bytes)) +
-                   " is too small for this input (" + std::to_string(in.points) + " points): use --memory " +
-                   std::to_string(need_mib) + "M or more");
+                   " is too small for this input (" + points + "): use --memory " + std::to_string(need_mib) +
+                   "M or more");
 }
 
 namespace {

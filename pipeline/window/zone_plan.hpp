@@ -51,6 +51,9 @@ struct PlanOptions {
   // job's caller gave it less (a periodic job keeps its tables beside the padded job),
   // and suggests what the job needs plus `reserved_bytes`, what that caller holds.
   std::uint64_t stated_bytes = 0, reserved_bytes = 0;
+  // The user's points among the job's (0: all of them; a periodic job's padded job
+  // adds their images), so that the refusal counts what the user gave.
+  std::uint64_t stated_points = 0;
 };
 
 // What the plan is made from: the sorted view and its index once they exist, or,
