@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -39,20 +40,23 @@ std::uint64_t write_points(const std::string& path, std::uint64_t n, const doubl
 constexpr std::uint64_t kPoints = 200000;
 constexpr std::uint64_t kMemory = std::uint64_t(64) << 20;
 
+// The unit box's mean-spacing margin for kPoints.
+std::array<double, 3> mean_margin() {
+  PeriodicOptions o;
+  o.period = {1, 1, 1};
+  return mean_spacing_margin(o, kPoints);
+}
+
 DensityMargin estimate(const io::TempDir& dir, const double* centre, double radius, double keep) {
   const std::string path = dir.file("p.f64");
   write_points(path, kPoints, centre, radius, keep);
-  PeriodicOptions o;
-  o.period = {1, 1, 1};
-  return margin_for_density(path, kPoints, o.period, mean_spacing_margin(o, kPoints), kMemory);
+  return margin_for_density(path, kPoints, {1, 1, 1}, mean_margin(), kMemory);
 }
 
 TEST(PeriodicMargin, UniformPointsKeepTheMeanSpacingMargin) {
   io::TempDir dir;
   const double nowhere[3] = {0.5, 0.5, 0.5};
-  PeriodicOptions o;
-  o.period = {1, 1, 1};
-  const auto mean = mean_spacing_margin(o, kPoints);
+  const auto mean = mean_margin();
   const DensityMargin d = estimate(dir, nowhere, 0, 1);
   EXPECT_EQ(d.margin, mean);
   for (double s : d.sparsest) EXPECT_GT(s, 1 / (kSlack * kSlack * kSlack));
@@ -63,9 +67,7 @@ TEST(PeriodicMargin, AVoidAtAFaceRaisesItByItsSpacing) {
   io::TempDir dir;
   // A void of radius 0.15 across the x = 0 face, at an eighth of the mean density.
   const double at_face[3] = {0.0, 0.5, 0.5};
-  PeriodicOptions o;
-  o.period = {1, 1, 1};
-  const auto mean = mean_spacing_margin(o, kPoints);
+  const auto mean = mean_margin();
   const DensityMargin d = estimate(dir, at_face, 0.15, 0.125);
   // Twice the mean spacing inside: about twice the margin on x (the neighbourhoods'
   // noise bound and their reach over the void's edge take a little off).
@@ -77,10 +79,8 @@ TEST(PeriodicMargin, AVoidAtAFaceRaisesItByItsSpacing) {
 TEST(PeriodicMargin, AVoidFarFromTheFacesLeavesIt) {
   io::TempDir dir;
   const double middle[3] = {0.5, 0.5, 0.5};
-  PeriodicOptions o;
-  o.period = {1, 1, 1};
   const DensityMargin d = estimate(dir, middle, 0.15, 0.125);
-  EXPECT_EQ(d.margin, mean_spacing_margin(o, kPoints));
+  EXPECT_EQ(d.margin, mean_margin());
 }
 
 }  // namespace
