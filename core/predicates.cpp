@@ -481,7 +481,43 @@ bool circumcentre_offset_double_word(const double* const* p, double m, double x[
   return true;
 }
 
+// The exact sign of c_axis - t (circumcentre_side): the columns taken in the cyclic
+// order (axis, axis + 1, axis + 2), an even permutation, so both determinants keep
+// their signs. Sizes: |u|, |s| < 2^(64K-2) (K limbs); |u|^2 - 2 s u < 2^(128K-1) and the
+// 2x2 minors fit 2K limbs; det U (3 terms of K x 2K) 3K; the replaced determinant
+// (3 terms < 2^(256K-4)) 4K.
+template <int K>
+int circumcentre_side_int(const double* const* p, double t, int axis, int low) {
+  const int j = (axis + 1) % 3, l = (axis + 2) % 3;
+  Int<K> u[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) u[i][k] = to_int<K>(p[i + 1][k], low) - to_int<K>(p[0][k], low);
+  const Int<K> s = to_int<K>(t, low) - to_int<K>(p[0][axis], low);
+  Int<2 * K> minor[3], w[3];
+  for (int i = 0; i < 3; ++i) {
+    const int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
+    minor[i] = u[i1][j] * u[i2][l] - u[i2][j] * u[i1][l];
+    const Int<2 * K> lift = u[i][0] * u[i][0] + u[i][1] * u[i][1] + u[i][2] * u[i][2];
+    const Int<2 * K> su = s * u[i][axis];
+    w[i] = lift - (su + su);
+  }
+  const int det_sign = sign(u[0][axis] * minor[0] + u[1][axis] * minor[1] + u[2][axis] * minor[2]);
+  return det_sign * sign(w[0] * minor[0] + w[1] * minor[1] + w[2] * minor[2]);
+}
+
 }  // namespace
+
+int circumcentre_side(const double* a, const double* b, const double* c, const double* d, int axis, double t) {
+  const double* p[5] = {a, b, c, d, nullptr};
+  Range r = scan(p, 4);
+  if (!r.finite || !std::isfinite(t)) return 0;
+  if (t != 0.0) {
+    r.max_exp = std::max(r.max_exp, ceil_exponent(t));
+    r.low = std::min(r.low, lowbit_exponent(t));
+  }
+  if (r.max_exp == std::numeric_limits<int>::min()) return 0;  // all zero: flat
+  return with_exact_width(r.max_exp - r.low, [&]<int K>() { return circumcentre_side_int<K>(p, t, axis, r.low); });
+}
 
 // Circumsphere with a rigorous error bound. With u_ = b-a, v_ = c-a, w_ = d-a, the
 // centre is a + N / D, N = |u|^2 (v x w) + |v|^2 (w x u) + |w|^2 (u x v), D = 2 u.(v x w).

@@ -104,6 +104,14 @@ struct Circumsphere {
 };
 Circumsphere circumsphere(const double* a, const double* b, const double* c, const double* d);
 
+// The sign of c_axis - t, where c is the exact circumcentre of the tetrahedron abcd:
+// +1 when the centre lies past the plane x_axis = t, -1 before it, 0 on it. Exact for
+// any finite input (integer arithmetic: callers filter with circumsphere() first);
+// 0 also for a flat tetrahedron, which has no centre. With u_i = p_i - a and
+// s = t - a_axis, c_axis - t = det(U with column `axis` replaced by |u_i|^2 - 2 s u_i,axis)
+// / (2 det U) (Cramer's rule on 2 U (c - a) = |u_i|^2).
+int circumcentre_side(const double* a, const double* b, const double* c, const double* d, int axis, double t);
+
 // ---------------------------------------------------------------------------------
 // Inline filters. Everything below is implementation; the kernel sees only signs.
 //

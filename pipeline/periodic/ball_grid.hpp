@@ -9,8 +9,12 @@
 // kReach c around v (inside the marked cells) and holds a whole cell there (it holds
 // the cube of half-width c about its centre, since c sqrt(3) < kReach c / 2 for
 // kReach = 4): a padded point inside B, which a Delaunay ball never has. So the ball
-// has R < kReach c / 2, and lies within kReach c of v: inside the padded box. A tet
-// with a safe vertex passes the ball test without computing its ball.
+// has R < kReach c / 2, and lies within kReach c of v: inside the padded box. A point
+// is *roomy* when it is safe and every cell within kRoom cells of its own is inside the
+// padded box too: then the ball of radius sqrt(2) R about the centre of any such ball
+// (within (1 + sqrt(2)) R < 4.83 c of v) lies inside the padded box as well, which is
+// the keep's completeness condition (keep_parts.hpp, covers_centre_box). A tet with a
+// roomy vertex passes the keep's tests without computing its ball.
 //
 // Rounding: a point marks a cell, and a vertex is placed in one, only when it lies in
 // the cell's interior by a relative 2^-30 of the grid's extent (far beyond the
@@ -26,7 +30,7 @@ namespace tetstream::pipeline::periodic {
 
 class BallGrid {
  public:
-  static constexpr int kReach = 4;
+  static constexpr int kReach = 4, kRoom = 5;
 
   // The padded box from `lower` (inside -M) to the period; cells of side `cell`, fewer
   // when the grid would pass `max_cells`.
@@ -64,11 +68,21 @@ class BallGrid {
     std::int64_t c[3];
     return !safe_.empty() && cell_of(p, c) && safe_[index(c)];
   }
+  // Safe, and roomy (above): 0, 1 (safe) or 2 (roomy too).
+  int room(const double* p) const {
+    std::int64_t c[3];
+    if (safe_.empty() || !cell_of(p, c) || !safe_[index(c)]) return 0;
+    for (std::size_t k = 0; k < 3; ++k)
+      if (c[k] < kRoom || c[k] + kRoom >= n_[k]) return 1;
+    return 2;
+  }
 
   std::uint64_t bytes() const { return marked_.size() + safe_.size(); }
   // A ball through a safe point has a radius below kReach c / 2: its tet's edges are
   // shorter than kReach c.
   double diameter_bound() const { return kReach * cell_; }
+  // The radius of every Delaunay ball through a safe point is below this.
+  double radius_bound() const { return 0.5 * kReach * cell_; }
 
  private:
   bool cell_of(const double* p, std::int64_t c[3]) const {

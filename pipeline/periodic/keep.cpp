@@ -33,8 +33,8 @@ constexpr std::uint64_t kNone = std::numeric_limits<std::uint64_t>::max();
 constexpr std::size_t kChunk = std::size_t(1) << 16;
 
 // What a label of the padded container is: its point's periodic label and its offset
-// (bit k: -1 on axis k), and whether it is the point's canonical image, in one word
-// (periodic label << 4 | bits: one cache line a vertex instead of two, read at random).
+// (bit k: -1 on axis k), in one word (periodic label << 4 | bits: one cache line a
+// vertex instead of two, read at random).
 struct PaddedMap {
   std::vector<std::uint64_t> code;
   std::vector<double> xyz;  // the padded points' coordinates (read once, not per tet)
@@ -59,12 +59,9 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
   }
   m.code.resize(n);
   m.xyz.resize(3 * n);
-  double threshold[3];  // a point at or past it on axis k has its canonical image at -1
-  for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(in.period[k], in.margin[k]);
   for (std::uint64_t first = 0; first < n; first += kChunk) {
     const std::size_t k = std::size_t(std::min<std::uint64_t>(kChunk, n - first));
     r.read_points(first, k, &m.xyz[3 * first], ids.data());
-    const double* xyz = &m.xyz[3 * first];
     for (std::size_t i = 0; i < k; ++i) {
       std::uint64_t point = ids[i];
       std::uint8_t bits = 0;
@@ -74,8 +71,7 @@ PaddedMap map_labels(const io::TetReader& r, const KeepInput& in) {
         bits = std::uint8_t(code & 7);
       }
       if (of_point[point] == kNone) throw std::logic_error("periodic: an image without its point");
-      const bool canonical = is_canonical(&xyz[3 * i], bits, in.period, threshold);
-      m.code[first + i] = of_point[point] << 4 | bits | (canonical ? kCanonical : 0);
+      m.code[first + i] = of_point[point] << 4 | bits;
     }
   }
   return m;
@@ -86,11 +82,12 @@ struct KeptFrame {
   std::uint64_t failures = 0, long_edges = 0;
 };
 
-// One frame of the padded container: every tet with a vertex at its canonical image
-// certified (its ball inside the padded box), and those whose smallest periodic label
-// sits at its canonical image kept, in stored form.
-void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in,
-                const std::array<double, 3>& lower, std::vector<std::uint64_t>& t, KeptFrame& out) {
+// One frame of the padded container: every tet that may meet C (keep_parts.hpp) passes
+// the completeness condition by its circumsphere, and those whose circumcentre lies in
+// C are kept, in stored form. (The keep in the padded job, zone_keep.hpp, spares most
+// of these spheres with its ball grid; this step after an MPI job computes them all.)
+void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, const KeepInput& in, const CentreBox& box,
+                std::vector<std::uint64_t>& t, KeptFrame& out) {
   r.read_frame(f, t);
   out.kept.clear();
   out.failures = out.long_edges = 0;
@@ -103,26 +100,22 @@ void keep_frame(const io::TetReader& r, std::uint64_t f, const PaddedMap& m, con
       TS_PREFETCH(&m.code[t[v]]);
       TS_PREFETCH(&m.xyz[3 * t[v]]);
     }
-    int mi = 0;
-    bool any = false;
-    for (int j = 0; j < 4; ++j) {
-      any = any || (m.bits(t[i + j]) & kCanonical);
-      mi = m.plabel(t[i + j]) < m.plabel(t[i + mi]) ? j : mi;
-    }
-    if (!any) continue;
     const double* p[4];
     std::uint64_t label[4];
     int off[4][3];
+    unsigned side[4];
     for (int j = 0; j < 4; ++j) {
       p[j] = &m.xyz[3 * t[i + j]];
+      side[j] = centre_box_sides(p[j], box);
       label[j] = m.plabel(t[i + j]);
       for (int k = 0; k < 3; ++k) off[j][k] = -int(m.bits(t[i + j]) >> k & 1);
     }
-    if (!ball_inside(p, in.period, lower)) {
+    const core::Circumsphere s = core::circumsphere(p[0], p[1], p[2], p[3]);
+    if (may_meet_centre_box(side) && !covers_centre_box(s, box)) {
       ++out.failures;
       continue;
     }
-    if (!(m.bits(t[i + mi]) & kCanonical)) continue;
+    if (!centre_in_box(s, p, box)) continue;
     KeptTet kt;
     if (!stored_form(label, off, kt)) {
       ++out.failures;
@@ -225,7 +218,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   const PaddedMap m = map_labels(r, in);
   r.release_point_pages(0, r.point_count());  // read once into the map: their pages go back
   spdlog::debug("periodic keep: labels mapped in {:.2f}s", since());
-  const std::array<double, 3> lower = padded_lower(in.period, in.margin);
+  const CentreBox box = centre_box(in.period, in.margin);
   const int label_bits = std::max(1, int(std::bit_width(m.points)));
 
   // The writer first (the points come before the tets): a failing certificate
@@ -244,8 +237,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
   write_points(r, in, w);
   r.release_point_pages(0, r.point_count());
   spdlog::debug("periodic keep: points written in {:.2f}s", since());
-  io::PeriodicBox box{in.period, in.sort_axis};
-  w.add_section(io::kTagPeriodicBox, io::serialize_periodic_box(box));
+  w.add_section(io::kTagPeriodicBox, io::serialize_periodic_box(io::PeriodicBox{in.period, in.sort_axis}));
 
   // The sort's share: half for the tets waiting for the frontier, half for the
   // external sort of those written last.
@@ -260,9 +252,11 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
       },
       in.frame_tets);
   Frontier frontier(m, in.sort_axis);
-  const std::uint64_t deferred_from = Frontier(m, in.sort_axis)
-                                          .points_before(canonical_threshold(in.period[std::size_t(in.sort_axis)],
-                                                                             in.margin[std::size_t(in.sort_axis)]));
+  // The tets kept at an image of m across the sort axis' lower face (m's point within
+  // the margin of the upper face) come first and are written last (keep_stage.cpp).
+  const std::uint64_t deferred_from =
+      Frontier(m, in.sort_axis)
+          .points_before(in.period[std::size_t(in.sort_axis)] - in.margin[std::size_t(in.sort_axis)]);
   KeptStream stream([&feeder](std::span<const KeptTet> tets) { feeder.add(tets); }, deferred_from,
                     std::size_t(shares.sort_bytes / 2), sorter, label_bits);
 
@@ -285,7 +279,7 @@ KeepResult keep_periodic_tets(const KeepInput& in) {
     std::exception_ptr frame_error;
     if (!stop.load(std::memory_order_relaxed)) {
       try {
-        keep_frame(r, f, m, in, lower, decoded[me], kept[me]);
+        keep_frame(r, f, m, in, box, decoded[me], kept[me]);
       } catch (...) {
         frame_error = std::current_exception();
       }

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <span>
 #include <string>
 #include <utility>
@@ -21,25 +22,10 @@
 
 namespace tetstream::pipeline::periodic {
 
-// A padded point's code word: its point's periodic label << 4, its offset (bit k: -1 on
-// axis k) and kCanonical when it is its point's canonical image: one word a vertex.
-inline constexpr std::uint64_t kCanonical = 8;
+// A padded point's code word: its point's periodic label << 4 and its offset (bit k: -1
+// on axis k): one word a vertex.
 inline std::uint64_t code_plabel(std::uint64_t code) { return code >> 4; }
 inline unsigned code_bits(std::uint64_t code) { return unsigned(code & 7); }
-
-// Whether a padded point at `xyz` with offset `bits` is its point's canonical image:
-// on each axis at offset -1 exactly when its point lies at or past the threshold
-// L - M/2 (`threshold`, canonical_threshold).
-inline bool is_canonical(const double* xyz, unsigned bits, const std::array<double, 3>& period,
-                         const double threshold[3]) {
-  bool canonical = true;
-  for (int a = 0; a < 3; ++a) {
-    const bool minus = bits >> a & 1;
-    const double p = minus ? xyz[a] + period[std::size_t(a)] : xyz[a];  // exact: the image was
-    canonical = canonical && (minus == (p >= threshold[a]));
-  }
-  return canonical;
-}
 
 // The padded box's lower corner, -M rounded up (conservatively inside).
 inline std::array<double, 3> padded_lower(const std::array<double, 3>& period, const std::array<double, 3>& margin) {
@@ -51,18 +37,88 @@ inline std::array<double, 3> padded_lower(const std::array<double, 3>& period, c
   return lower;
 }
 
-// The circumball of a padded tet lies inside the padded box (-M, L)^3, with the
-// circumsphere's proved error bounds and a relative slack for this test's own
-// roundings: every periodic point it could hold is then in the padded set.
-inline bool ball_inside(const double* p[4], const std::array<double, 3>& period, const std::array<double, 3>& lower) {
-  const core::Circumsphere s = core::circumsphere(p[0], p[1], p[2], p[3]);
-  if (!s.valid) return false;
-  const double reach = (s.radius + s.radius_error + s.center_error) * (1 + 0x1p-40);
+// The box of circumcentres C = [t - L, t) on each axis, t = L - M/2 (canonical_threshold):
+// a fundamental domain of the periods, so each periodic tet has one copy whose
+// circumcentre lies in it, the copy kept (docs/periodic.md, "Keep"). With the padded
+// box [-M, L) around it, `half_margin` is the least room between C and the padded box's
+// faces (about M/2), rounded down.
+struct CentreBox {
+  std::array<double, 3> lo{}, hi{}, lower{}, period{};
+  double half_margin = 0;
+};
+inline CentreBox centre_box(const std::array<double, 3>& period, const std::array<double, 3>& margin) {
+  CentreBox b;
+  b.period = period;
+  b.lower = padded_lower(period, margin);
+  b.half_margin = std::numeric_limits<double>::infinity();
   for (std::size_t k = 0; k < 3; ++k) {
-    const double slack = std::fabs(s.center[k]) * 0x1p-50 + 0x1p-1000;
-    if (!(s.center[k] - reach - slack > lower[k]) || !(s.center[k] + reach + slack < period[k])) return false;
+    b.hi[k] = canonical_threshold(period[k], margin[k]);
+    b.lo[k] = b.hi[k] - period[k];  // exact (Sterbenz: t >= L/2 for M <= L)
+    const double room = std::min(b.lo[k] - b.lower[k], period[k] - b.hi[k]);
+    b.half_margin = std::min(b.half_margin, std::nextafter(std::nextafter(room, 0.0), 0.0));
+  }
+  return b;
+}
+
+// A padded point's side of C on each axis: bit k below it (x_k < t_k - L_k), bit 3 + k
+// at or past it (x_k >= t_k).
+inline constexpr unsigned kBelowC = 1, kAboveC = 8, kOutsideC = 63;
+inline unsigned centre_box_sides(const double* x, const CentreBox& b) {
+  unsigned f = 0;
+  for (int k = 0; k < 3; ++k)
+    f |= (x[k] < b.lo[std::size_t(k)] ? kBelowC << k : 0u) | (x[k] >= b.hi[std::size_t(k)] ? kAboveC << k : 0u);
+  return f;
+}
+// Whether a tet with vertices on these sides may meet C: its bounding box does unless
+// all four lie below C, or all past it, on one axis.
+inline bool may_meet_centre_box(const unsigned side[4]) {
+  return (side[0] & side[1] & side[2] & side[3] & kOutsideC) == 0;
+}
+
+// The completeness condition of a padded tet that may meet C (docs/periodic.md,
+// "Completeness"): at every point y of the tet the nearest padded point is nearer than
+// the padded box's faces, so that no periodic point nearer lies outside the padded set.
+// At y in the tet that distance is at most sqrt(r^2 - |y - c|^2) (the tet's vertices
+// are on its sphere): within `half_margin` when r^2 - dist(c, C)^2 is below its square
+// (for y in C), or inside the box whenever the ball of radius sqrt(2) r about c is. With
+// the circumsphere's proved error bounds and a relative slack for these roundings.
+inline bool covers_centre_box(const core::Circumsphere& s, const CentreBox& b) {
+  if (!s.valid) return false;
+  const double e = s.center_error * (1 + 0x1p-40);
+  const double r = (s.radius + s.radius_error) * (1 + 0x1p-40);
+  double d2 = 0;  // dist(c, C)^2, a lower bound
+  for (std::size_t k = 0; k < 3; ++k) {
+    const double c = s.center[k];
+    const double gap = std::max({0.0, b.lo[k] - (c + e), (c - e) - b.hi[k]}) * (1 - 0x1p-40);
+    d2 += gap * gap;
+  }
+  const double h = b.half_margin * (1 - 0x1p-40);
+  if (r * r * (1 + 0x1p-40) - d2 * (1 - 0x1p-40) < h * h) return true;
+  const double reach = (std::sqrt(2.0) * r + e) * (1 + 0x1p-40);
+  for (std::size_t k = 0; k < 3; ++k) {
+    const double c = s.center[k], slack = std::fabs(c) * 0x1p-50 + 0x1p-1000;
+    if (!(c - reach - slack > b.lower[k]) || !(c + reach + slack < b.period[k])) return false;
   }
   return std::isfinite(reach);
+}
+
+// Whether the padded tet `p`'s circumcentre lies in C: from its sphere where the centre
+// is clear of C's faces by the error bound, exactly (core::circumcentre_side) where it
+// is not. Two copies of a tet differ by whole periods, exact translations, so exactly
+// one of them answers true.
+inline bool centre_in_box(const core::Circumsphere& s, const double* p[4], const CentreBox& b) {
+  const auto side = [&](int k, double plane) {  // the sign of c_k - plane
+    if (s.valid) {
+      const double c = s.center[k];
+      const double e = s.center_error * (1 + 0x1p-40) + (std::fabs(c) + std::fabs(plane)) * 0x1p-50 + 0x1p-1060;
+      if (c - e > plane) return 1;
+      if (c + e < plane) return -1;
+    }
+    return core::circumcentre_side(p[0], p[1], p[2], p[3], k, plane);
+  };
+  for (int k = 0; k < 3; ++k)
+    if (side(k, b.lo[std::size_t(k)]) < 0 || side(k, b.hi[std::size_t(k)]) >= 0) return false;
+  return true;
 }
 
 // CGAL's criterion for the 1-sheeted covering (Periodic_3_Delaunay_triangulation_3:
@@ -88,22 +144,6 @@ inline InputError long_edges_error(const std::string& input, std::uint64_t long_
                     "docs/periodic.md, \"When it refuses\")");
 }
 
-// A padded tet given by its vertices' code words: whether to certify it (a vertex at
-// its canonical image) and whether it is kept (its smallest periodic label's vertex
-// canonical: each orbit's one copy); its stored form when kept (false: not a tet of
-// one period, a failure of the certificate).
-struct Verdict {
-  bool certify = false, kept = false;
-};
-inline Verdict judge(const std::uint64_t code[4]) {
-  int mi = 0;
-  bool any = false;
-  for (int j = 0; j < 4; ++j) {
-    any = any || (code[j] & kCanonical);
-    mi = code_plabel(code[j]) < code_plabel(code[mi]) ? j : mi;
-  }
-  return {any, any && (code[mi] & kCanonical) != 0};
-}
 inline bool stored_form_of(const std::uint64_t code[4], KeptTet& out) {
   std::uint64_t label[4];
   int off[4][3];
@@ -125,11 +165,20 @@ class FrameFeeder {
   FrameFeeder(Emit emit, std::size_t frame_tets) : emit_(std::move(emit)), frame_tets_(frame_tets) {}
 
   void add(std::span<const KeptTet> batch) {
-    for (const KeptTet& t : batch) {
-      if (codes_.size() >= frame_tets_ && t.v[0] != labels_[labels_.size() - 4]) flush();
-      labels_.insert(labels_.end(), t.v, t.v + 4);
-      codes_.push_back(t.code);
-      ++count_;
+    std::size_t i = 0;
+    while (i < batch.size()) {
+      std::size_t j = i;
+      if (codes_.size() < frame_tets_) {
+        j = std::min(batch.size(), i + (frame_tets_ - codes_.size()));  // up to the frame's size
+        append(batch.subspan(i, j - i));
+      } else {
+        // Full: the group of the last smallest label goes on, the next one starts a frame.
+        const std::uint64_t last = labels_[labels_.size() - 4];
+        while (j < batch.size() && batch[j].v[0] == last) ++j;
+        append(batch.subspan(i, j - i));
+        if (j < batch.size()) flush();
+      }
+      i = j;
     }
   }
   void flush() {
@@ -158,6 +207,20 @@ class FrameFeeder {
   }
 
  private:
+  // The tets at the end of the frame being filled, without a cut among them.
+  void append(std::span<const KeptTet> run) {
+    const std::size_t l = labels_.size(), c = codes_.size();
+    labels_.resize(l + 4 * run.size());
+    codes_.resize(c + run.size());
+    std::uint64_t* out = labels_.data() + l;
+    for (std::size_t k = 0; k < run.size(); ++k) {
+      out[4 * k] = run[k].v[0], out[4 * k + 1] = run[k].v[1], out[4 * k + 2] = run[k].v[2],
+              out[4 * k + 3] = run[k].v[3];
+      codes_[c + k] = run[k].code;
+    }
+    count_ += run.size();
+  }
+
   Emit emit_;
   std::size_t frame_tets_;
   std::vector<std::uint64_t> labels_;

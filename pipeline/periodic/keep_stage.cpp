@@ -69,21 +69,18 @@ class RankedBits {
 // and its periodic label is then the number of the box's points before it (the
 // periodic labels keep the padded job's lexicographic order); an image takes its
 // point's. Held as a bit a padded label (a point of the box), the box's points
-// counted before each word, a bit a padded label (at its canonical image), and each
-// image's word in padded order (found by the images before it: the label less the
+// counted before each word, and each image's word in padded order (found by the images before it: the label less the
 // box's points before it). So a zone's code words cost reads of these tables alone,
 // near one another for a window's labels, and no read of the sorted file.
 class PeriodicLabels {
  public:
   PeriodicLabels(const SortedView& view, const KeepSetup& s, io::TetFileHeader& header, BallGrid& grid)
-      : box_(view.count), canonical_(view.count) {
+      : box_(view.count) {
     // Each point with images, by its rank among them: its periodic label, once met.
     RankedBits has_images(s.input_points);
     for (std::uint64_t code : s.images->code) has_images.set(code >> 3);
     has_images.count();
     std::vector<std::uint64_t> image_point_label(has_images.rank(s.input_points), 0);
-    double threshold[3];
-    for (int k = 0; k < 3; ++k) threshold[k] = canonical_threshold(s.period[std::size_t(k)], s.margin[std::size_t(k)]);
     Bounds bounds;
     // (The images' slots grow a wave at a time: merged duplicates leave fewer labels
     // than points and images, so their count is known only as the waves go.)
@@ -145,7 +142,6 @@ class PeriodicLabels {
                 bits = unsigned(c & 7);
                 image_code_[image++] = has_images.rank(c >> 3) << 3 | bits;
               }
-              if (is_canonical(p, bits, s.period, threshold)) canonical_.set(label);
             }
           }
 #pragma omp critical(periodic_labels_bounds)
@@ -174,10 +170,10 @@ class PeriodicLabels {
   std::uint64_t code(std::uint64_t label) const {
     const std::uint64_t before = box_.rank(label);
     const std::uint64_t word = box_.test(label) ? before << 4 : image_code_[label - before];
-    return word | (canonical_.test(label) ? kCanonical : 0);
+    return word;
   }
 
-  std::uint64_t bytes() const { return box_.bytes() + canonical_.bytes() + 8 * image_code_.size(); }
+  std::uint64_t bytes() const { return box_.bytes() + 8 * image_code_.size(); }
 
  private:
   static constexpr std::uint64_t kBlock = std::uint64_t(1) << 16;  // labels a thread takes at once: whole words
@@ -192,7 +188,7 @@ class PeriodicLabels {
       for (int k = 0; k < 3; ++k) min[k] = std::min(min[k], o.min[k]), max[k] = std::max(max[k], o.max[k]);
     }
   };
-  RankedBits box_, canonical_;  // canonical_: tested only, never ranked
+  RankedBits box_;
   std::vector<std::uint64_t> image_code_;
   std::uint64_t points_ = 0;
 };
@@ -313,7 +309,7 @@ class KeepStage final : public OutputStage {
   const TriangulateShares shares_;
   const KeepSetup& s_;
   KeepResult& result_;
-  std::array<double, 3> lower_{};
+  CentreBox box_;  // C, where the kept tets' circumcentres lie, and the padded box
   io::TetFileHeader header_;
   std::optional<BallGrid> grid_;
   std::optional<PeriodicLabels> labels_;
@@ -333,7 +329,6 @@ class KeepStage final : public OutputStage {
   // fresh pages for each zone would cost their zeroing.
   struct Scratch {
     std::vector<ZoneVertex> vx;
-    std::vector<std::uint8_t> safe;
     KeptGroup group;
     std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>> apart;
     std::vector<std::uint32_t> deferred;
@@ -355,7 +350,7 @@ class KeepStage final : public OutputStage {
 
 void KeepStage::prepare() {
   const auto t0 = StageClock::now();
-  lower_ = padded_lower(s_.period, s_.margin);
+  box_ = centre_box(s_.period, s_.margin);
   header_.coord_type = io::CoordType::kFloat64;
   header_.tool = "tetstream 0.1.0";
   header_.options = s_.options_json;
@@ -365,13 +360,16 @@ void KeepStage::prepare() {
   // padded box, and a uniform set leaves a cell empty about once in 10^7 points.
   const double spacing =
       std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] / double(std::max<std::uint64_t>(s_.input_points, 1)));
-  grid_.emplace(lower_, s_.period, 2.52 * spacing);
+  grid_.emplace(box_.lower, s_.period, 2.52 * spacing);
   labels_.emplace(view_, s_, header_, *grid_);
   grid_->finish();
   // Safe tets are far below CGAL's edge limit once the box is some 25 spacings wide.
   const double l = std::min({s_.period[0], s_.period[1], s_.period[2]});
   safe_edges_ = grid_->diameter_bound() < std::sqrt(0.166) * l * (1 - 0x1p-20);
   header_.point_count = labels_->points();
+  // A zone's vertex keeps its place beside its code word (zone_keep.hpp, ZoneVertex).
+  if (labels_->points() >> (ZoneVertex::kPlaceShift - 4) != 0)
+    throw InputError(s_.input + ": more than 2^48 points in one periodic box");
   label_bits_ = std::max(1, int(std::bit_width(labels_->points())));
 
   io::TetWriterOptions wo;
@@ -417,8 +415,11 @@ void KeepStage::prepare() {
     feeder_.emplace([this](std::vector<std::uint64_t>& l, std::vector<std::uint16_t>& c) { emit_frame(l, c); },
                     s_.frame_tets);
     const int axis = view_.axis;
-    deferred_from_ = labels_->box_points_before(
-        view_.lower_bound(canonical_threshold(s_.period[std::size_t(axis)], s_.margin[std::size_t(axis)])));
+    // A kept tet whose m lies at its image across the sort axis' lower face has m's
+    // point within the margin of the upper face (the points with such images): those
+    // tets, which come first in the padded order, are written last.
+    deferred_from_ =
+        labels_->box_points_before(view_.lower_bound(s_.period[std::size_t(axis)] - s_.margin[std::size_t(axis)]));
     waiting_cap_ = std::max<std::size_t>(1, std::size_t(s_.waiting_bytes / sizeof(KeptTet)));
     if (resumed_) restore(state["keep"]);
   }
@@ -506,7 +507,6 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   const auto t0 = StageClock::now();
   Scratch& scratch = scratch_.at(std::size_t(omp_get_thread_num()));
   std::vector<ZoneVertex>& vx = scratch.vx;
-  std::vector<std::uint8_t>& safe = scratch.safe;
   ZoneKept kept;
   {
     const std::lock_guard lock(zones_mutex_);
@@ -518,19 +518,18 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   const std::size_t n = z.labels.size();
   kept.code.resize(n);
   vx.resize(n);
-  safe.resize(n);
   // The window's coordinates are the zone worker's (ZoneTets::xyz), read in order.
   if (z.xyz.size() < 3 * n) throw std::logic_error("periodic keep: a zone came without its coordinates");
   const double* xyz = z.xyz.data();
   for (std::size_t i = 0; i < n; ++i) {
-    vx[i].code = kept.code[i] = labels_->code(z.labels[i]);
+    const std::uint64_t code = kept.code[i] = labels_->code(z.labels[i]);
+    const std::uint64_t place = vertex_place(xyz + 3 * i, grid_->room(xyz + 3 * i), grid_->radius_bound(), box_);
+    vx[i].word = code | place << ZoneVertex::kPlaceShift;
     vx[i].axis = xyz[3 * i + std::size_t(view_.axis)];
-    safe[i] = grid_->safe(xyz + 3 * i);
   }
-  if (!keep_zone(z, kept, vx, safe, xyz, s_.period, lower_, deferred_from_, safe_edges_, scratch.group, scratch.apart,
-                 scratch.deferred)) {
+  if (!keep_zone(z, kept, vx, xyz, box_, deferred_from_, safe_edges_, scratch.group, scratch.apart, scratch.deferred)) {
     abandoned_ = true;
-    throw BallsLeaveBox(s_.input + ": a Delaunay ball at a canonical image leaves the padded box");
+    throw BallsLeaveBox(s_.input + ": a Delaunay ball near the box of circumcentres leaves the padded box");
   }
   {
     const std::lock_guard lock(zones_mutex_);
@@ -826,18 +825,17 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
                                std::uint64_t waiting_bytes, int threads) {
-  // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the
-  // canonical bits (1/8 byte a position), the images' code words and, while they are
+  // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the images'
+  // code words and, while they are
   // made, the labels of the points with images (8 bytes an image each), the waiting
   // tets (twice: the merge makes the next list beside the last), the offsets
   // (compressed: a tenth of a byte a tet, 7 tets a point), the ball grid (two bytes a
   // cell of about 16 points), the zones' code tables held for their segment (8 bytes a
-  // window point: about a byte a padded point), and each zone thread's buffers (17
-  // bytes a window point, a window taken as a 32nd of the points: its code word and sort
-  // axis coordinate, and whether it is safe).
-  return padded_points / 4 + padded_points / 8 + input_points / 4 + 16 * images + 2 * waiting_bytes +
-         padded_points / 2 + padded_points / 8 + padded_points +
-         std::uint64_t(std::max(threads, 1)) * 17 * padded_points / 32 + (1 << 20);
+  // window point: about a byte a padded point), and each zone thread's buffers (16
+  // bytes a window point, a window taken as a 32nd of the points: its code word with its
+  // place and its sort axis coordinate, zone_keep.hpp).
+  return padded_points / 4 + input_points / 4 + 16 * images + 2 * waiting_bytes + padded_points / 2 +
+         padded_points / 8 + padded_points + std::uint64_t(std::max(threads, 1)) * 16 * padded_points / 32 + (1 << 20);
 }
 
 }  // namespace tetstream::pipeline::periodic

@@ -89,9 +89,9 @@ DensityMargin margin_for_density(const std::string& points_path, std::uint64_t c
   double expected = per_cell;
   for (int k = 0; k < 3; ++k) expected *= double(std::min(2 * std::max<std::int64_t>(h, 0) + 1, n[std::size_t(k)]));
   // Per axis, the sparsest neighbourhood about the cells near its faces: within the
-  // band [L - 1.5 M, L) u [0, M / 2), where the balls at canonical images that could
-  // leave the padded box have their centres (docs/periodic.md). A raised margin widens
-  // the band: a few rounds.
+  // band [L - 3 M, L) u [0, M), where the balls that could fail the keep's condition (a
+  // radius of M/2 or more, about a centre in C = [-M/2, L - M/2)) reach across the
+  // padded box's faces (docs/periodic.md). A raised margin widens the band: a few rounds.
   for (int round = 0; round < 3; ++round) {
     bool raised = false;
     for (int axis = 0; axis < 3; ++axis) {
@@ -99,8 +99,7 @@ DensityMargin margin_for_density(const std::string& points_path, std::uint64_t c
       double sparsest = 1;  // the neighbourhood's density over the mean (an upper bound of it)
       for (std::int64_t i = 0; i < n[std::size_t(axis)]; ++i) {
         const double centre = (double(i) + 0.5) * cell;
-        if (centre < period[axis] - 1.5 * margin[std::size_t(axis)] && centre >= 0.5 * margin[std::size_t(axis)])
-          continue;
+        if (centre < period[axis] - 3 * margin[std::size_t(axis)] && centre >= margin[std::size_t(axis)]) continue;
         // The slice i across the axis: the other two axes whole.
         const int u = (axis + 1) % 3, v = (axis + 2) % 3;
         for (std::int64_t a = 0; a < n[std::size_t(u)]; ++a)

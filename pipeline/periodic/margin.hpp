@@ -2,8 +2,8 @@
 // The periodic job's first margin (docs/periodic.md, "The first margin"): a number of
 // mean spacings, raised where the points near the box's faces are sparser than the
 // mean. A void at a face holds Delaunay balls several mean spacings wide, which the
-// first margin must cover (its certificate needs the balls at canonical images inside
-// the padded box): without the density's word the first attempt fails there and the
+// first margin must cover (the keep needs the balls about centres near the box's faces
+// to have radii below half of it): without the density's word the first attempt fails there and the
 // job runs again at twice the margin. An estimate, not a proof: the certificate still
 // decides, and the margin still doubles where it fails.
 #include "pipeline/periodic/periodic.hpp"
@@ -27,7 +27,7 @@ struct DensityMargin {
 // Counts the wrapped points (raw float64, `count` of them, in [0, L)) on a periodic grid
 // of about 8 points a cell, sums each cell's neighbourhood (at least ~1000 points of
 // the mean density), and over the cells near each axis' faces (within the band the
-// balls at canonical images reach, docs/periodic.md) takes the sparsest: its spacing
+// balls that could fail the keep's condition reach, docs/periodic.md) takes the sparsest: its spacing
 // over the mean's, when above kSlack, multiplies `margin` on that axis. The grid takes
 // at most `memory_bytes` / 4 (8 bytes a cell).
 DensityMargin margin_for_density(const std::string& points_path, std::uint64_t count,
@@ -35,7 +35,8 @@ DensityMargin margin_for_density(const std::string& points_path, std::uint64_t c
                                  std::uint64_t memory_bytes);
 
 // The mean-spacing margin already holds the balls of a density a little below the
-// mean: its 8 spacings hold balls up to 2 spacings in radius, and the largest empty
+// mean: its 4 spacings hold balls up to 2 spacings in radius (the keep's condition is a
+// radius below M/2), and the largest empty
 // ball among 10^7 uniform points is about 1.65 spacings (Poisson: n (4/3) pi r^3 ~
 // ln n + ln ln n). A sparsest neighbourhood's spacing up to this factor of the mean
 // leaves the margin as it is, which keeps uniform points' margin where it was.

@@ -78,9 +78,11 @@ json fingerprint_if_there(const std::string& path) { return exists(path) ? finge
 
 // What of the periodic options changes the output's bytes (the checkpoint's identity
 // beside the plain job's: docs/periodic.md). Not --memory: a resumed job may take
-// another, and the header keeps the first (as a plain run's does).
+// another, and the header keeps the first (as a plain run's does). `keep`: which copy
+// of each tet the keep writes (the one whose circumcentre lies in the box of centres):
+// a checkpoint of a keep that chose the copies otherwise cannot be continued.
 json periodic_identity(const PeriodicOptions& p) {
-  return {{"period", p.period}, {"wrap", p.wrap}, {"margin_spacings", p.margin_spacings}};
+  return {{"period", p.period}, {"wrap", p.wrap}, {"margin_spacings", p.margin_spacings}, {"keep", "circumcentre"}};
 }
 
 std::string header_options(std::uint64_t memory, const PeriodicOptions& p, const std::array<double, 3>& margin) {

@@ -43,7 +43,7 @@ namespace tetstream::pipeline::periodic {
 struct PeriodicOptions {
   std::array<double, 3> period{0, 0, 0};
   bool wrap = true;              // points outside [0, L): wrapped (exactly), else refused
-  double margin_spacings = 8.0;  // the first margin, in mean point spacings (at most L)
+  double margin_spacings = 4.0;  // the first margin, in mean point spacings (at most L)
   // And raised where the points near the faces are sparse (margin.hpp); off when the
   // user gives the margin.
   bool margin_from_density = true;

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 namespace tetstream::pipeline::periodic {
@@ -63,12 +64,18 @@ inline bool rotate_stored(int v[4], const std::uint64_t c[4]) {
   return true;
 }
 
-// A window point as the zone's certificate reads it for every tet: its code word and
-// its coordinate on the sort axis, 16 bytes (the rest of its coordinates only for the
-// tets whose balls are computed, from the worker's window).
+// A window point as the zone's keep reads it for every tet: its code word with its
+// place (vertex_place, below) in the top bits, and its coordinate on the sort axis, 16
+// bytes (the rest of its coordinates only for the tets whose balls are computed, from
+// the worker's window). The periodic labels stay below 2^48 (keep_stage.cpp).
 struct ZoneVertex {
-  std::uint64_t code;
+  static constexpr int kPlaceShift = 52;
+  static constexpr std::uint64_t kCodeMask = (std::uint64_t(1) << kPlaceShift) - 1;
+  std::uint64_t word;
   double axis;
+
+  std::uint64_t code() const { return word & kCodeMask; }
+  unsigned place() const { return unsigned(word >> kPlaceShift); }
 };
 
 // The offsets' code of a tet whose four vertices are at offset 0.
@@ -124,17 +131,38 @@ struct KeptGroup {
   const KeptTet& last() const { return form[order.back()]; }
 };
 
-// Certifies and keeps a zone's tets in place (above). `vx` and `safe` by local id, and
+// A window point's place, as the keep reads it for each of its tets (a bit field): its
+// sides of C (keep_parts.hpp, centre_box_sides), whether it is safe or roomy in the
+// ball grid (ball_grid.hpp), and, when safe, whether every Delaunay ball through it
+// (radius below the grid's bound R) has its centre in C (kInner: inside C by more than
+// R on every axis) or outside it (kOuter: outside by R or more on one axis).
+inline constexpr std::uint16_t kSafe = 64, kRoomy = 128, kInner = 256, kOuter = 512;
+inline std::uint16_t vertex_place(const double* x, int room, double radius, const CentreBox& b) {
+  std::uint16_t f = std::uint16_t(centre_box_sides(x, b));
+  if (room == 0) return f;
+  f |= kSafe | (room > 1 ? kRoomy : 0);
+  const double r = radius * (1 + 0x1p-30);  // the roundings of the sums below, and more
+  bool inner = true, outer = false;
+  for (std::size_t k = 0; k < 3; ++k) {
+    inner = inner && x[k] - r > b.lo[k] && x[k] + r < b.hi[k];
+    outer = outer || x[k] + r < b.lo[k] || x[k] - r > b.hi[k];
+  }
+  return std::uint16_t(f | (inner ? kInner : 0) | (outer ? kOuter : 0));
+}
+
+// Certifies and keeps a zone's tets in place (above). `vx` by local id, and
 // `xyz` the window's coordinates (3 a point); the sort axis decides which tets are in
 // order: m strictly first on it is the tet's smallest padded vertex (the padded labels
-// are the lexicographic order). False at the first tet that fails the certificate (its
-// ball leaves the padded box): the margin must double. `safe_edges`: a tet with a safe
+// are the lexicographic order). A tet that may meet C passes the completeness condition
+// (covers_centre_box: at once when it has a roomy vertex, else by its circumsphere); the
+// tets whose circumcentre lies in C are kept (at once from a safe vertex that is inner or
+// outer, else from the circumsphere, exactly near C's faces). False at the first tet
+// that fails the condition: the margin must double. `safe_edges`: a tet with a safe
 // vertex (its ball smaller than the grid's reach) has no edge as long as CGAL's limit.
 // The last three are scratch.
-inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx,
-                      const std::vector<std::uint8_t>& safe, const double* xyz, const std::array<double, 3>& period,
-                      const std::array<double, 3>& lower, std::uint64_t deferred_from, bool safe_edges,
-                      KeptGroup& group, std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
+inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx, const double* xyz,
+                      const CentreBox& box, std::uint64_t deferred_from, bool safe_edges, KeptGroup& group,
+                      std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
                       std::vector<std::uint32_t>& deferred) {
   apart.clear();
   deferred.clear();
@@ -156,25 +184,42 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     group.clear();
   };
   // A tet's vertices are read at random within a slab of the window (past the caches
-  // at 10^6 points and more): each tet asks for those of the tet kAhead places on.
-  constexpr std::size_t kAhead = 8;
+  // at 10^6 points and more): each tet asks for those of the tet kAhead places on, and,
+  // once they are in, for the coordinates of the tet kAhead / 2 places on when its
+  // places say that its sphere will be computed (no roomy vertex, or no inner or outer one).
+  constexpr std::size_t kAhead = 8, kHalf = kAhead / 2;
+  const auto needs_sphere = [](unsigned any) { return !(any & kRoomy) || !(any & (kInner | kOuter)); };
   for (std::size_t i = 0; i < tets; ++i) {
     if (i + kAhead < tets)
       for (int j = 0; j < 4; ++j) TS_PREFETCH(&vx[t[4 * (i + kAhead) + std::size_t(j)]]);
+    if (i + kHalf < tets) {
+      const std::uint32_t* a = t + 4 * (i + kHalf);
+      if (needs_sphere(vx[a[0]].place() | vx[a[1]].place() | vx[a[2]].place() | vx[a[3]].place()))
+        for (int j = 0; j < 4; ++j) TS_PREFETCH(xyz + 3 * std::size_t(a[j]));
+    }
     std::uint32_t v[4] = {t[4 * i], t[4 * i + 1], t[4 * i + 2], t[4 * i + 3]};
-    std::uint64_t c[4] = {vx[v[0]].code, vx[v[1]].code, vx[v[2]].code, vx[v[3]].code};
-    const Verdict verdict = judge(c);
-    if (!verdict.certify) continue;
-    const bool small = safe[v[0]] | safe[v[1]] | safe[v[2]] | safe[v[3]];
-    ++k.certified;
-    k.balls += !small;
+    const ZoneVertex* w[4] = {&vx[v[0]], &vx[v[1]], &vx[v[2]], &vx[v[3]]};
+    const unsigned f[4] = {w[0]->place(), w[1]->place(), w[2]->place(), w[3]->place()};
+    const unsigned any = f[0] | f[1] | f[2] | f[3];
     const double* p[4] = {xyz + 3 * std::size_t(v[0]), xyz + 3 * std::size_t(v[1]), xyz + 3 * std::size_t(v[2]),
                           xyz + 3 * std::size_t(v[3])};
-    if (!small && !ball_inside(p, period, lower)) return false;
-    if (!verdict.kept) continue;
+    std::optional<core::Circumsphere> sphere;
+    const auto ball = [&]() -> const core::Circumsphere& {
+      if (!sphere) sphere = core::circumsphere(p[0], p[1], p[2], p[3]);
+      return *sphere;
+    };
+    if (may_meet_centre_box(f)) {
+      ++k.certified;
+      if (!(any & kRoomy) && !covers_centre_box(ball(), box)) return false;
+    }
+    const bool in_c = (any & kInner) ? true : (any & kOuter) ? false : centre_in_box(ball(), p, box);
+    k.balls += sphere.has_value();
+    if (!in_c) continue;
+    const std::uint64_t c[4] = {w[0]->code(), w[1]->code(), w[2]->code(), w[3]->code()};
+    const bool small = (any & kSafe) != 0;
     int order[4] = {0, 1, 2, 3};
     if (!rotate_stored(order, c)) return false;
-    if (!(small && safe_edges)) k.long_edges += long_edge(p, period);
+    if (!(small && safe_edges)) k.long_edges += long_edge(p, box.period);
     const std::uint64_t rc[4] = {c[order[0]], c[order[1]], c[order[2]], c[order[3]]};
     const std::array<std::uint32_t, 4> q = {v[order[0]], v[order[1]], v[order[2]], v[order[3]]};
     const KeptTet form = kept_tet_of(rc);
@@ -196,7 +241,7 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
       std::array<std::uint32_t, 4> q;
       std::copy(t + 4 * i, t + 4 * i + 4, q.begin());
       std::uint64_t c[4];
-      for (int j = 0; j < 4; ++j) c[j] = vx[q[std::size_t(j)]].code;
+      for (int j = 0; j < 4; ++j) c[j] = vx[q[std::size_t(j)]].code();
       apart.push_back({kept_tet_of(c), q});
     }
     kept = 0;

@@ -715,6 +715,34 @@ TEST(Predicates, InfiniteConflictAgreesWithFiniteTets) {
   EXPECT_GT(conflicts, 100);
 }
 
+// The exact circumcentre of a tet, as its first vertex (`corner`) and the offset from
+// it: N / D with u, v, w the edges from the first vertex, N = |u|^2 (v x w) + |v|^2
+// (w x u) + |w|^2 (u x v), D = 2 u.(v x w). Not valid when D = 0 (a flat tet).
+struct ExactCentre {
+  bool valid = false;
+  cpp_rational corner[3], offset[3];
+};
+ExactCentre exact_centre(const std::array<P3, 4>& p) {
+  std::array<std::array<cpp_rational, 3>, 4> r;
+  for (int i = 0; i < 4; ++i)
+    for (int k = 0; k < 3; ++k) r[i][k] = to_rational(p[i][k]);
+  cpp_rational u[3], v[3], w[3];
+  for (int k = 0; k < 3; ++k) u[k] = r[1][k] - r[0][k], v[k] = r[2][k] - r[0][k], w[k] = r[3][k] - r[0][k];
+  const auto cross = [](const cpp_rational* x, const cpp_rational* y, int k) {
+    const int i = (k + 1) % 3, j = (k + 2) % 3;
+    return x[i] * y[j] - x[j] * y[i];
+  };
+  const auto dot = [](const cpp_rational* x, const cpp_rational* y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
+  const cpp_rational den = 2 * (u[0] * cross(v, w, 0) + u[1] * cross(v, w, 1) + u[2] * cross(v, w, 2));
+  ExactCentre e;
+  for (int k = 0; k < 3; ++k) e.corner[k] = r[0][k];
+  if (den == 0) return e;
+  e.valid = true;
+  for (int k = 0; k < 3; ++k)
+    e.offset[k] = (dot(u, u) * cross(v, w, k) + dot(v, v) * cross(w, u, k) + dot(w, w) * cross(u, v, k)) / den;
+  return e;
+}
+
 // circumsphere(): the bound must contain the exact centre and radius.
 TEST(Predicates, CircumsphereBoundIsSound) {
   SEEDED(seed, 808);
@@ -757,29 +785,12 @@ TEST(Predicates, CircumsphereBoundIsSound) {
     ++valid;
     ASSERT_GE(cs.center_error, 0);
     ASSERT_GE(cs.radius_error, 0);
-    std::array<std::array<cpp_rational, 3>, 4> r;
-    for (int i = 0; i < 4; ++i)
-      for (int k = 0; k < 3; ++k) r[i][k] = to_rational(p[i][k]);
-    cpp_rational u[3], v[3], w[3];
-    for (int k = 0; k < 3; ++k) {
-      u[k] = r[1][k] - r[0][k];
-      v[k] = r[2][k] - r[0][k];
-      w[k] = r[3][k] - r[0][k];
-    }
-    const auto cross = [](const cpp_rational* x, const cpp_rational* y, int k) {
-      const int i = (k + 1) % 3, j = (k + 2) % 3;
-      return x[i] * y[j] - x[j] * y[i];
-    };
-    const auto dot = [](const cpp_rational* x, const cpp_rational* y) {
-      return x[0] * y[0] + x[1] * y[1] + x[2] * y[2];
-    };
-    const cpp_rational den = 2 * (u[0] * cross(v, w, 0) + u[1] * cross(v, w, 1) + u[2] * cross(v, w, 2));
+    const ExactCentre ec = exact_centre(p);
     cpp_rational r2 = 0;
     for (int k = 0; k < 3; ++k) {
-      const cpp_rational x =
-          (dot(u, u) * cross(v, w, k) + dot(v, v) * cross(w, u, k) + dot(w, w) * cross(u, v, k)) / den;
+      const cpp_rational& x = ec.offset[k];
       r2 += x * x;
-      const cpp_rational err = abs(r[0][k] + x - to_rational(cs.center[k]));
+      const cpp_rational err = abs(ec.corner[k] + x - to_rational(cs.center[k]));
       ASSERT_LE(err, to_rational(cs.center_error)) << "iteration " << it << " axis " << k;
     }
     const cpp_rational lo = to_rational(cs.radius) - to_rational(cs.radius_error);
@@ -803,6 +814,50 @@ TEST(Predicates, CircumsphereBoundIsSound) {
   EXPECT_GT(valid, 3200);
   EXPECT_EQ(invalid, 0);  // only an exactly flat tet (skipped above) has no sphere
   EXPECT_GT(huge, 20);    // the exact path was exercised
+}
+
+// circumcentre_side(): the exact sign of the centre's coordinate against a plane, on
+// planes through the centre (rounded, and the doubles either side of it) and through
+// exactly representable centres, against rational arithmetic.
+TEST(Predicates, CircumcentreSideIsExact) {
+  SEEDED(seed, 809);
+  tp::Rng rng(seed);
+  int zeros = 0, checked = 0;
+  for (int it = 0; it < 2000; ++it) {
+    std::array<P3, 4> p;
+    for (auto& q : p) q = random_point(rng);
+    if (it % 4 == 1) {  // nearly flat: the centre far away
+      const double s = rng.uniform(-1, 2), t = rng.uniform(-1, 2);
+      for (int k = 0; k < 3; ++k) p[3][k] = p[0][k] + s * (p[1][k] - p[0][k]) + t * (p[2][k] - p[0][k]);
+      p[3][rng.below(3)] += std::pow(10.0, -rng.uniform(0, 12));
+    } else if (it % 4 == 2) {  // a box's corners: the centre a double, on the plane exactly
+      const double x = double(rng.below(64)) / 8, y = double(rng.below(64)) / 8, z = double(rng.below(64)) / 8;
+      const double h = double(1 + rng.below(16)) / 4;
+      p = {P3{x, y, z}, P3{x + h, y, z}, P3{x, y + h, z}, P3{x, y, z + h}};
+    }
+    const ExactCentre ec = exact_centre(p);
+    if (!ec.valid) {
+      EXPECT_EQ(circumcentre_side(p[0].data(), p[1].data(), p[2].data(), p[3].data(), 0, 0.5), 0);
+      continue;
+    }
+    for (int axis = 0; axis < 3; ++axis) {
+      const cpp_rational c = ec.corner[axis] + ec.offset[axis];
+      const double near = static_cast<double>(c);
+      for (const double t : {near, std::nextafter(near, -INFINITY), std::nextafter(near, INFINITY), near * 0.5}) {
+        if (!std::isfinite(t)) continue;
+        const cpp_rational d = c - to_rational(t);
+        const int want = d > 0 ? 1 : d < 0 ? -1 : 0;
+        ASSERT_EQ(circumcentre_side(p[0].data(), p[1].data(), p[2].data(), p[3].data(), axis, t), want)
+            << "iteration " << it << " axis " << axis << " t " << t;
+        // The order of the vertices does not matter.
+        ASSERT_EQ(circumcentre_side(p[2].data(), p[0].data(), p[3].data(), p[1].data(), axis, t), want);
+        zeros += want == 0;
+        ++checked;
+      }
+    }
+  }
+  EXPECT_GT(zeros, 300);  // centres exactly on the plane were met
+  EXPECT_GT(checked, 20000);
 }
 
 TEST(Predicates, StatsCountFilterFailures) {

@@ -56,6 +56,21 @@ TEST(BallGrid, SafeOnlyWithTheReachInsideTheBox) {
   EXPECT_DOUBLE_EQ(grid.diameter_bound(), r * kCell);
 }
 
+// Roomy: safe, and the kRoom cells around it inside the grid (cells 5..11 here).
+TEST(BallGrid, RoomyOnlyWithTheRoomInsideTheBox) {
+  const BallGrid grid = lattice_grid({-1, -1, -1});
+  const int room = BallGrid::kRoom;
+  const double middle[3] = {centre(8), centre(room), centre(16 - room)};
+  EXPECT_EQ(grid.room(middle), 2);
+  for (const int edge : {room - 1, 17 - room}) {
+    const double near_face[3] = {centre(8), centre(edge), centre(8)};
+    EXPECT_EQ(grid.room(near_face), 1) << edge;  // safe, not roomy
+  }
+  const double unsafe[3] = {centre(8), centre(BallGrid::kReach - 1), centre(8)};
+  EXPECT_EQ(grid.room(unsafe), 0);
+  EXPECT_DOUBLE_EQ(grid.radius_bound(), BallGrid::kReach * kCell / 2);
+}
+
 TEST(BallGrid, AnEmptyCellMakesItsReachUnsafe) {
   const BallGrid grid = lattice_grid({6, 6, 6});
   const int r = BallGrid::kReach;

@@ -38,7 +38,7 @@ TEST(ZoneKeep, TheRotationAndOffsetsAreTheStoredFormInEveryVertexOrder) {
     for (int j = 0; j < 4; ++j) {
       const std::uint64_t label = close ? base + rng() % 50 : rng() % (std::uint64_t(1) << 40);
       const std::uint64_t bits = no_offsets ? 0 : rng() % 8;
-      code[j] = label << 4 | (rng() % 2 ? kCanonical : 0) | bits;
+      code[j] = label << 4 | bits;
     }
     int perm[4] = {0, 1, 2, 3};
     do {
@@ -60,7 +60,7 @@ TEST(ZoneKeep, TheRotationAndOffsetsAreTheStoredFormInEveryVertexOrder) {
 TEST(ZoneKeep, TwoVerticesOfOneLabelAreRefused) {
   // A tet across a whole period: two images of one point.
   for (int twin = 1; twin < 4; ++twin) {
-    std::uint64_t c[4] = {10 << 4 | kCanonical, 20 << 4, 30 << 4 | 1, 40 << 4 | 2};
+    std::uint64_t c[4] = {10 << 4, 20 << 4, 30 << 4 | 1, 40 << 4 | 2};
     c[twin] = (10 << 4) | 4;
     int order[4] = {0, 1, 2, 3};
     KeptTet t{};
