@@ -35,31 +35,41 @@ struct ZoneKept {
 // periodic label) first and the smallest of the others second (tet_records.hpp,
 // stored_form). False when two of its periodic labels are equal (a tet across a whole
 // period: the certificate fails).
+namespace detail {
+// For the first two places (s0, s1), the other two vertices in the order that makes
+// (s0, s1, x, y) an even permutation of (0, 1, 2, 3).
+struct EvenRest {
+  std::int8_t rest[4][4][2];
+  constexpr EvenRest() : rest{} {
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) {
+        if (a == b) continue;
+        int x = -1, y = -1;
+        for (int j = 0; j < 4; ++j)
+          if (j != a && j != b) (x < 0 ? x : y) = j;
+        const int p[4] = {a, b, x, y};
+        int inversions = 0;
+        for (int i = 0; i < 4; ++i)
+          for (int j = i + 1; j < 4; ++j) inversions += p[i] > p[j];
+        rest[a][b][0] = std::int8_t(inversions % 2 ? y : x);
+        rest[a][b][1] = std::int8_t(inversions % 2 ? x : y);
+      }
+  }
+};
+inline constexpr EvenRest kEvenRest{};
+}  // namespace detail
+
 inline bool rotate_stored(int v[4], const std::uint64_t c[4]) {
-  // The vertices by periodic label: each code word with its flags replaced by the
-  // vertex's index, sorted by a network of five exchanges (no branches to mispredict:
-  // the labels come in any order). That even rotation is the one that starts (s0, s1).
-  std::uint64_t k[4];
-  for (int j = 0; j < 4; ++j) k[j] = (c[j] & ~std::uint64_t(15)) | std::uint64_t(j);
-  const auto exchange = [](std::uint64_t& x, std::uint64_t& y) {
-    const std::uint64_t a = x, b = y;
-    x = std::min(a, b), y = std::max(a, b);
-  };
-  exchange(k[0], k[1]);
-  exchange(k[2], k[3]);
-  exchange(k[0], k[2]);
-  exchange(k[1], k[3]);
-  exchange(k[1], k[2]);
-  if (code_plabel(k[0]) == code_plabel(k[1]) || code_plabel(k[1]) == code_plabel(k[2]) ||
-      code_plabel(k[2]) == code_plabel(k[3]))
-    return false;
-  int p[4];
-  for (int j = 0; j < 4; ++j) p[j] = int(k[j] & 3);
-  int inversions = 0;
-  for (int i = 0; i < 4; ++i)
-    for (int j = i + 1; j < 4; ++j) inversions += p[i] > p[j];
-  if (inversions & 1) std::swap(p[2], p[3]);
-  const int w[4] = {v[p[0]], v[p[1]], v[p[2]], v[p[3]]};
+  // The smallest and second smallest labels by selects (no branches to mispredict: the
+  // labels come in any order), then the rest from the table.
+  const std::uint64_t l[4] = {code_plabel(c[0]), code_plabel(c[1]), code_plabel(c[2]), code_plabel(c[3])};
+  if ((l[0] == l[1]) | (l[0] == l[2]) | (l[0] == l[3]) | (l[1] == l[2]) | (l[1] == l[3]) | (l[2] == l[3])) return false;
+  int s0 = 0;
+  for (int j = 1; j < 4; ++j) s0 = l[j] < l[s0] ? j : s0;
+  int s1 = s0 == 0 ? 1 : 0;
+  for (int j = 1; j < 4; ++j) s1 = j != s0 && l[j] < l[s1] ? j : s1;
+  const std::int8_t* rest = detail::kEvenRest.rest[s0][s1];
+  const int w[4] = {v[s0], v[s1], v[rest[0]], v[rest[1]]};
   std::copy(w, w + 4, v);
   return true;
 }
@@ -82,20 +92,23 @@ struct ZoneVertex {
 inline constexpr std::uint16_t kNoOffsets = std::uint16_t(729 * 13 + 27 * 13 + 13);
 
 // A kept tet's stored form from its rotated code words (no reads).
-inline KeptTet kept_tet_of(const std::uint64_t c[4]) {
-  KeptTet t;
+inline void kept_tet_into(const std::uint64_t c[4], KeptTet& t) {
   int o[3], codes[3];
   for (int j = 0; j < 4; ++j) t.v[j] = code_plabel(c[j]);
   std::fill(std::begin(t.pad), std::end(t.pad), 0);
   if (((c[0] | c[1] | c[2] | c[3]) & 7) == 0) {  // the box's interior: most tets
     t.code = kNoOffsets;
-    return t;
+    return;
   }
   for (int j = 1; j < 4; ++j) {
     for (int k = 0; k < 3; ++k) o[k] = int(code_bits(c[0]) >> k & 1) - int(code_bits(c[j]) >> k & 1);
     codes[j - 1] = io::offset_code(o);
   }
   t.code = io::tet_offset_code(codes[0], codes[1], codes[2]);
+}
+inline KeptTet kept_tet_of(const std::uint64_t c[4]) {
+  KeptTet t;
+  kept_tet_into(c, t);
   return t;
 }
 
@@ -105,30 +118,37 @@ inline KeptTet kept_tet(const std::uint32_t* q, const std::vector<std::uint64_t>
   return kept_tet_of(c);
 }
 
-// The group being gathered (one m, in order): its stored forms and local ids as they
-// come, and their order, by insertion of indices (a group is a few tets).
+// The group being gathered (one m, in order): its stored forms and local ids, each
+// written where it stays (a fresh struct copied at once costs a stall: its fields' narrow
+// stores cannot feed the copy's wide loads), and their order, by insertion of indices
+// (a group is a few tets).
 struct KeptGroup {
-  std::vector<KeptTet> form;
-  std::vector<std::array<std::uint32_t, 4>> quad;
+  struct Entry {
+    KeptTet form;
+    std::array<std::uint32_t, 4> quad;
+  };
+  std::vector<Entry> entries;
   std::vector<std::uint32_t> order;
+  std::uint64_t m = 0;  // the group's smallest label, while it is not empty
 
-  bool empty() const { return order.empty(); }
+  bool empty() const { return entries.empty(); }
   void clear() {
-    form.clear();
-    quad.clear();
+    entries.clear();
     order.clear();
   }
-  void add(const KeptTet& f, const std::array<std::uint32_t, 4>& q) {
+  // The next tet's place; `settle` puts it in order once it is written.
+  Entry& next() { return entries.emplace_back(); }
+  void settle() {
     const KeptTetLess less;
-    form.push_back(f);
-    quad.push_back(q);
+    const KeptTet& f = entries.back().form;
+    m = f.v[0];
     std::size_t j = order.size();
     order.push_back(std::uint32_t(j));
-    for (; j > 0 && less(f, form[order[j - 1]]); --j) order[j] = order[j - 1];
-    order[j] = std::uint32_t(form.size() - 1);
+    for (; j > 0 && less(f, entries[order[j - 1]].form); --j) order[j] = order[j - 1];
+    order[j] = std::uint32_t(entries.size() - 1);
   }
-  const KeptTet& first() const { return form[order.front()]; }
-  const KeptTet& last() const { return form[order.back()]; }
+  const KeptTet& first() const { return entries[order.front()].form; }
+  const KeptTet& last() const { return entries[order.back()].form; }
 };
 
 // A window point's place, as the keep reads it for each of its tets (a bit field): its
@@ -180,7 +200,8 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     if (group.empty()) return;
     if (kept > 0 && !less(previous, group.first())) in_order = false;
     previous = group.last();
-    for (const std::uint32_t j : group.order) std::copy(group.quad[j].begin(), group.quad[j].end(), t + 4 * kept++);
+    for (const std::uint32_t j : group.order)
+      std::copy(group.entries[j].quad.begin(), group.entries[j].quad.end(), t + 4 * kept++);
     group.clear();
   };
   // A tet's vertices are read at random within a slab of the window (past the caches
@@ -222,16 +243,19 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     if (!(small && safe_edges)) k.long_edges += long_edge(p, box.period);
     const std::uint64_t rc[4] = {c[order[0]], c[order[1]], c[order[2]], c[order[3]]};
     const std::array<std::uint32_t, 4> q = {v[order[0]], v[order[1]], v[order[2]], v[order[3]]};
-    const KeptTet form = kept_tet_of(rc);
     const double xm = vx[q[0]].axis;
     const bool first_on_axis = xm < vx[q[1]].axis && xm < vx[q[2]].axis && xm < vx[q[3]].axis;
-    if (form.v[0] >= deferred_from) {
+    const std::uint64_t m = code_plabel(rc[0]);
+    if (m >= deferred_from) {
       deferred.insert(deferred.end(), q.begin(), q.end());
     } else if (!first_on_axis) {
-      apart.push_back({form, q});
+      apart.push_back({kept_tet_of(rc), q});
     } else {
-      if (!group.empty() && group.first().v[0] != form.v[0]) flush_group();
-      group.add(form, q);
+      if (!group.empty() && group.m != m) flush_group();
+      KeptGroup::Entry& e = group.next();
+      kept_tet_into(rc, e.form);
+      e.quad = q;
+      group.settle();
     }
   }
   flush_group();
