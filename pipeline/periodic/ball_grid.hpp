@@ -1,5 +1,5 @@
 #pragma once
-// Which padded points need no circumsphere for the ball test (docs/periodic.md,
+// Which padded points need no circumsphere for the keep's tests (docs/periodic.md,
 // "Completeness", the grid): a grid of cubes of side c over the padded box, each
 // marked when a padded point lies in it. A point v is *safe* when every cell within
 // kReach cells of v's cell (Chebyshev distance) is marked and inside the padded box.
@@ -13,8 +13,8 @@
 // is *roomy* when it is safe and every cell within kRoom cells of its own is inside the
 // padded box too: then the ball of radius sqrt(2) R about the centre of any such ball
 // (within (1 + sqrt(2)) R < 4.83 c of v) lies inside the padded box as well, which is
-// the keep's completeness condition (keep_parts.hpp, covers_centre_box). A tet with a
-// roomy vertex passes the keep's tests without computing its ball.
+// the keep's completeness condition (keep_parts.hpp, covers_centre_box): a tet with a
+// roomy vertex passes it without computing its ball.
 //
 // Rounding: a point marks a cell, and a vertex is placed in one, only when it lies in
 // the cell's interior by a relative 2^-30 of the grid's extent (far beyond the

@@ -3,12 +3,12 @@
 // the padded points, the periodic tets, each once, certified, and the output written.
 //
 // The certificate (docs/periodic.md, "Completeness"): when the padded box's 8 corner
-// cubes hold points (Images::corners_full), every canonical image v is strictly inside
-// the padded set's hull, so its star in the padded triangulation is complete (finite
-// tets only, all in the container). When every tet of those stars has its circumball
-// inside the padded box, each is a tet of DT(P*), and a set of tets of a triangulation
-// that covers a neighbourhood of v is v's whole star there: every periodic tet, whose
-// canonical copy lies in the star of its smallest label's canonical image, is kept.
+// cubes hold points (Images::corners_full), the box of centres C = [t - L, t)^3 lies
+// strictly inside the padded set's hull, so every point of C lies in a finite padded
+// tet. When every padded tet that may meet C passes the cover (keep_parts.hpp,
+// covers_centre_box), the nearest padded point of every point of C is nearer than the
+// padded box's faces: then the padded tets with their circumcentres in C are exactly
+// the tets of DT(P*) with their circumcentres in C, one copy of each periodic tet, kept.
 #include "io/output_file.hpp"
 #include "pipeline/periodic/pad.hpp"
 #include "pipeline/util/memory_budget.hpp"
@@ -38,7 +38,7 @@ struct KeepInput {
 };
 
 struct KeepResult {
-  bool complete = false;  // every ball at a canonical image inside the padded box
+  bool complete = false;  // every padded tet that may meet C passed the cover
   std::uint64_t ball_failures = 0;
   std::uint64_t points = 0, tets = 0, output_bytes = 0;
   std::vector<MemoryBudget::Share> memory_shares;  // the keep phase of the ledger (plan_keep)

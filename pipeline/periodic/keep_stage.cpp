@@ -355,9 +355,9 @@ void KeepStage::prepare() {
   header_.tool = "tetstream 0.1.0";
   header_.options = s_.options_json;
   header_.input_count = s_.input_points;
-  // Cells of about 16 points of uniform data (2.52 mean spacings): with the reach of 4
-  // cells, the ball test is skipped for the points more than ~10 spacings inside the
-  // padded box, and a uniform set leaves a cell empty about once in 10^7 points.
+  // Cells of about 16 points of uniform data (2.52 mean spacings): with the room of 5
+  // cells, the sphere is skipped for the tets of the points more than ~13 spacings
+  // inside the padded box, and a uniform set leaves a cell empty about once in 10^7 points.
   const double spacing =
       std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] / double(std::max<std::uint64_t>(s_.input_points, 1)));
   grid_.emplace(box_.lower, s_.period, 2.52 * spacing);

@@ -3,8 +3,9 @@
 // the output stage (pipeline/run/output_stage.hpp) that the ordinary job on the padded
 // points runs in place of its write stage, so the padded tets are never encoded,
 // written, read back or decoded. Each zone's tets are certified and kept on the thread
-// that triangulated it (zone_done: the code words of its window's points, the ball of
-// every tet with a vertex at its canonical image, the canonical copies kept in place);
+// that triangulated it (zone_done: the code words and places of its window's points,
+// the cover of every tet that may meet the box of centres C, the copies whose
+// circumcentres lie in C kept in place);
 // each segment's kept tets then go, merged by smallest padded label, to the stream of
 // kept_stream.hpp, which writes them in the stored order behind the frontier, and the
 // periodic container is written as the segments finish, on the writer's own thread.
@@ -48,8 +49,9 @@ struct KeepSetup {
   std::uint64_t sort_bytes = 0;  // the external sort of the tets written last (after the triangulation)
 };
 
-// A ball at a canonical image leaves the padded box: the attempt is given up, its
-// output emptied, and the periodic job doubles the margin.
+// A tet that may meet the box of centres fails the cover (a ball too large for the
+// margin): the attempt is given up, its output emptied, and the periodic job doubles
+// the margin.
 struct BallsLeaveBox : detail::JobAbandoned {
   using detail::JobAbandoned::JobAbandoned;
 };

@@ -43,7 +43,7 @@ struct Images {
   std::string path;                 // periodic-images.f64
   std::vector<std::uint64_t> code;  // point * 8 + offset bits, in file order
   // Whether each of the padded box's 8 corner cubes of side M/2 holds a padded point:
-  // then every canonical image is strictly inside the padded set's hull (keep.hpp).
+  // then the box of centres is strictly inside the padded set's hull (keep.hpp).
   bool corners_full = false;
   bool rewritten = false;  // the file was not there with these bytes
 };
@@ -52,8 +52,8 @@ struct Images {
 Images write_images(const WrappedInput& points, const std::array<double, 3>& period,
                     const std::array<double, 3>& margin, const std::string& dir, bool durable);
 
-// The canonical threshold t_k = L_k - M_k/2 (rounded once, here): a point at or past it
-// on axis k has its canonical image at offset -1 (keep.hpp).
+// The threshold t_k = L_k - M_k/2 (rounded once, here): the box of centres is
+// [t - L, t) on each axis (keep_parts.hpp, centre_box).
 inline double canonical_threshold(double period, double margin) { return period - 0.5 * margin; }
 
 // x - l when it is a double, else nullopt-like false (error-free transformation).

@@ -10,11 +10,11 @@
 //   run      the ordinary exact job on them (run_job), unchanged: its labels are the
 //            points' lexicographic order, which a translation keeps, so its symbolic
 //            perturbation is the same for a point and its images;
-//   keep     each tet whose smallest label sits at its canonical image (the one in
-//            [-M/2, L - M/2) on each axis), once every tet at a canonical image has its
-//            circumball (conservatively) inside the padded box and the box's corners
-//            hold points (the certificate, keep.hpp); otherwise the margin doubles and
-//            the job repeats, up to M = L;
+//   keep     each tet whose circumcentre lies in the box of centres C = [-M/2, L - M/2)
+//            on each axis (decided exactly), once every tet that may meet C passes the
+//            cover (its sphere small enough for the margin, conservatively) and the
+//            box's corners hold points (the certificate, keep.hpp); otherwise the
+//            margin doubles and the job repeats, up to M = L;
 //   write    the original points in label order and the kept tets with their vertex
 //            offsets (io/tet_periodic.hpp), through the job's claim on the output.
 //

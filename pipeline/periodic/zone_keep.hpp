@@ -1,14 +1,14 @@
 #pragma once
 // A zone's tets kept (keep_stage.hpp), on the thread that triangulated it: the
-// certificate of each tet with a vertex at its canonical image, the canonical copies
-// left in the zone's output, each turned to its stored rotation (m, a, b, c) and the
+// cover of each tet that may meet the box of centres C, the copies whose circumcentres
+// lie in C left in the zone's output, each turned to its stored rotation (m, a, b, c) and the
 // output put in the stored order of the format, so that a segment's zones only need
 // merging. The zone's output comes grouped by smallest padded label, and for almost
 // every kept tet that vertex is m (docs/periodic.md, "Why the padded order almost is
 // the periodic one"): those groups, each sorted, are already in the stored order. The
 // others (m is not the smallest padded vertex: an image across the sort axis' lower
-// face, or a tie on the sort axis) are sorted apart, and those kept at an image below
-// 0 on the sort axis (m at or past `deferred_from`, written last) put at the end:
+// face, or a tie on the sort axis) are sorted apart, and those whose m has images across
+// the sort axis' lower face (m at or past `deferred_from`, written last) put at the end:
 //
 //   tets = [ in order | sorted apart | deferred ]      (local ids, 4 a tet)
 #include "core/compiler.hpp"
