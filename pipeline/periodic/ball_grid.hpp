@@ -64,10 +64,7 @@ class BallGrid {
     for (int axis = 0; axis < 3; ++axis) erode(axis);
   }
 
-  bool safe(const double* p) const {
-    std::int64_t c[3];
-    return !safe_.empty() && cell_of(p, c) && safe_[index(c)];
-  }
+  bool safe(const double* p) const { return room(p) > 0; }
   // Safe, and roomy (above): 0, 1 (safe) or 2 (roomy too).
   int room(const double* p) const {
     std::int64_t c[3];

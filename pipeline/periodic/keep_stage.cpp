@@ -69,9 +69,9 @@ class RankedBits {
 // and its periodic label is then the number of the box's points before it (the
 // periodic labels keep the padded job's lexicographic order); an image takes its
 // point's. Held as a bit a padded label (a point of the box), the box's points
-// counted before each word, and each image's word in padded order (found by the images before it: the label less the
-// box's points before it). So a zone's code words cost reads of these tables alone,
-// near one another for a window's labels, and no read of the sorted file.
+// counted before each word, and each image's word in padded order (found by the
+// images before it: the label less the box's points before it). So a zone's code words cost reads of these tables
+// alone, near one another for a window's labels, and no read of the sorted file.
 class PeriodicLabels {
  public:
   PeriodicLabels(const SortedView& view, const KeepSetup& s, io::TetFileHeader& header, BallGrid& grid)
@@ -340,7 +340,7 @@ class KeepStage final : public OutputStage {
   std::size_t next_unit_ = 0;  // the unit of the next segment's first zone
   std::uint64_t long_edges_ = 0;
   bool safe_edges_ = false;
-  std::uint64_t certified_ = 0, balls_ = 0;  // this process's: tets certified, and by their ball
+  std::uint64_t certified_ = 0, balls_ = 0;  // this process's: tets that may meet C, circumspheres computed
   int label_bits_ = 1;
   bool resumed_ = false, finishing_ = false, done_ = false;
   std::atomic<bool> abandoned_{false};  // set by a zone's thread
@@ -810,8 +810,8 @@ void KeepStage::finish() {
   seconds_ += seconds_since(t0);
   spdlog::debug(
       "periodic keep: {:.2f}s in the zones (summed over threads), {:.2f}s in the segments and the end; {} tets "
-      "certified, {} of them by their circumsphere (the others by the ball grid); at most {} tets waited for the "
-      "frontier (room for {})",
+      "that may meet the box of centres covered, {} circumspheres computed (the other tets by the ball grid); at "
+      "most {} tets waited for the frontier (room for {})",
       zone_seconds_.load(), seconds_, certified_, balls_, peak_waiting_, waiting_cap_);
 }
 
@@ -826,8 +826,7 @@ std::unique_ptr<OutputStage> make_keep_stage(const StageContext& context, const 
 std::uint64_t keep_stage_bytes(std::uint64_t padded_points, std::uint64_t input_points, std::uint64_t images,
                                std::uint64_t waiting_bytes, int threads) {
   // The rank tables (a bit and a count a word of 64: 1/4 byte a position), the images'
-  // code words and, while they are
-  // made, the labels of the points with images (8 bytes an image each), the waiting
+  // code words and, while they are made, the labels of the points with images (8 bytes an image each), the waiting
   // tets (twice: the merge makes the next list beside the last), the offsets
   // (compressed: a tenth of a byte a tet, 7 tets a point), the ball grid (two bytes a
   // cell of about 16 points), the zones' code tables held for their segment (8 bytes a

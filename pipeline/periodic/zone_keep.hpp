@@ -28,7 +28,7 @@ struct ZoneKept {
   std::vector<std::uint64_t> code;  // by local id: the code word of the window's point
   std::size_t in_order_end = 0, sorted_end = 0;
   std::uint64_t long_edges = 0;
-  std::uint64_t certified = 0, balls = 0;  // tets certified; of them, by their circumsphere
+  std::uint64_t certified = 0, balls = 0;  // tets that may meet C (covered); circumspheres computed
 };
 
 // The even rotation of a tet (its vertices v, code words c) that puts m (the smallest
