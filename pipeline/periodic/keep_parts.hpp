@@ -181,6 +181,13 @@ class FrameFeeder {
       i = j;
     }
   }
+  // One tet, as add() takes it (the keep's merge gives them one at a time).
+  void add_one(const KeptTet& t) {
+    if (codes_.size() >= frame_tets_ && t.v[0] != labels_[labels_.size() - 4]) flush();
+    labels_.insert(labels_.end(), std::begin(t.v), std::end(t.v));
+    codes_.push_back(t.code);
+    ++count_;
+  }
   void flush() {
     if (codes_.empty()) return;
     emit_(labels_, codes_);

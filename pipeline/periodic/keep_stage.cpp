@@ -663,7 +663,7 @@ void KeepStage::write(const KeptTet& t) {
     throw std::logic_error("periodic keep: a tet of label " + std::to_string(t.v[0]) +
                            " came after the frontier passed it");
   last_ = t.v[0];
-  feeder_->add(std::span<const KeptTet>(&t, 1));
+  feeder_->add_one(t);
 }
 
 // A frame to the writer's thread, which also compresses its offsets (in frame order:

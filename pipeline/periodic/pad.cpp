@@ -79,36 +79,81 @@ bool wrap_coordinate(double& x, double l) {
 }
 }  // namespace
 
-WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
-                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable) {
-  WrappedInput out;
-  out.path = dir + "/periodic-points.f64";
-  auto reader = io::open_points(input, read);
-  ReplacedFile file(out.path, durable);
+namespace {
+// Reads the input a chunk at a time, each point checked and wrapped in place (or
+// refused with its file and offset), -0.0 made 0.0; `chunk(xyz, n, changed)` gets each
+// chunk and whether a coordinate of it changed, and stops the pass by returning false.
+template <class Chunk>
+void each_wrapped_chunk(io::PointReader& reader, const std::array<double, 3>& period, bool wrap,
+                        std::uint64_t& wrapped, Chunk&& chunk) {
   std::vector<double> xyz(3 * kChunk);
   static const char* kAxis[3] = {"x", "y", "z"};
-  while (const std::size_t n = reader->read(xyz.data(), kChunk)) {
+  std::uint64_t first = 0;
+  while (const std::size_t n = reader.read(xyz.data(), kChunk)) {
+    bool changed = false;
     for (std::size_t i = 0; i < n; ++i) {
       bool moved = false;
       for (int k = 0; k < 3; ++k) {
         double& x = xyz[3 * i + k];
         if (x >= 0 && x < period[k]) {
+          changed = changed || std::signbit(x);
           x += 0.0;
           continue;
         }
-        const std::uint64_t index = out.count + i;
         const std::string what = std::string(kAxis[k]) + " = " + coordinate_text(x) + " lies outside [0, " +
                                  coordinate_text(period[k]) + ")";
-        if (!wrap) throw reader->error_at(index, what + " (--periodic-outside wrap wraps it)");
+        if (!wrap) throw reader.error_at(first + i, what + " (--periodic-outside wrap wraps it)");
         if (!wrap_coordinate(x, period[k]))
-          throw reader->error_at(index, what + " and cannot be wrapped exactly (x + L is not a double)");
+          throw reader.error_at(first + i, what + " and cannot be wrapped exactly (x + L is not a double)");
         moved = true;
       }
-      out.wrapped += moved;
+      wrapped += moved;
+      changed = changed || moved;
     }
-    file.write(xyz.data(), 3 * n);
-    out.count += n;
+    if (!chunk(xyz.data(), n, changed)) return;
+    first += n;
   }
+}
+
+// Whether the padded job, which reads its points as raw float64 (24-byte records), reads
+// this input's points as the user's options do: then an input inside the box, with no
+// -0.0, is its own wrapped copy.
+bool reads_as_raw_float64(const std::string& input, const io::PointReadOptions& read, const io::PointReader& reader) {
+  // (A file of known size: a pipe could not be read twice.)
+  return input != "-" && read.more_inputs.empty() && reader.count().has_value() &&
+         reader.format_name() == "raw f64 little-endian";
+}
+}  // namespace
+
+WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable) {
+  WrappedInput out;
+  auto reader = io::open_points(input, read);
+  if (reads_as_raw_float64(input, read, *reader)) {
+    // One pass that writes nothing: a point outside the box (or a -0.0) ends it, and
+    // the copy below reads the input again.
+    bool as_is = true;
+    std::uint64_t wrapped = 0;
+    each_wrapped_chunk(*reader, period, wrap, wrapped, [&](const double*, std::size_t n, bool changed) {
+      out.count += n;
+      as_is = !changed;
+      return as_is;
+    });
+    if (as_is) {
+      out.path = input;
+      out.as_is = true;
+      return out;
+    }
+    out.count = 0;
+    reader = io::open_points(input, read);
+  }
+  out.path = dir + "/periodic-points.f64";
+  ReplacedFile file(out.path, durable);
+  each_wrapped_chunk(*reader, period, wrap, out.wrapped, [&](const double* xyz, std::size_t n, bool) {
+    file.write(xyz, 3 * n);
+    out.count += n;
+    return true;
+  });
   out.rewritten = file.close();
   return out;
 }

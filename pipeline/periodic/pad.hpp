@@ -3,7 +3,9 @@
 // float64 files in the job's directory that the ordinary job reads as one input.
 //
 //   periodic-points.f64   the N input points, wrapped into [0, L), in input order:
-//                         the ordinary job's original index of a point is its own;
+//                         the ordinary job's original index of a point is its own
+//                         (not written when the input is a raw float64 file already
+//                         inside the box, with no -0.0: the job reads that file);
 //   periodic-images.f64   the images p + o L, o in {-1, 0}^3 \ {0}, of each point with
 //                         p_k >= L_k - M_k on every axis k where o_k = -1: the periodic
 //                         set inside [-M, L)^3 minus the box itself;
@@ -28,13 +30,15 @@
 namespace tetstream::pipeline::periodic {
 
 struct WrappedInput {
-  std::string path;  // periodic-points.f64
+  std::string path;  // periodic-points.f64, or the input itself (as_is)
   std::uint64_t count = 0, wrapped = 0;
-  bool rewritten = false;  // the file was not there with these bytes
+  bool as_is = false;      // the input is its own wrapped copy (raw float64, inside the box)
+  bool rewritten = false;  // the file was not there with these bytes (never when as_is)
 };
 
 // Reads the input once and writes it wrapped (wrap) or refuses a point outside the
-// box with its file and offset (InputError). A wrap is exact or refused. `durable`:
+// box with its file and offset (InputError). A wrap is exact or refused. A raw float64
+// input inside the box is not copied (as_is), a file the job only reads. `durable`:
 // synced before it replaces an earlier one (a checkpointed job's; the same for images).
 WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
                            const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable);

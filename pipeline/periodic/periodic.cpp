@@ -37,12 +37,13 @@ double seconds_since(std::chrono::steady_clock::time_point t) {
 
 constexpr const char* kPadded = "periodic-padded.tets";
 
-// The ordinary job on the padded points in the job's directory `dir`: the same options
-// but for the files. Checkpointed when the periodic job is, its checkpoint nested in
+// The ordinary job on the padded points in the job's directory `dir` (the input itself
+// for the box's points when it is its own wrapped copy, pad.hpp): the same options but
+// for the files. Checkpointed when the periodic job is, its checkpoint nested in
 // the periodic one's (dir/periodic-padded.tets.ckpt).
-RunOptions padded_job(const RunOptions& o, const std::string& dir, bool images) {
+RunOptions padded_job(const RunOptions& o, const std::string& dir, bool input_as_is, bool images) {
   RunOptions inner = o;
-  inner.input = dir + "/periodic-points.f64";
+  inner.input = input_as_is ? o.input : dir + "/periodic-points.f64";
   inner.read = io::PointReadOptions{};
   inner.read.format = io::PointFormat::kRaw;
   inner.read.type = io::ScalarType::kFloat64;
@@ -183,12 +184,13 @@ bool Root::open(PeriodicSummary& sum) {
 
 // The flags rank 0 broadcasts before each attempt's padded job.
 struct Attempt {
-  bool corners_full = false, images = false, skip = false, resume = false;
+  bool corners_full = false, images = false, skip = false, resume = false, input_as_is = false;
   std::string encode() const {
-    return {char('0' + corners_full), char('0' + images), char('0' + skip), char('0' + resume)};
+    return {char('0' + corners_full), char('0' + images), char('0' + skip), char('0' + resume),
+            char('0' + input_as_is)};
   }
   static Attempt decode(const std::string& s) {
-    return {s.at(0) == '1', s.at(1) == '1', s.at(2) == '1', s.at(3) == '1'};
+    return {s.at(0) == '1', s.at(1) == '1', s.at(2) == '1', s.at(3) == '1', s.at(4) == '1'};
   }
 };
 }  // namespace
@@ -228,7 +230,7 @@ namespace {
 bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& periodic, const std::string& dir, Root& job,
                         const WrappedInput& points, const Images& images, const std::array<double, 3>& margin,
                         bool resume, PeriodicSummary& sum) {
-  RunOptions inner = padded_job(options, dir, !images.code.empty());
+  RunOptions inner = padded_job(options, dir, points.as_is, !images.code.empty());
   inner.resume = resume;
   KeepSetup setup;
   setup.input_points = points.count;
@@ -294,6 +296,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
         write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir, job->checkpoint() != nullptr);
     sum.input_points = points.count;
     sum.wrapped = points.wrapped;
+    sum.input_copied = !points.as_is;
     bool recorded = false;
     if (job->checkpoint()) {
       detail::trusting_checkpoint(*job->checkpoint(), [&] {
@@ -344,6 +347,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
       job->save();
       a.corners_full = images.corners_full;
       a.images = !images.code.empty();
+      a.input_as_is = points.as_is;
       a.skip = state.contains("padded");
       a.resume = exists(dir + "/" + kPadded + ".ckpt");
       sum.seconds_pad += seconds_since(t);
@@ -364,7 +368,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
       }
       job->save();
     } else if (a.corners_full) {
-      RunOptions inner = padded_job(options, dir, a.images);
+      RunOptions inner = padded_job(options, dir, a.input_as_is, a.images);
       inner.resume = a.resume;
       if (!a.skip) {
         sum.padded = comm.size() > 1 ? run_job_distributed(inner, comm) : run_job(inner);
@@ -490,6 +494,7 @@ nlohmann::json periodic_summary_json(const RunOptions& options, const PeriodicOp
                    {"points", s.points},
                    {"input_points", s.input_points},
                    {"wrapped", s.wrapped},
+                   {"input_copied", s.input_copied},
                    {"images", s.images},
                    {"tets", s.tets},
                    {"attempts", s.attempts},

@@ -58,6 +58,9 @@ struct PeriodicSummary {
   double seconds_pad = 0, seconds_keep = 0, seconds_write = 0, seconds_total = 0;
   std::uint64_t output_bytes = 0;
   bool resumed = false;  // continued a checkpoint (the padded job, or the whole job, done before)
+  // The wrapped points were written to the job's directory (pad.hpp); false when the
+  // padded job read the input itself (raw float64, already inside the box).
+  bool input_copied = true;
 };
 
 // Parses "L", "Lx,Ly,Lz" or "auto" (the HDF5 input's Header/BoxSize attribute).

@@ -12,6 +12,9 @@
 #include <array>
 #include <cmath>
 #include <random>
+#include <span>
+#include <utility>
+#include <vector>
 
 namespace tetstream::pipeline::periodic {
 namespace {
@@ -134,6 +137,50 @@ TEST(KeepParts, ASafeVertexIsInnerOrOuterOnlyWhereEveryBallAgrees) {
   EXPECT_FALSE(may_meet_centre_box(below_x));
   const unsigned across[4] = {kBelowC, 0, kBelowC, kAboveC};
   EXPECT_TRUE(may_meet_centre_box(across));
+}
+
+}  // namespace
+}  // namespace tetstream::pipeline::periodic
+
+namespace tetstream::pipeline::periodic {
+namespace {
+
+// The feeder cuts its frames between groups of one smallest label, past the frame's
+// size; tets handed one at a time (the keep's merge) make the frames that spans make.
+TEST(KeepParts, TheFeederMakesTheSameFramesFromOneTetAtATime) {
+  std::mt19937_64 rng(5);
+  std::vector<KeptTet> tets;
+  std::uint64_t m = 0;
+  for (int i = 0; i < 5000; ++i) {
+    m += rng() % 3 == 0;  // groups of about three tets
+    KeptTet t{};
+    t.v[0] = m;
+    for (int j = 1; j < 4; ++j) t.v[j] = m + 1 + rng() % 100;
+    t.code = std::uint16_t(rng() % 19683);
+    tets.push_back(t);
+  }
+  using Frames = std::vector<std::pair<std::vector<std::uint64_t>, std::vector<std::uint16_t>>>;
+  for (const std::size_t frame : {std::size_t(1), std::size_t(7), std::size_t(64), std::size_t(10000)}) {
+    Frames by_span, by_one;
+    FrameFeeder spans([&](auto& l, auto& c) { by_span.push_back({l, c}); }, frame);
+    FrameFeeder ones([&](auto& l, auto& c) { by_one.push_back({l, c}); }, frame);
+    for (std::size_t i = 0; i < tets.size();) {
+      const std::size_t n = std::min<std::size_t>(tets.size() - i, 1 + rng() % 50);
+      spans.add(std::span<const KeptTet>(&tets[i], n));
+      i += n;
+    }
+    for (const KeptTet& t : tets) ones.add_one(t);
+    spans.flush();
+    ones.flush();
+    EXPECT_EQ(by_one, by_span) << "frames of " << frame;
+    EXPECT_EQ(ones.count(), tets.size());
+    // Every frame but the last at least the frame's size, and no group across a cut.
+    for (std::size_t f = 0; f + 1 < by_one.size(); ++f) {
+      EXPECT_GE(by_one[f].second.size(), frame);
+      const std::vector<std::uint64_t>& l = by_one[f].first;
+      EXPECT_NE(l[l.size() - 4], by_one[f + 1].first[0]);
+    }
+  }
 }
 
 }  // namespace

@@ -114,6 +114,24 @@ TEST_F(Periodic, PointsOutsideTheBoxAreWrappedOrRefused) {
   }
 }
 
+// A raw float64 input inside the box is the padded job's input as it is; one -0.0 (made
+// 0.0 by the wrap) or one point outside makes the wrapped copy, and the same bytes.
+TEST_F(Periodic, AnInputInsideTheBoxIsReadInPlace) {
+  auto xyz = testing_util::dyadic_uniform(2000, 6);
+  xyz[3 * 17 + 1] = 0.0;
+  EXPECT_FALSE(run(xyz, "in_place.tets", 1, 300).input_copied);
+  const std::string in_place = bytes("in_place.tets");
+  xyz[3 * 17 + 1] = -0.0;
+  EXPECT_TRUE(run(xyz, "minus_zero.tets", 1, 300).input_copied);
+  EXPECT_EQ(bytes("minus_zero.tets"), in_place);
+  xyz[3 * 17 + 1] = 1.0;  // wrapped to 0.0
+  const auto wrapped = run(xyz, "wrapped.tets", 1, 300);
+  EXPECT_TRUE(wrapped.input_copied);
+  EXPECT_EQ(wrapped.wrapped, 1u);
+  EXPECT_EQ(bytes("wrapped.tets"), in_place);
+  EXPECT_TRUE(std::filesystem::exists(path("points.f64")));  // the input, only read
+}
+
 TEST_F(Periodic, DuplicatesAfterWrappingAreMerged) {
   // The lattice plus copies of its x = 0 face at x = 1: wrapped onto the face, merged.
   auto xyz = testing_util::lattice(8);
