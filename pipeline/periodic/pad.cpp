@@ -84,8 +84,8 @@ namespace {
 // refused with its file and offset), -0.0 made 0.0; `chunk(xyz, n, changed)` gets each
 // chunk and whether a coordinate of it changed, and stops the pass by returning false.
 template <class Chunk>
-void each_wrapped_chunk(io::PointReader& reader, const std::array<double, 3>& period, bool wrap,
-                        std::uint64_t& wrapped, Chunk&& chunk) {
+void each_wrapped_chunk(io::PointReader& reader, const std::array<double, 3>& period, bool wrap, std::uint64_t& wrapped,
+                        Chunk&& chunk) {
   std::vector<double> xyz(3 * kChunk);
   static const char* kAxis[3] = {"x", "y", "z"};
   std::uint64_t first = 0;

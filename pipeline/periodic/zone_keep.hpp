@@ -12,6 +12,7 @@
 //
 //   tets = [ in order | sorted apart | deferred ]      (local ids, 4 a tet)
 #include "core/compiler.hpp"
+#include "core/small_sort.hpp"
 #include "pipeline/periodic/keep_parts.hpp"
 #include "pipeline/periodic/tet_records.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
@@ -120,32 +121,58 @@ inline KeptTet kept_tet(const std::uint32_t* q, const std::vector<std::uint64_t>
 
 // The group being gathered (one m, in order): its stored forms and local ids, each
 // written where it stays (a fresh struct copied at once costs a stall: its fields' narrow
-// stores cannot feed the copy's wide loads), and their order, by insertion of indices
-// (a group is a few tets).
+// stores cannot feed the copy's wide loads), and their order once the group is whole.
+// The stored order within a group is (a, lo, hi, parity, offsets) (KeptTetLess): with
+// the labels' distances from m below 2^19 (most groups: neighbours along the sort axis)
+// each tet is one word, (a - m, lo - m, hi - m, parity, its index), sorted without
+// branches (core/small_sort.hpp); otherwise, or when two tets have the same labels (two
+// copies: only their offsets tell them apart), by KeptTetLess.
 struct KeptGroup {
   struct Entry {
     KeptTet form;
     std::array<std::uint32_t, 4> quad;
   };
+  static constexpr int kDeltaBits = 19, kIndexBits = 6;  // 3 x 19 + 1 + 6 = 64 bits
   std::vector<Entry> entries;
+  std::vector<std::uint64_t> keys;  // the words, while every tet has one (packed)
   std::vector<std::uint32_t> order;
   std::uint64_t m = 0;  // the group's smallest label, while it is not empty
+  bool packed = true;
 
   bool empty() const { return entries.empty(); }
   void clear() {
     entries.clear();
+    keys.clear();
     order.clear();
+    packed = true;
   }
-  // The next tet's place; `settle` puts it in order once it is written.
+  // The next tet's place; `settle` takes it once it is written.
   Entry& next() { return entries.emplace_back(); }
   void settle() {
-    const KeptTetLess less;
     const KeptTet& f = entries.back().form;
     m = f.v[0];
-    std::size_t j = order.size();
-    order.push_back(std::uint32_t(j));
-    for (; j > 0 && less(f, entries[order[j - 1]].form); --j) order[j] = order[j - 1];
-    order[j] = std::uint32_t(entries.size() - 1);
+    const std::uint64_t index = entries.size() - 1;
+    const std::uint64_t lo = std::min(f.v[2], f.v[3]) - m, hi = std::max(f.v[2], f.v[3]) - m;
+    // m < a < lo < hi: hi - m is the largest distance.
+    packed = packed & (hi >> kDeltaBits == 0) & (index >> kIndexBits == 0);
+    keys.push_back((f.v[1] - m) << 45 | lo << 26 | hi << 7 | std::uint64_t(f.v[2] > f.v[3]) << 6 | (index & 63));
+  }
+  void put_in_order() {
+    const std::size_t n = entries.size();
+    order.resize(n);
+    if (packed) {
+      core::sort_small(keys.data(), n);
+      bool twins = false;
+      for (std::size_t j = 0; j < n; ++j) {
+        order[j] = std::uint32_t(keys[j] & 63);
+        twins = twins | (j > 0 && keys[j] >> kIndexBits == keys[j - 1] >> kIndexBits);
+      }
+      if (!twins) return;
+    }
+    for (std::size_t j = 0; j < n; ++j) order[j] = std::uint32_t(j);
+    const KeptTetLess less;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::uint32_t x, std::uint32_t y) { return less(entries[x].form, entries[y].form); });
   }
   const KeptTet& first() const { return entries[order.front()].form; }
   const KeptTet& last() const { return entries[order.back()].form; }
@@ -198,6 +225,7 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
   // written back where the kept tets go once the next group starts.
   const auto flush_group = [&] {
     if (group.empty()) return;
+    group.put_in_order();
     if (kept > 0 && !less(previous, group.first())) in_order = false;
     previous = group.last();
     for (const std::uint32_t j : group.order)

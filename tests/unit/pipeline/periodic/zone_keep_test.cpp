@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cstring>
 #include <random>
+#include <vector>
 
 namespace tetstream::pipeline::periodic {
 namespace {
@@ -66,6 +67,49 @@ TEST(ZoneKeep, TwoVerticesOfOneLabelAreRefused) {
     KeptTet t{};
     EXPECT_FALSE(rotate_stored(order, c));
     EXPECT_FALSE(stored_form_of(c, t));
+  }
+}
+
+// A group's order is the stored order whatever the tets' arrival: groups whose labels
+// lie near m (one word a tet, sorted by the network), far from it, larger than the
+// words' index holds, and with two copies of one tet (the same labels, other offsets).
+TEST(ZoneKeep, AGroupComesOutInTheStoredOrder) {
+  std::mt19937_64 rng(11);
+  const KeptTetLess less;
+  const std::uint64_t m = 1000;
+  for (int trial = 0; trial < 400; ++trial) {
+    const std::size_t n = trial < 300 ? 1 + rng() % 16 : std::size_t(1 + rng() % 90);
+    const bool far = trial % 5 == 1;  // a label past 2^19 from m
+    std::vector<KeptTet> forms(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      KeptTet& f = forms[i];
+      f = KeptTet{};
+      std::uint64_t l[3];
+      for (auto& x : l) x = m + 1 + rng() % (trial % 2 ? 40 : 600000);  // many ties on a and lo
+      if (far && i == n / 2) l[2] = m + (std::uint64_t(1) << 19) + rng() % 5;
+      std::sort(l, l + 3);
+      if (l[0] == l[1] || l[1] == l[2]) l[1] = l[0] + 1, l[2] = std::max(l[2], l[1] + 1);
+      f.v[0] = m, f.v[1] = l[0];
+      const bool odd = rng() % 2;
+      f.v[2] = odd ? l[2] : l[1], f.v[3] = odd ? l[1] : l[2];
+      f.code = std::uint16_t(rng() % 19683);
+      f.pad[0] = std::uint8_t(i);  // its arrival
+    }
+    if (trial % 7 == 3 && n > 2) {
+      forms[n - 1] = forms[0];  // a second copy: same labels, its own offsets
+      forms[n - 1].code = std::uint16_t(forms[0].code ^ 1);
+      forms[n - 1].pad[0] = std::uint8_t(n - 1);
+    }
+    KeptGroup g;
+    for (const KeptTet& f : forms) {
+      g.next().form = f;
+      g.settle();
+    }
+    g.put_in_order();
+    std::stable_sort(forms.begin(), forms.end(), less);
+    ASSERT_EQ(g.order.size(), n);
+    for (std::size_t i = 0; i < n; ++i)
+      ASSERT_TRUE(same(g.entries[g.order[i]].form, forms[i])) << "trial " << trial << ", place " << i << " of " << n;
   }
 }
 
