@@ -3,18 +3,14 @@
 // "Completeness", the grid): a grid of cubes of side c over the padded box, each
 // marked when a padded point lies in it. A point v is *safe* when every cell within
 // kReach cells of v's cell (Chebyshev distance) is marked and inside the padded box.
-// Then every Delaunay ball of the padded set with v on its sphere lies inside the
-// padded box: a ball B through v of radius R >= kReach c / 2 would hold the ball B' of
-// radius kReach c / 2 tangent to it at v, which lies in the cube of half-width
-// kReach c around v (inside the marked cells) and holds a whole cell there (it holds
-// the cube of half-width c about its centre, since c sqrt(3) < kReach c / 2 for
-// kReach = 4): a padded point inside B, which a Delaunay ball never has. So the ball
-// has R < kReach c / 2, and lies within kReach c of v: inside the padded box. A point
-// is *roomy* when it is safe and every cell within kRoom cells of its own is inside the
-// padded box too: then the ball of radius sqrt(2) R about the centre of any such ball
-// (within (1 + sqrt(2)) R < 4.83 c of v) lies inside the padded box as well, which is
-// the keep's completeness condition (keep_parts.hpp, covers_centre_box): a tet with a
-// roomy vertex passes it without computing its ball.
+// Then every Delaunay ball of the padded set with v on its sphere has a radius below
+// sqrt(3) c: a ball B through v of radius R >= sqrt(3) c would hold the ball B' of
+// radius sqrt(3) c tangent to it at v, which lies within 2 sqrt(3) c < kReach c of v
+// (inside the marked cells) and holds the cube of half-width c about its centre (its
+// corners on B''s sphere), so a whole cell there: a padded point strictly inside B,
+// which a Delaunay ball never has. So the ball lies within 2 sqrt(3) c of v: inside the
+// padded box. (Which of the safe points are *roomy*, their balls' covers inside the
+// padded box too, their coordinates say: zone_keep.hpp, vertex_place.)
 //
 // Rounding: a point marks a cell, and a vertex is placed in one, only when it lies in
 // the cell's interior by a relative 2^-30 of the grid's extent (far beyond the
@@ -30,7 +26,7 @@ namespace tetstream::pipeline::periodic {
 
 class BallGrid {
  public:
-  static constexpr int kReach = 4, kRoom = 5;
+  static constexpr int kReach = 4;
 
   // The padded box from `lower` (inside -M) to the period; cells of side `cell`, fewer
   // when the grid would pass `max_cells`.
@@ -64,22 +60,17 @@ class BallGrid {
     for (int axis = 0; axis < 3; ++axis) erode(axis);
   }
 
-  bool safe(const double* p) const { return room(p) > 0; }
-  // Safe, and roomy (above): 0, 1 (safe) or 2 (roomy too).
-  int room(const double* p) const {
+  bool safe(const double* p) const {
     std::int64_t c[3];
-    if (safe_.empty() || !cell_of(p, c) || !safe_[index(c)]) return 0;
-    for (std::size_t k = 0; k < 3; ++k)
-      if (c[k] < kRoom || c[k] + kRoom >= n_[k]) return 1;
-    return 2;
+    return !safe_.empty() && cell_of(p, c) && safe_[index(c)];
   }
 
   std::uint64_t bytes() const { return marked_.size() + safe_.size(); }
-  // A ball through a safe point has a radius below kReach c / 2: its tet's edges are
-  // shorter than kReach c.
-  double diameter_bound() const { return kReach * cell_; }
-  // The radius of every Delaunay ball through a safe point is below this.
-  double radius_bound() const { return 0.5 * kReach * cell_; }
+  // The radius of every Delaunay ball through a safe point is below this (sqrt(3) c,
+  // rounded up by far more than its rounding).
+  double radius_bound() const { return std::sqrt(3.0) * cell_ * (1 + 0x1p-40); }
+  // A ball through a safe point has a diameter below this: its tet's edges are shorter.
+  double diameter_bound() const { return 2 * radius_bound(); }
 
  private:
   bool cell_of(const double* p, std::int64_t c[3]) const {

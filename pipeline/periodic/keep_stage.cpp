@@ -355,9 +355,9 @@ void KeepStage::prepare() {
   header_.tool = "tetstream 0.1.0";
   header_.options = s_.options_json;
   header_.input_count = s_.input_points;
-  // Cells of about 16 points of uniform data (2.52 mean spacings): with the room of 5
-  // cells, the sphere is skipped for the tets of the points more than ~13 spacings
-  // inside the padded box, and a uniform set leaves a cell empty about once in 10^7 points.
+  // Cells of about 16 points of uniform data (2.52 mean spacings): the sphere is skipped
+  // for the tets of the roomy points, (1 + sqrt(2)) sqrt(3) c (~10.5 spacings) inside the
+  // padded box, and a uniform set leaves a cell empty about once in 10^7 points.
   const double spacing =
       std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] / double(std::max<std::uint64_t>(s_.input_points, 1)));
   grid_.emplace(box_.lower, s_.period, 2.52 * spacing);
@@ -523,7 +523,7 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
   const double* xyz = z.xyz.data();
   for (std::size_t i = 0; i < n; ++i) {
     const std::uint64_t code = kept.code[i] = labels_->code(z.labels[i]);
-    const std::uint64_t place = vertex_place(xyz + 3 * i, grid_->room(xyz + 3 * i), grid_->radius_bound(), box_);
+    const std::uint64_t place = vertex_place(xyz + 3 * i, grid_->safe(xyz + 3 * i), grid_->radius_bound(), box_);
     vx[i].word = code | place << ZoneVertex::kPlaceShift;
     vx[i].axis = xyz[3 * i + std::size_t(view_.axis)];
   }

@@ -19,6 +19,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -179,22 +180,28 @@ struct KeptGroup {
 };
 
 // A window point's place, as the keep reads it for each of its tets (a bit field): its
-// sides of C (keep_parts.hpp, centre_box_sides), whether it is safe or roomy in the
-// ball grid (ball_grid.hpp), and, when safe, whether every Delaunay ball through it
-// (radius below the grid's bound R) has its centre in C (kInner: inside C by more than
-// R on every axis) or outside it (kOuter: outside by R or more on one axis).
+// sides of C (keep_parts.hpp, centre_box_sides), whether it is safe in the ball grid
+// (ball_grid.hpp: every Delaunay ball through it has a radius below the grid's bound
+// R), and, when safe, whether it is roomy (those balls pass the cover:
+// covers_centre_box's ball of radius sqrt(2) r about the centre, which lies within
+// (1 + sqrt(2)) R of the point, inside the padded box), and whether every such ball has
+// its centre in C (kInner: inside C by more than R on every axis) or outside it
+// (kOuter: outside by R or more on one axis).
 inline constexpr std::uint16_t kSafe = 64, kRoomy = 128, kInner = 256, kOuter = 512;
-inline std::uint16_t vertex_place(const double* x, int room, double radius, const CentreBox& b) {
+inline std::uint16_t vertex_place(const double* x, bool safe, double radius, const CentreBox& b) {
   std::uint16_t f = std::uint16_t(centre_box_sides(x, b));
-  if (room == 0) return f;
-  f |= kSafe | (room > 1 ? kRoomy : 0);
+  if (!safe) return f;
+  f |= kSafe;
   const double r = radius * (1 + 0x1p-30);  // the roundings of the sums below, and more
-  bool inner = true, outer = false;
+  const double reach = (1 + std::sqrt(2.0)) * r;
+  bool inner = true, outer = false, roomy = true;
   for (std::size_t k = 0; k < 3; ++k) {
-    inner = inner && x[k] - r > b.lo[k] && x[k] + r < b.hi[k];
-    outer = outer || x[k] + r < b.lo[k] || x[k] - r > b.hi[k];
+    const double slack = std::fabs(x[k]) * 0x1p-50;  // the sums' roundings, wherever the box lies
+    inner = inner && x[k] - r - slack > b.lo[k] && x[k] + r + slack < b.hi[k];
+    outer = outer || x[k] + r + slack < b.lo[k] || x[k] - r - slack > b.hi[k];
+    roomy = roomy && x[k] - reach - slack > b.lower[k] && x[k] + reach + slack < b.period[k];
   }
-  return std::uint16_t(f | (inner ? kInner : 0) | (outer ? kOuter : 0));
+  return std::uint16_t(f | (inner ? kInner : 0) | (outer ? kOuter : 0) | (roomy ? kRoomy : 0));
 }
 
 // Certifies and keeps a zone's tets in place (above). `vx` by local id, and

@@ -1,13 +1,17 @@
 // The ball grid of a periodic keep (pipeline/periodic/ball_grid.hpp): a point is safe
 // only when every cell within kReach cells of its own is occupied and inside the
 // padded box; an empty cell, the box's faces and a point on a cell's face make points
-// unsafe, never safe.
+// unsafe, never safe; the Delaunay balls through safe points are below the bound.
 #include "pipeline/periodic/ball_grid.hpp"
+
+#include "core/delaunay.hpp"
+#include "core/predicates.hpp"
 
 #include <gtest/gtest.h>
 
 #include <array>
 #include <cmath>
+#include <random>
 #include <vector>
 
 namespace tetstream::pipeline::periodic {
@@ -53,22 +57,36 @@ TEST(BallGrid, SafeOnlyWithTheReachInsideTheBox) {
   // On a cell's face: which cell it is in is not trusted.
   const double on_face[3] = {kLower[0] + 8 * kCell, centre(8), centre(8)};
   EXPECT_FALSE(grid.safe(on_face));
-  EXPECT_DOUBLE_EQ(grid.diameter_bound(), r * kCell);
 }
 
-// Roomy: safe, and the kRoom cells around it inside the grid (cells 5..11 here).
-TEST(BallGrid, RoomyOnlyWithTheRoomInsideTheBox) {
-  const BallGrid grid = lattice_grid({-1, -1, -1});
-  const int room = BallGrid::kRoom;
-  const double middle[3] = {centre(8), centre(room), centre(16 - room)};
-  EXPECT_EQ(grid.room(middle), 2);
-  for (const int edge : {room - 1, 17 - room}) {
-    const double near_face[3] = {centre(8), centre(edge), centre(8)};
-    EXPECT_EQ(grid.room(near_face), 1) << edge;  // safe, not roomy
-  }
-  const double unsafe[3] = {centre(8), centre(BallGrid::kReach - 1), centre(8)};
-  EXPECT_EQ(grid.room(unsafe), 0);
-  EXPECT_DOUBLE_EQ(grid.radius_bound(), BallGrid::kReach * kCell / 2);
+// The lemma on a triangulation: every Delaunay ball through a safe point has a radius
+// below the bound (sqrt(3) c), and points of uniform data inside are mostly safe.
+TEST(BallGrid, EveryBallThroughASafePointIsBelowTheBound) {
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> u(-0.25, 2.0);
+  const std::size_t n = 100000;  // about 17 points a cell of side 0.125
+  std::vector<double> xyz(3 * n);
+  for (double& x : xyz) x = u(rng);
+  BallGrid grid(kLower, kPeriod, kCell);
+  for (std::size_t i = 0; i < n; ++i) grid.mark(&xyz[3 * i]);
+  grid.finish();
+  core::Delaunay dt;
+  ASSERT_EQ(dt.build(xyz.data(), nullptr, n), core::BuildStatus::kOk);
+  std::size_t safe_tets = 0;
+  double largest = 0;
+  dt.for_each_finite_tet([&](const core::VertexId* v) {
+    bool safe = false;
+    for (int j = 0; j < 4; ++j) safe = safe || grid.safe(dt.point(v[j]));
+    if (!safe) return;
+    ++safe_tets;
+    const core::Circumsphere s = core::circumsphere(dt.point(v[0]), dt.point(v[1]), dt.point(v[2]), dt.point(v[3]));
+    largest = std::max(largest, s.radius);
+    EXPECT_LT(s.radius, grid.radius_bound());
+  });
+  EXPECT_GT(safe_tets, 30000u);
+  EXPECT_LT(largest, grid.radius_bound());
+  EXPECT_DOUBLE_EQ(grid.radius_bound(), std::sqrt(3.0) * kCell * (1 + 0x1p-40));
+  EXPECT_DOUBLE_EQ(grid.diameter_bound(), 2 * grid.radius_bound());
 }
 
 TEST(BallGrid, AnEmptyCellMakesItsReachUnsafe) {
@@ -87,7 +105,7 @@ TEST(BallGrid, AGridTooLargeGetsCoarser) {
   const double p[3] = {0.5, 0.5, 0.5};
   grid.mark(p);
   grid.finish();
-  EXPECT_GT(grid.diameter_bound(), BallGrid::kReach * kCell);
+  EXPECT_GT(grid.diameter_bound(), 2 * std::sqrt(3.0) * kCell);
   EXPECT_FALSE(grid.safe(p));  // its neighbours are empty
 }
 

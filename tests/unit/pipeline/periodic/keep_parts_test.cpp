@@ -121,18 +121,39 @@ TEST(KeepParts, TheCoverHoldsForSmallBallsAndBallsFarFromTheBox) {
 }
 
 TEST(KeepParts, ASafeVertexIsInnerOrOuterOnlyWhereEveryBallAgrees) {
-  const CentreBox b = centre_box(kPeriod, kMargin);  // C = [-0.125, 0.875)^3
+  const CentreBox b = centre_box(kPeriod, kMargin);  // C = [-0.125, 0.875)^3, padded (-0.25, 1)^3
   const double radius = 0.05;
-  const auto place = [&](P3 x, int room) { return vertex_place(x.data(), room, radius, b); };
-  EXPECT_TRUE(place({0.5, 0.5, 0.5}, 2) & kInner);
-  EXPECT_TRUE(place({0.5, 0.5, 0.5}, 2) & kRoomy);
-  EXPECT_FALSE(place({0.5, 0.5, 0.5}, 1) & kRoomy);
-  EXPECT_FALSE(place({0.5, 0.5, 0.5}, 0) & (kInner | kSafe));    // not safe: no bound on its balls
-  EXPECT_FALSE(place({-0.1, 0.5, 0.5}, 2) & (kInner | kOuter));  // within the radius of a face
-  EXPECT_FALSE(place({0.84, 0.5, 0.5}, 2) & (kInner | kOuter));
-  EXPECT_TRUE(place({-0.2, 0.5, 0.5}, 2) & kOuter);
-  EXPECT_TRUE(place({0.93, 0.5, 0.5}, 2) & kOuter);
-  EXPECT_EQ(place({-0.2, 0.5, 0.9}, 0) & kOutsideC, kBelowC | (kAboveC << 2));
+  const auto place = [&](P3 x, bool safe) { return vertex_place(x.data(), safe, radius, b); };
+  EXPECT_TRUE(place({0.5, 0.5, 0.5}, true) & kInner);
+  EXPECT_FALSE(place({0.5, 0.5, 0.5}, false) & (kInner | kSafe | kRoomy));  // not safe: no bound on its balls
+  EXPECT_FALSE(place({-0.1, 0.5, 0.5}, true) & (kInner | kOuter));          // within the radius of a face
+  EXPECT_FALSE(place({0.84, 0.5, 0.5}, true) & (kInner | kOuter));
+  EXPECT_TRUE(place({-0.2, 0.5, 0.5}, true) & kOuter);
+  EXPECT_TRUE(place({0.93, 0.5, 0.5}, true) & kOuter);
+  // Roomy: (1 + sqrt(2)) x 0.05 = 0.1207 inside the padded box on every axis.
+  EXPECT_TRUE(place({0.5, 0.5, 0.5}, true) & kRoomy);
+  EXPECT_TRUE(place({-0.129, 0.878, 0.5}, true) & kRoomy);
+  EXPECT_FALSE(place({-0.13, 0.5, 0.5}, true) & kRoomy);
+  EXPECT_FALSE(place({0.5, 0.88, 0.5}, true) & kRoomy);
+  // And a roomy vertex's balls pass the cover: spheres through it of radius up to the
+  // bound, their centres in every direction.
+  std::mt19937_64 rng(8);
+  std::normal_distribution<double> g;
+  for (const P3 x : {P3{-0.129, 0.5, 0.5}, P3{0.5, 0.878, 0.878}, P3{0.3, 0.6, -0.129}}) {
+    ASSERT_TRUE(place(x, true) & kRoomy);
+    for (int i = 0; i < 2000; ++i) {
+      P3 d{g(rng), g(rng), g(rng)};
+      const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      const double r = radius * (0.999 - 0.2 * (i % 5) / 5.0);
+      core::Circumsphere s{};
+      s.valid = true;
+      for (int k = 0; k < 3; ++k) s.center[std::size_t(k)] = x[std::size_t(k)] + r * d[std::size_t(k)] / len;
+      s.radius = r;
+      s.center_error = s.radius_error = 1e-17;
+      EXPECT_TRUE(covers_centre_box(s, b)) << i;
+    }
+  }
+  EXPECT_EQ(place({-0.2, 0.5, 0.9}, false) & kOutsideC, kBelowC | (kAboveC << 2));
   const unsigned below_x[4] = {kBelowC, kBelowC, kBelowC | (kAboveC << 1), kBelowC};
   EXPECT_FALSE(may_meet_centre_box(below_x));
   const unsigned across[4] = {kBelowC, 0, kBelowC, kAboveC};
