@@ -362,7 +362,9 @@ void KeepStage::prepare() {
       std::cbrt(s_.period[0] * s_.period[1] * s_.period[2] / double(std::max<std::uint64_t>(s_.input_points, 1)));
   grid_.emplace(box_.lower, s_.period, 2.52 * spacing);
   labels_.emplace(view_, s_, header_, *grid_);
+  const double labelled = seconds_since(t0);
   grid_->finish();
+  spdlog::debug("periodic keep: code tables in {:.3f}s, ball grid in {:.3f}s", labelled, seconds_since(t0) - labelled);
   // Safe tets are far below CGAL's edge limit once the box is some 25 spacings wide.
   const double l = std::min({s_.period[0], s_.period[1], s_.period[2]});
   safe_edges_ = grid_->diameter_bound() < std::sqrt(0.166) * l * (1 - 0x1p-20);

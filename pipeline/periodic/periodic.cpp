@@ -297,6 +297,8 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
     sum.input_points = points.count;
     sum.wrapped = points.wrapped;
     sum.input_copied = !points.as_is;
+    spdlog::debug("periodic: input {} in {:.3f}s", points.as_is ? "read in place" : "wrapped into a copy",
+                  seconds_since(t));
     bool recorded = false;
     if (job->checkpoint()) {
       detail::trusting_checkpoint(*job->checkpoint(), [&] {
@@ -316,6 +318,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
               "{:.2g} of the mean",
               d.margin[0], margin[0], *std::min_element(d.sparsest.begin(), d.sparsest.end()));
         margin = d.margin;
+        spdlog::debug("periodic: the density's margin in {:.3f}s", seconds_since(t));
       }
     }
     sum.seconds_pad += seconds_since(t);
@@ -329,6 +332,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
       ++sum.attempts;
       images = write_images(points, periodic.period, margin, dir, job->checkpoint() != nullptr);
       sum.images = images.code.size();
+      spdlog::debug("periodic: {} images in {:.3f}s", sum.images, seconds_since(t));
       // The padded job's work in the checkpoint: its nested checkpoint resumes, its
       // output (recorded with its fingerprint once complete) is kept; any other is redone.
       json& state = job->state();
