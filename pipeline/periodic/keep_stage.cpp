@@ -586,6 +586,7 @@ void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSta
   const std::uint64_t f = frontier(next_label);
   const KeptTetLess less;
   still_waiting_.clear();
+  const std::size_t spill_batch = std::min(waiting_cap_, kBlockTets);
   // The run with the smallest head gives its tets while they stay below every other
   // run's head (the zones' runs are long stretches of labels): one comparison a tet,
   // and a search of the heads only where the run changes.
@@ -604,10 +605,20 @@ void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSta
     if (!best) break;
     do {
       const KeptTet& t = best->head;
-      if (!spilling_ && t.v[0] < f)
+      if (!spilling_ && t.v[0] < f) {
         write(t);
-      else
+      } else {
         still_waiting_.push_back(t);
+        if (still_waiting_.size() >= (spilling_ ? spill_batch : waiting_cap_)) {
+          // Past the share (or a spill's batch): to the deferred file, which the external
+          // sort orders at the end, and the rest of the job after it (the tets written
+          // so far precede every one of these: they were below the frontier).
+          if (!spilling_) spdlog::debug("periodic keep: tets far out of order, the rest through the external sort");
+          spilling_ = true;
+          defer(still_waiting_);
+          still_waiting_.clear();
+        }
+      }
       if (++best->at >= best->end) break;
       if (!best->part) {
         best->head = waiting_[best->at];
@@ -620,19 +631,15 @@ void KeepStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSta
     } while (!bound || less(best->head, *bound));
   }
   if (spilling_) {
-    defer(still_waiting_);
-    still_waiting_.clear();
-  }
-  waiting_.swap(still_waiting_);
-  peak_waiting_ = std::max(peak_waiting_, waiting_.size());
-  if (!spilling_ && waiting_.size() > waiting_cap_) {
     // Tets far out of order (a shape this frontier does not suit): they and all the
-    // rest go through the external sort, which then writes them in order.
-    defer(waiting_);
-    waiting_.clear();
-    waiting_.shrink_to_fit();
-    spilling_ = true;
-    spdlog::debug("periodic keep: tets far out of order, the rest through the external sort");
+    // rest go through the external sort, which then writes them in order; the lists
+    // hold at most a batch.
+    defer(still_waiting_);
+    still_waiting_ = {};
+    waiting_ = {};
+  } else {
+    waiting_.swap(still_waiting_);
+    peak_waiting_ = std::max(peak_waiting_, waiting_.size());
   }
   // The deferred tets, in any order: the external sort orders them at the end.
   std::vector<KeptTet> tail;
