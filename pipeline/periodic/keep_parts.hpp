@@ -165,23 +165,10 @@ class FrameFeeder {
   FrameFeeder(Emit emit, std::size_t frame_tets) : emit_(std::move(emit)), frame_tets_(frame_tets) {}
 
   void add(std::span<const KeptTet> batch) {
-    std::size_t i = 0;
-    while (i < batch.size()) {
-      std::size_t j = i;
-      if (codes_.size() < frame_tets_) {
-        j = std::min(batch.size(), i + (frame_tets_ - codes_.size()));  // up to the frame's size
-        append(batch.subspan(i, j - i));
-      } else {
-        // Full: the group of the last smallest label goes on, the next one starts a frame.
-        const std::uint64_t last = labels_[labels_.size() - 4];
-        while (j < batch.size() && batch[j].v[0] == last) ++j;
-        append(batch.subspan(i, j - i));
-        if (j < batch.size()) flush();
-      }
-      i = j;
-    }
+    for (const KeptTet& t : batch) add_one(t);
   }
-  // One tet, as add() takes it (the keep's merge gives them one at a time).
+  // One tet: a full frame goes out before the next smallest label (the group of the
+  // last one goes on past the frame's size).
   void add_one(const KeptTet& t) {
     if (codes_.size() >= frame_tets_ && t.v[0] != labels_[labels_.size() - 4]) flush();
     labels_.insert(labels_.end(), std::begin(t.v), std::end(t.v));
@@ -214,20 +201,6 @@ class FrameFeeder {
   }
 
  private:
-  // The tets at the end of the frame being filled, without a cut among them.
-  void append(std::span<const KeptTet> run) {
-    const std::size_t l = labels_.size(), c = codes_.size();
-    labels_.resize(l + 4 * run.size());
-    codes_.resize(c + run.size());
-    std::uint64_t* out = labels_.data() + l;
-    for (std::size_t k = 0; k < run.size(); ++k) {
-      out[4 * k] = run[k].v[0], out[4 * k + 1] = run[k].v[1], out[4 * k + 2] = run[k].v[2],
-              out[4 * k + 3] = run[k].v[3];
-      codes_[c + k] = run[k].code;
-    }
-    count_ += run.size();
-  }
-
   Emit emit_;
   std::size_t frame_tets_;
   std::vector<std::uint64_t> labels_;

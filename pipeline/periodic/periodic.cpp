@@ -310,6 +310,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
     if (!recorded) {
       margin = mean_spacing_margin(periodic, points.count);
       if (periodic.margin_from_density) {
+        const auto density_start = std::chrono::steady_clock::now();
         const DensityMargin d =
             margin_for_density(points.path, points.count, periodic.period, margin, options.memory_bytes);
         if (d.margin != margin)
@@ -318,7 +319,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
               "{:.2g} of the mean",
               d.margin[0], margin[0], *std::min_element(d.sparsest.begin(), d.sparsest.end()));
         margin = d.margin;
-        spdlog::debug("periodic: the density's margin in {:.3f}s", seconds_since(t));
+        spdlog::debug("periodic: the density's margin in {:.3f}s", seconds_since(density_start));
       }
     }
     sum.seconds_pad += seconds_since(t);

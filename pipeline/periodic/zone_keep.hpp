@@ -133,7 +133,12 @@ struct KeptGroup {
     KeptTet form;
     std::array<std::uint32_t, 4> quad;
   };
-  static constexpr int kDeltaBits = 19, kIndexBits = 6;  // 3 x 19 + 1 + 6 = 64 bits
+  // A word: a - m, lo - m, hi - m, the parity, the index, from the top bit down.
+  static constexpr int kDeltaBits = 19, kIndexBits = 6;
+  static constexpr int kParityShift = kIndexBits, kHiShift = kParityShift + 1, kLoShift = kHiShift + kDeltaBits,
+                       kAShift = kLoShift + kDeltaBits;
+  static_assert(kAShift + kDeltaBits == 64);
+  static constexpr std::uint64_t kIndexMask = (std::uint64_t(1) << kIndexBits) - 1;
   std::vector<Entry> entries;
   std::vector<std::uint64_t> keys;  // the words, while every tet has one (packed)
   std::vector<std::uint32_t> order;
@@ -156,7 +161,8 @@ struct KeptGroup {
     const std::uint64_t lo = std::min(f.v[2], f.v[3]) - m, hi = std::max(f.v[2], f.v[3]) - m;
     // m < a < lo < hi: hi - m is the largest distance.
     packed = packed & (hi >> kDeltaBits == 0) & (index >> kIndexBits == 0);
-    keys.push_back((f.v[1] - m) << 45 | lo << 26 | hi << 7 | std::uint64_t(f.v[2] > f.v[3]) << 6 | (index & 63));
+    keys.push_back((f.v[1] - m) << kAShift | lo << kLoShift | hi << kHiShift |
+                   std::uint64_t(f.v[2] > f.v[3]) << kParityShift | (index & kIndexMask));
   }
   void put_in_order() {
     const std::size_t n = entries.size();
@@ -165,7 +171,7 @@ struct KeptGroup {
       core::sort_small(keys.data(), n);
       bool twins = false;
       for (std::size_t j = 0; j < n; ++j) {
-        order[j] = std::uint32_t(keys[j] & 63);
+        order[j] = std::uint32_t(keys[j] & kIndexMask);
         twins = twins | (j > 0 && keys[j] >> kIndexBits == keys[j - 1] >> kIndexBits);
       }
       if (!twins) return;
@@ -228,8 +234,8 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
   const auto by_form = [&less](const auto& x, const auto& y) { return less(x.first, y.first); };
   bool in_order = true;
   KeptTet previous{};
-  // The group being gathered (one m, in order), sorted by insertion as it comes and
-  // written back where the kept tets go once the next group starts.
+  // The group being gathered (one m, in order), put in order and written back where
+  // the kept tets go once the next group starts.
   const auto flush_group = [&] {
     if (group.empty()) return;
     group.put_in_order();

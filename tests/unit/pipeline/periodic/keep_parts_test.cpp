@@ -167,7 +167,8 @@ namespace tetstream::pipeline::periodic {
 namespace {
 
 // The feeder cuts its frames between groups of one smallest label, past the frame's
-// size; tets handed one at a time (the keep's merge) make the frames that spans make.
+// size, whether it is handed spans (the keep after an MPI job) or one tet at a time
+// (the keep's merge).
 TEST(KeepParts, TheFeederMakesTheSameFramesFromOneTetAtATime) {
   std::mt19937_64 rng(5);
   std::vector<KeptTet> tets;
@@ -195,7 +196,12 @@ TEST(KeepParts, TheFeederMakesTheSameFramesFromOneTetAtATime) {
     ones.flush();
     EXPECT_EQ(by_one, by_span) << "frames of " << frame;
     EXPECT_EQ(ones.count(), tets.size());
-    // Every frame but the last at least the frame's size, and no group across a cut.
+    // The frames hold every tet in order; every frame but the last at least the
+    // frame's size, and no group across a cut.
+    std::vector<std::uint64_t> all;
+    for (const auto& [labels, codes] : by_one) all.insert(all.end(), labels.begin(), labels.end());
+    ASSERT_EQ(all.size(), 4 * tets.size());
+    for (std::size_t i = 0; i < tets.size(); ++i) EXPECT_EQ(all[4 * i], tets[i].v[0]);
     for (std::size_t f = 0; f + 1 < by_one.size(); ++f) {
       EXPECT_GE(by_one[f].second.size(), frame);
       const std::vector<std::uint64_t>& l = by_one[f].first;
