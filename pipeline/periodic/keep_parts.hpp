@@ -154,11 +154,16 @@ inline bool stored_form_of(const std::uint64_t code[4], KeptTet& out) {
   return stored_form(label, off, out);
 }
 
-// The kept tets, in stored order, cut into frames at group boundaries (a frame at the
-// first new smallest label past `frame_tets` tets): each frame's labels and offset
-// codes go to `emit` as it is cut, which takes them (leaving empty vectors, recycled
-// ones best: a frame's fresh pages cost their zeroing). The frame being filled is
-// what a checkpoint keeps.
+// The kept tets, in the order of their smallest label m, cut into frames at group
+// boundaries (a frame at the first new smallest label past `frame_tets` tets): each
+// frame's labels and offset codes go to `emit` as it is cut, which takes them (leaving
+// empty vectors, recycled ones best: a frame's fresh pages cost their zeroing). The
+// frame being filled is what a checkpoint keeps.
+//
+// Within a group the tets may come in any order: the codec stores each group in the
+// stored order whatever its labels' order, so only the offsets must follow that order
+// themselves. A group whose tets all have the same offsets (almost all: the box's
+// interior) is therefore left as it came, and the others are sorted (KeptTetLess).
 class FrameFeeder {
  public:
   using Emit = std::function<void(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes)>;
@@ -170,13 +175,20 @@ class FrameFeeder {
   // One tet: a full frame goes out before the next smallest label (the group of the
   // last one goes on past the frame's size).
   void add_one(const KeptTet& t) {
-    if (codes_.size() >= frame_tets_ && t.v[0] != labels_[labels_.size() - 4]) flush();
+    if (codes_.empty() || t.v[0] != labels_[labels_.size() - 4]) {
+      close_group();
+      if (codes_.size() >= frame_tets_) flush();
+      group_ = codes_.size();
+    } else {
+      mixed_ = mixed_ || t.code != codes_[group_];
+    }
     labels_.insert(labels_.end(), std::begin(t.v), std::end(t.v));
     codes_.push_back(t.code);
     ++count_;
   }
   void flush() {
     if (codes_.empty()) return;
+    close_group();
     emit_(labels_, codes_);
     labels_.clear();
     codes_.clear();
@@ -186,25 +198,45 @@ class FrameFeeder {
   // The frame being filled, as tets; a resumed feeder's, with the count so far.
   std::vector<KeptTet> pending() const {
     std::vector<KeptTet> out(codes_.size());
-    for (std::size_t i = 0; i < out.size(); ++i) {
-      std::copy(&labels_[4 * i], &labels_[4 * i] + 4, out[i].v);
-      out[i].code = codes_[i];
-      std::fill(std::begin(out[i].pad), std::end(out[i].pad), 0);
-    }
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = tet(i);
     return out;
   }
   void restore(std::span<const KeptTet> pending, std::uint64_t count) {
     labels_.clear();
     codes_.clear();
+    mixed_ = false;
     count_ = count - pending.size();
     add(pending);
   }
 
  private:
+  KeptTet tet(std::size_t i) const {
+    KeptTet t;
+    std::copy(&labels_[4 * i], &labels_[4 * i] + 4, t.v);
+    t.code = codes_[i];
+    std::fill(std::begin(t.pad), std::end(t.pad), 0);
+    return t;
+  }
+  // The group from group_ to the end, in the stored order when its offsets differ.
+  void close_group() {
+    if (!mixed_) return;
+    mixed_ = false;
+    group_tets_.clear();
+    for (std::size_t i = group_; i < codes_.size(); ++i) group_tets_.push_back(tet(i));
+    std::sort(group_tets_.begin(), group_tets_.end(), KeptTetLess{});
+    for (std::size_t i = 0; i < group_tets_.size(); ++i) {
+      std::copy(std::begin(group_tets_[i].v), std::end(group_tets_[i].v), &labels_[4 * (group_ + i)]);
+      codes_[group_ + i] = group_tets_[i].code;
+    }
+  }
+
   Emit emit_;
   std::size_t frame_tets_;
   std::vector<std::uint64_t> labels_;
   std::vector<std::uint16_t> codes_;
+  std::size_t group_ = 0;  // where the last group starts
+  bool mixed_ = false;     // its offsets differ
+  std::vector<KeptTet> group_tets_;
   std::uint64_t count_ = 0;
 };
 

@@ -329,7 +329,6 @@ class KeepStage final : public OutputStage {
   // fresh pages for each zone would cost their zeroing.
   struct Scratch {
     std::vector<ZoneVertex> vx;
-    KeptGroup group;
     std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>> apart;
     std::vector<std::uint32_t> deferred;
   };
@@ -529,7 +528,7 @@ void KeepStage::zone_done(std::size_t unit, ZoneTets& z) {
     vx[i].word = code | place << ZoneVertex::kPlaceShift;
     vx[i].axis = xyz[3 * i + std::size_t(view_.axis)];
   }
-  if (!keep_zone(z, kept, vx, xyz, box_, deferred_from_, safe_edges_, scratch.group, scratch.apart, scratch.deferred)) {
+  if (!keep_zone(z, kept, vx, xyz, box_, deferred_from_, safe_edges_, scratch.apart, scratch.deferred)) {
     abandoned_ = true;
     throw BallsLeaveBox(s_.input + ": a Delaunay ball near the box of circumcentres leaves the padded box");
   }

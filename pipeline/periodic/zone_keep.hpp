@@ -2,17 +2,16 @@
 // A zone's tets kept (keep_stage.hpp), on the thread that triangulated it: the
 // cover of each tet that may meet the box of centres C, the copies whose circumcentres
 // lie in C left in the zone's output, each turned to its stored rotation (m, a, b, c) and the
-// output put in the stored order of the format, so that a segment's zones only need
-// merging. The zone's output comes grouped by smallest padded label, and for almost
-// every kept tet that vertex is m (docs/periodic.md, "Why the padded order almost is
-// the periodic one"): those groups, each sorted, are already in the stored order. The
-// others (m is not the smallest padded vertex: an image across the sort axis' lower
-// face, or a tie on the sort axis) are sorted apart, and those whose m has images across
-// the sort axis' lower face (m at or past `deferred_from`, written last) put at the end:
+// output put in the order of m, so that a segment's zones only need merging. The
+// zone's output comes grouped by smallest padded label, and for almost every kept tet
+// that vertex is m (docs/periodic.md, "Why the padded order almost is the periodic
+// one"): those groups are already in the order of m. The others (m is not the smallest
+// padded vertex: an image across the sort axis' lower face, or a tie on the sort axis)
+// are sorted apart, and those whose m has images across the sort axis' lower face (m at
+// or past `deferred_from`, written last) put at the end:
 //
 //   tets = [ in order | sorted apart | deferred ]      (local ids, 4 a tet)
 #include "core/compiler.hpp"
-#include "core/small_sort.hpp"
 #include "pipeline/periodic/keep_parts.hpp"
 #include "pipeline/periodic/tet_records.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
@@ -120,71 +119,6 @@ inline KeptTet kept_tet(const std::uint32_t* q, const std::vector<std::uint64_t>
   return kept_tet_of(c);
 }
 
-// The group being gathered (one m, in order): its stored forms and local ids, each
-// written where it stays (a fresh struct copied at once costs a stall: its fields' narrow
-// stores cannot feed the copy's wide loads), and their order once the group is whole.
-// The stored order within a group is (a, lo, hi, parity, offsets) (KeptTetLess): with
-// the labels' distances from m below 2^19 (most groups: neighbours along the sort axis)
-// each tet is one word, (a - m, lo - m, hi - m, parity, its index), sorted without
-// branches (core/small_sort.hpp); otherwise, or when two tets have the same labels (two
-// copies: only their offsets tell them apart), by KeptTetLess.
-struct KeptGroup {
-  struct Entry {
-    KeptTet form;
-    std::array<std::uint32_t, 4> quad;
-  };
-  // A word: a - m, lo - m, hi - m, the parity, the index, from the top bit down.
-  static constexpr int kDeltaBits = 19, kIndexBits = 6;
-  static constexpr int kParityShift = kIndexBits, kHiShift = kParityShift + 1, kLoShift = kHiShift + kDeltaBits,
-                       kAShift = kLoShift + kDeltaBits;
-  static_assert(kAShift + kDeltaBits == 64);
-  static constexpr std::uint64_t kIndexMask = (std::uint64_t(1) << kIndexBits) - 1;
-  std::vector<Entry> entries;
-  std::vector<std::uint64_t> keys;  // the words, while every tet has one (packed)
-  std::vector<std::uint32_t> order;
-  std::uint64_t m = 0;  // the group's smallest label, while it is not empty
-  bool packed = true;
-
-  bool empty() const { return entries.empty(); }
-  void clear() {
-    entries.clear();
-    keys.clear();
-    order.clear();
-    packed = true;
-  }
-  // The next tet's place; `settle` takes it once it is written.
-  Entry& next() { return entries.emplace_back(); }
-  void settle() {
-    const KeptTet& f = entries.back().form;
-    m = f.v[0];
-    const std::uint64_t index = entries.size() - 1;
-    const std::uint64_t lo = std::min(f.v[2], f.v[3]) - m, hi = std::max(f.v[2], f.v[3]) - m;
-    // m < a < lo < hi: hi - m is the largest distance.
-    packed = packed & (hi >> kDeltaBits == 0) & (index >> kIndexBits == 0);
-    keys.push_back((f.v[1] - m) << kAShift | lo << kLoShift | hi << kHiShift |
-                   std::uint64_t(f.v[2] > f.v[3]) << kParityShift | (index & kIndexMask));
-  }
-  void put_in_order() {
-    const std::size_t n = entries.size();
-    order.resize(n);
-    if (packed) {
-      core::sort_small(keys.data(), n);
-      bool twins = false;
-      for (std::size_t j = 0; j < n; ++j) {
-        order[j] = std::uint32_t(keys[j] & kIndexMask);
-        twins = twins | (j > 0 && keys[j] >> kIndexBits == keys[j - 1] >> kIndexBits);
-      }
-      if (!twins) return;
-    }
-    for (std::size_t j = 0; j < n; ++j) order[j] = std::uint32_t(j);
-    const KeptTetLess less;
-    std::stable_sort(order.begin(), order.end(),
-                     [&](std::uint32_t x, std::uint32_t y) { return less(entries[x].form, entries[y].form); });
-  }
-  const KeptTet& first() const { return entries[order.front()].form; }
-  const KeptTet& last() const { return entries[order.back()].form; }
-};
-
 // A window point's place, as the keep reads it for each of its tets (a bit field): its
 // sides of C (keep_parts.hpp, centre_box_sides), whether it is safe in the ball grid
 // (ball_grid.hpp: every Delaunay ball through it has a radius below the grid's bound
@@ -219,32 +153,25 @@ inline std::uint16_t vertex_place(const double* x, bool safe, double radius, con
 // outer, else from the circumsphere, exactly near C's faces). False at the first tet
 // that fails the condition: the margin must double. `safe_edges`: a tet with a safe
 // vertex (its ball smaller than the grid's reach) has no edge as long as CGAL's limit.
-// The last three are scratch.
+// The last two are scratch.
+//
+// The run in order is in order by m only: the order within a group does not matter to
+// the frames' labels (the codec puts each group in the stored order itself), and where
+// it matters to their offsets, a group of tets with different offsets, the frame feeder
+// sorts it (keep_parts.hpp, FrameFeeder).
 inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& vx, const double* xyz,
-                      const CentreBox& box, std::uint64_t deferred_from, bool safe_edges, KeptGroup& group,
+                      const CentreBox& box, std::uint64_t deferred_from, bool safe_edges,
                       std::vector<std::pair<KeptTet, std::array<std::uint32_t, 4>>>& apart,
                       std::vector<std::uint32_t>& deferred) {
   apart.clear();
   deferred.clear();
-  group.clear();
   std::uint32_t* t = z.tets.data();
   const std::size_t tets = z.size();
   std::size_t kept = 0;
   const KeptTetLess less;
   const auto by_form = [&less](const auto& x, const auto& y) { return less(x.first, y.first); };
   bool in_order = true;
-  KeptTet previous{};
-  // The group being gathered (one m, in order), put in order and written back where
-  // the kept tets go once the next group starts.
-  const auto flush_group = [&] {
-    if (group.empty()) return;
-    group.put_in_order();
-    if (kept > 0 && !less(previous, group.first())) in_order = false;
-    previous = group.last();
-    for (const std::uint32_t j : group.order)
-      std::copy(group.entries[j].quad.begin(), group.entries[j].quad.end(), t + 4 * kept++);
-    group.clear();
-  };
+  std::uint64_t previous_m = 0;
   // A tet's vertices are read at random within a slab of the window (past the caches
   // at 10^6 points and more): each tet asks for those of the tet kAhead places on, and,
   // once they are in, for the coordinates of the tet kAhead / 2 places on when its
@@ -292,14 +219,12 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
     } else if (!first_on_axis) {
       apart.push_back({kept_tet_of(rc), q});
     } else {
-      if (!group.empty() && group.m != m) flush_group();
-      KeptGroup::Entry& e = group.next();
-      kept_tet_into(rc, e.form);
-      e.quad = q;
-      group.settle();
+      // Written back where the kept tets go: a kept tet's place is never past its own.
+      in_order = in_order && m >= previous_m;
+      previous_m = m;
+      std::copy(q.begin(), q.end(), t + 4 * kept++);
     }
   }
-  flush_group();
   if (!in_order) {
     // A tie on the sort axis broke the groups' order: all of them sorted apart.
     for (std::size_t i = 0; i < kept; ++i) {
