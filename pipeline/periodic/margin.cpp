@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 namespace tetstream::pipeline::periodic {
@@ -48,39 +49,43 @@ void box_sum(std::vector<std::uint32_t>& cells, const std::array<std::int64_t, 3
 
 }  // namespace
 
-DensityMargin margin_for_density(const std::string& points_path, std::uint64_t count,
-                                 const std::array<double, 3>& period, std::array<double, 3> margin,
-                                 std::uint64_t memory_bytes) {
-  DensityMargin out;
-  out.margin = margin;
-  if (count == 0) return out;
-  // The grid: cubes of about kPointsPerCell points of the mean density, as many as the
-  // memory allows (the counts and their sums: 4 bytes a cell, and a line's copy).
+DensityGrid::DensityGrid(std::uint64_t count, const std::array<double, 3>& period, std::uint64_t memory_bytes)
+    : count_(count), period_(period) {
+  if (count == 0) return;
+  // Cubes of about kPointsPerCell points of the mean density, as many as the memory
+  // allows (the counts and their sums: 4 bytes a cell, and a line's copy).
   const double volume = period[0] * period[1] * period[2];
   const double most = std::max(1.0, std::min(double(count) / kPointsPerCell, double(memory_bytes / 4) / 4));
   const double side = std::cbrt(volume / std::min(most, double(std::uint64_t(1) << 26)));
-  std::array<std::int64_t, 3> n;
-  for (int k = 0; k < 3; ++k) n[std::size_t(k)] = std::max<std::int64_t>(1, std::int64_t(period[k] / side));
-  const std::size_t cells = std::size_t(n[0] * n[1] * n[2]);
-  out.cells = cells;
-  std::vector<std::uint32_t> grid(cells, 0);
-  {
-    BinaryFile in(points_path, "rb");
-    std::vector<double> xyz(3 * kChunk);
-    while (const std::size_t m = in.read(xyz.data(), 3 * sizeof(double), kChunk)) {
-      for (std::size_t i = 0; i < m; ++i) {
-        std::int64_t at = 0, stride = 1;
-        for (int k = 0; k < 3; ++k) {
-          const auto c = std::min<std::int64_t>(
-              n[std::size_t(k)] - 1, std::int64_t(xyz[3 * i + std::size_t(k)] / period[k] * double(n[std::size_t(k)])));
-          at += std::max<std::int64_t>(c, 0) * stride;
-          stride *= n[std::size_t(k)];
-        }
-        std::uint32_t& cell = grid[std::size_t(at)];
-        cell += cell != UINT32_MAX;
-      }
+  for (int k = 0; k < 3; ++k) n_[std::size_t(k)] = std::max<std::int64_t>(1, std::int64_t(period[k] / side));
+  grid_.assign(std::size_t(n_[0] * n_[1] * n_[2]), 0);
+}
+
+void DensityGrid::add(const double* xyz, std::size_t m) {
+  if (grid_.empty()) return;
+  for (std::size_t i = 0; i < m; ++i) {
+    std::int64_t at = 0, stride = 1;
+    for (int k = 0; k < 3; ++k) {
+      const auto c = std::min<std::int64_t>(
+          n_[std::size_t(k)] - 1, std::int64_t(xyz[3 * i + std::size_t(k)] / period_[k] * double(n_[std::size_t(k)])));
+      at += std::max<std::int64_t>(c, 0) * stride;
+      stride *= n_[std::size_t(k)];
     }
+    std::uint32_t& cell = grid_[std::size_t(at)];
+    cell += cell != UINT32_MAX;
   }
+}
+
+DensityMargin DensityGrid::margin(std::array<double, 3> margin) && {
+  DensityMargin out;
+  out.margin = margin;
+  if (count_ == 0) return out;
+  const std::array<std::int64_t, 3>& n = n_;
+  std::vector<std::uint32_t>& grid = grid_;
+  const std::array<double, 3>& period = period_;
+  const std::size_t cells = grid.size();
+  out.cells = cells;
+  const std::uint64_t count = count_;
   // Each cell's neighbourhood: (2h + 1)^3 cells holding about kNeighbourhoodPoints.
   const double per_cell = double(count) / double(cells);
   const auto h = std::int64_t(std::ceil((std::cbrt(kNeighbourhoodPoints / per_cell) - 1) / 2));
@@ -122,6 +127,18 @@ DensityMargin margin_for_density(const std::string& points_path, std::uint64_t c
   }
   out.margin = margin;
   return out;
+}
+
+DensityMargin margin_for_density(const std::string& points_path, std::uint64_t count,
+                                 const std::array<double, 3>& period, std::array<double, 3> margin,
+                                 std::uint64_t memory_bytes) {
+  DensityGrid grid(count, period, memory_bytes);
+  if (count > 0) {
+    BinaryFile in(points_path, "rb");
+    std::vector<double> xyz(3 * kChunk);
+    while (const std::size_t m = in.read(xyz.data(), 3 * sizeof(double), kChunk)) grid.add(xyz.data(), m);
+  }
+  return std::move(grid).margin(margin);
 }
 
 }  // namespace tetstream::pipeline::periodic

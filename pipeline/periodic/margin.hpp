@@ -11,6 +11,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace tetstream::pipeline::periodic {
 
@@ -24,12 +25,28 @@ struct DensityMargin {
   std::uint64_t cells = 0;                  // the count grid's cells
 };
 
-// Counts the wrapped points (raw float64, `count` of them, in [0, L)) on a periodic grid
-// of about 8 points a cell, sums each cell's neighbourhood (at least ~1000 points of
-// the mean density), and over the cells near each axis' faces (within the band the
-// balls that could fail the keep's condition reach, docs/periodic.md) takes the sparsest: its spacing
-// over the mean's, when above kSlack, multiplies `margin` on that axis. The grid takes
-// at most `memory_bytes` / 4 (8 bytes a cell).
+// Counts the wrapped points (in [0, L), `count` of them) on a periodic grid of about 8
+// points a cell, sums each cell's neighbourhood (at least ~1000 points of the mean
+// density), and over the cells near each axis' faces (within the band the balls that
+// could fail the keep's condition reach, docs/periodic.md) takes the sparsest: its
+// spacing over the mean's, when above kSlack, multiplies `margin` on that axis. The
+// grid takes at most `memory_bytes` / 4 (8 bytes a cell). Fed as the points are read
+// (the pass that wraps them: pad.hpp), or from the wrapped file (margin_for_density).
+class DensityGrid {
+ public:
+  DensityGrid(std::uint64_t count, const std::array<double, 3>& period, std::uint64_t memory_bytes);
+  void add(const double* xyz, std::size_t n);  // n points, 3 doubles each
+  // The margin from the counts (which it sums in place: once).
+  DensityMargin margin(std::array<double, 3> margin) &&;
+
+ private:
+  std::uint64_t count_;
+  std::array<double, 3> period_;
+  std::array<std::int64_t, 3> n_{};
+  std::vector<std::uint32_t> grid_;
+};
+
+// The same from the wrapped points' file (raw float64).
 DensityMargin margin_for_density(const std::string& points_path, std::uint64_t count,
                                  const std::array<double, 3>& period, std::array<double, 3> margin,
                                  std::uint64_t memory_bytes);

@@ -126,17 +126,28 @@ bool reads_as_raw_float64(const std::string& input, const io::PointReadOptions& 
 }  // namespace
 
 WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
-                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable) {
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable,
+                           std::optional<std::uint64_t> density_memory) {
   WrappedInput out;
   auto reader = io::open_points(input, read);
+  // A fresh count for each pass (the copy after an in-place pass that found a point to wrap).
+  const auto start_density = [&] {
+    out.density.reset();
+    if (density_memory && reader->count()) out.density.emplace(*reader->count(), period, *density_memory);
+  };
+  const auto count_density = [&](const double* xyz, std::size_t n) {
+    if (out.density) out.density->add(xyz, n);
+  };
   if (reads_as_raw_float64(input, read, *reader)) {
     // One pass that writes nothing: a point outside the box (or a -0.0) ends it, and
     // the copy below reads the input again.
     bool as_is = true;
     std::uint64_t wrapped = 0;
-    each_wrapped_chunk(*reader, period, wrap, wrapped, [&](const double*, std::size_t n, bool changed) {
+    start_density();
+    each_wrapped_chunk(*reader, period, wrap, wrapped, [&](const double* xyz, std::size_t n, bool changed) {
       out.count += n;
       as_is = !changed;
+      if (as_is) count_density(xyz, n);
       return as_is;
     });
     if (as_is) {
@@ -149,8 +160,10 @@ WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions&
   }
   out.path = dir + "/periodic-points.f64";
   ReplacedFile file(out.path, durable);
+  start_density();
   each_wrapped_chunk(*reader, period, wrap, out.wrapped, [&](const double* xyz, std::size_t n, bool) {
     file.write(xyz, 3 * n);
+    count_density(xyz, n);
     out.count += n;
     return true;
   });

@@ -21,9 +21,11 @@
 // modification time, so the checkpointed padded job (which fingerprints its input)
 // resumes; `rewritten` says the bytes changed and the padded job's work is stale.
 #include "io/point_reader.hpp"
+#include "pipeline/periodic/margin.hpp"
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,14 +36,20 @@ struct WrappedInput {
   std::uint64_t count = 0, wrapped = 0;
   bool as_is = false;      // the input is its own wrapped copy (raw float64, inside the box)
   bool rewritten = false;  // the file was not there with these bytes (never when as_is)
+  // The wrapped points counted for the first margin as they were read (margin.hpp),
+  // when asked and the input's count was known before it was read.
+  std::optional<DensityGrid> density;
 };
 
 // Reads the input once and writes it wrapped (wrap) or refuses a point outside the
 // box with its file and offset (InputError). A wrap is exact or refused. A raw float64
 // input inside the box is not copied (as_is), a file the job only reads. `durable`:
 // synced before it replaces an earlier one (a checkpointed job's; the same for images).
+// `density_memory`: count the points for the first margin in the same pass, the grid
+// within that many bytes (when the input tells its count before it is read).
 WrappedInput write_wrapped(const std::string& input, const io::PointReadOptions& read,
-                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable);
+                           const std::array<double, 3>& period, bool wrap, const std::string& dir, bool durable,
+                           std::optional<std::uint64_t> density_memory = std::nullopt);
 
 struct Images {
   std::string path;                 // periodic-images.f64

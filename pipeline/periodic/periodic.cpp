@@ -292,13 +292,7 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
   together(comm, [&] {
     if (!root) return;
     const auto t = std::chrono::steady_clock::now();
-    points =
-        write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir, job->checkpoint() != nullptr);
-    sum.input_points = points.count;
-    sum.wrapped = points.wrapped;
-    sum.input_copied = !points.as_is;
-    spdlog::debug("periodic: input {} in {:.3f}s", points.as_is ? "read in place" : "wrapped into a copy",
-                  seconds_since(t));
+    // The density counted in the same pass unless a checkpoint's margin makes it moot.
     bool recorded = false;
     if (job->checkpoint()) {
       detail::trusting_checkpoint(*job->checkpoint(), [&] {
@@ -307,19 +301,30 @@ void attempts(const RunOptions& options, const PeriodicOptions& periodic, Commun
         sum.attempts = job->state().value("attempts", std::uint64_t(0));
       });
     }
+    std::optional<std::uint64_t> density_memory;
+    if (!recorded && periodic.margin_from_density) density_memory = options.memory_bytes;
+    points = write_wrapped(options.input, options.read, periodic.period, periodic.wrap, dir,
+                           job->checkpoint() != nullptr, density_memory);
+    sum.input_points = points.count;
+    sum.wrapped = points.wrapped;
+    sum.input_copied = !points.as_is;
+    spdlog::debug("periodic: input {} in {:.3f}s", points.as_is ? "read in place" : "wrapped into a copy",
+                  seconds_since(t));
     if (!recorded) {
       margin = mean_spacing_margin(periodic, points.count);
       if (periodic.margin_from_density) {
         const auto density_start = std::chrono::steady_clock::now();
-        const DensityMargin d =
-            margin_for_density(points.path, points.count, periodic.period, margin, options.memory_bytes);
+        const DensityMargin d = points.density ? std::move(*points.density).margin(margin)
+                                               : margin_for_density(points.path, points.count, periodic.period, margin,
+                                                                    options.memory_bytes);
         if (d.margin != margin)
           spdlog::info(
               "periodic: the first margin {:.4g} (not {:.4g}): the points near the faces are as sparse as "
               "{:.2g} of the mean",
               d.margin[0], margin[0], *std::min_element(d.sparsest.begin(), d.sparsest.end()));
         margin = d.margin;
-        spdlog::debug("periodic: the density's margin in {:.3f}s", seconds_since(density_start));
+        spdlog::debug("periodic: the density's margin in {:.3f}s{}", seconds_since(density_start),
+                      points.density ? " (its counts taken in the input's pass)" : "");
       }
     }
     sum.seconds_pad += seconds_since(t);

@@ -1,8 +1,10 @@
 // The first margin from the density near the faces (margin.hpp): uniform points keep the
 // mean-spacing margin; a void at a face raises it by about the void's spacing over the
-// mean; a void in the middle of the box, far from every face, does not.
+// mean; a void in the middle of the box, far from every face, does not. The counts
+// taken in the input's pass (pad.hpp) give the margin of the wrapped file's.
 #include "io/point_rng.hpp"
 #include "pipeline/periodic/margin.hpp"
+#include "pipeline/periodic/pad.hpp"
 #include "point_files.hpp"
 
 #include <gtest/gtest.h>
@@ -10,6 +12,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <vector>
 
 namespace tetstream::pipeline::periodic {
@@ -81,6 +84,57 @@ TEST(PeriodicMargin, AVoidFarFromTheFacesLeavesIt) {
   const double middle[3] = {0.5, 0.5, 0.5};
   const DensityMargin d = estimate(dir, middle, 0.15, 0.125);
   EXPECT_EQ(d.margin, mean_margin());
+}
+
+// The grid counted while the input is read, in place or into its wrapped copy (a point
+// outside the box), is the one the wrapped file gives; an input that tells no count
+// before it is read (text) gets none, and the job counts the wrapped file.
+TEST(PeriodicMargin, TheInputsPassCountsWhatTheWrappedFileWould) {
+  io::TempDir dir;
+  const double at_face[3] = {0.0, 0.5, 0.5};
+  const std::string path = dir.file("p.f64");
+  const std::string here = std::filesystem::path(path).parent_path().string();
+  write_points(path, kPoints, at_face, 0.15, 0.125);
+  const std::array<double, 3> unit = {1, 1, 1};
+  const io::PointReadOptions read;
+  WrappedInput in_place = write_wrapped(path, read, unit, true, here, false, kMemory);
+  ASSERT_TRUE(in_place.as_is);
+  ASSERT_TRUE(in_place.density.has_value());
+  const DensityMargin expected = margin_for_density(path, kPoints, unit, mean_margin(), kMemory);
+  EXPECT_GT(expected.margin[0], 1.6 * mean_margin()[0]);
+  const DensityMargin got = std::move(*in_place.density).margin(mean_margin());
+  EXPECT_EQ(got.margin, expected.margin);
+  EXPECT_EQ(got.sparsest, expected.sparsest);
+  EXPECT_EQ(got.cells, expected.cells);
+
+  // The first point a period out on x: the pass in place stops there and the copy counts.
+  {
+    std::FILE* f = std::fopen(path.c_str(), "r+b");
+    double x = 0;
+    ASSERT_EQ(std::fread(&x, sizeof x, 1, f), 1u);
+    x += 1;
+    std::fseek(f, 0, SEEK_SET);
+    std::fwrite(&x, sizeof x, 1, f);
+    std::fclose(f);
+  }
+  WrappedInput copied = write_wrapped(path, read, unit, true, here, false, kMemory);
+  ASSERT_FALSE(copied.as_is);
+  ASSERT_EQ(copied.wrapped, 1u);
+  ASSERT_TRUE(copied.density.has_value());
+  const DensityMargin from_copy = margin_for_density(copied.path, kPoints, unit, mean_margin(), kMemory);
+  EXPECT_EQ(from_copy.margin, expected.margin);  // the same points, wrapped
+  EXPECT_EQ(std::move(*copied.density).margin(mean_margin()).margin, expected.margin);
+
+  // Text: no count before the pass.
+  const std::string text = dir.file("p.xyz");
+  {
+    std::FILE* f = std::fopen(text.c_str(), "w");
+    std::fprintf(f, "0.1 0.2 0.3\n0.4 0.5 0.6\n0.7 0.8 0.9\n0.2 0.9 0.4\n");
+    std::fclose(f);
+  }
+  const WrappedInput from_text = write_wrapped(text, read, unit, true, here, false, kMemory);
+  EXPECT_EQ(from_text.count, 4u);
+  EXPECT_FALSE(from_text.density.has_value());
 }
 
 }  // namespace
