@@ -182,7 +182,10 @@ class FrameFeeder {
     } else {
       mixed_ = mixed_ || t.code != codes_[group_];
     }
-    labels_.insert(labels_.end(), std::begin(t.v), std::end(t.v));
+    // (Not a range insert: for four labels its call costs more than the copy.)
+    const std::size_t at = labels_.size();
+    labels_.resize(at + 4);
+    std::copy_n(t.v, 4, labels_.data() + at);
     codes_.push_back(t.code);
     ++count_;
   }

@@ -176,7 +176,7 @@ inline bool keep_zone(ZoneTets& z, ZoneKept& k, const std::vector<ZoneVertex>& v
   // at 10^6 points and more): each tet asks for those of the tet kAhead places on, and,
   // once they are in, for the coordinates of the tet kAhead / 2 places on when its
   // places say that its sphere will be computed (no roomy vertex, or no inner or outer one).
-  constexpr std::size_t kAhead = 8, kHalf = kAhead / 2;
+  constexpr std::size_t kAhead = 16, kHalf = kAhead / 2;
   const auto needs_sphere = [](unsigned any) { return !(any & kRoomy) || !(any & (kInner | kOuter)); };
   for (std::size_t i = 0; i < tets; ++i) {
     if (i + kAhead < tets)
