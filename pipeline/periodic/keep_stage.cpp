@@ -29,6 +29,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <limits>
 #include <map>
@@ -298,6 +299,7 @@ class KeepStage final : public OutputStage {
  private:
   std::uint64_t frontier(std::uint64_t padded_label) const;
   void emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes);
+  void save_offsets();
   void write(const KeptTet& t);
   void defer(std::span<const KeptTet> tets) { deferred_->append(tets.data(), tets.size_bytes()); }
   void record(std::uint64_t next_label, bool finishing);
@@ -316,7 +318,12 @@ class KeepStage final : public OutputStage {
   std::unique_ptr<io::TetWriter> writer_;
   std::optional<AsyncTetWriter> async_;
   std::optional<AppendFile> deferred_, offsets_file_;
-  io::PeriodicOffsetsWriter offsets_;
+  io::PeriodicOffsetsWriter offsets_;  // POFS, filled on the segments' thread in frame order
+  // Frames' compressed offsets not yet in offsets_file_ (a checkpointed job's): the
+  // writer's thread appends those of the frames written before each record.
+  std::mutex unsaved_mutex_;
+  std::deque<std::vector<std::uint8_t>> unsaved_offsets_;
+  std::uint64_t offsets_in_file_ = 0;  // frames (the writer's thread's)
   std::optional<FrameFeeder> feeder_;
   std::uint64_t deferred_from_ = 0;  // tets of m from here on are written last (deferred)
   // The kept tets at or past the frontier, sorted, waiting for the next segments; past
@@ -461,6 +468,7 @@ void KeepStage::restore(const json& rec) {
   if (frames != writer_->frames_written())
     throw DamagedCheckpoint(offsets_file_->path() + ": damaged checkpoint (" + std::to_string(frames) +
                             " frames of offsets, " + std::to_string(writer_->frames_written()) + " frames)");
+  offsets_in_file_ = frames;
   feeder_->restore(read_tets(rec.at("pending")), rec.at("kept").get<std::uint64_t>());
   waiting_ = read_tets(rec.at("waiting"));
   last_ = rec.at("last").get<std::uint64_t>();
@@ -674,20 +682,38 @@ void KeepStage::write(const KeptTet& t) {
   feeder_->add_one(t);
 }
 
-// A frame to the writer's thread, which also compresses its offsets (in frame order:
-// POFS's, and the checkpoint's file of them) so the segments' thread does neither.
+// A frame to the writer's thread; its offsets compressed here (a few microseconds a
+// frame), so that nothing but frames goes between the frames in the writer's queue: it
+// takes the frames queued together and encodes them on its threads, as the plain write
+// stage's (a task after each frame had it encode one frame at a time, on one thread).
 void KeepStage::emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {
+  const std::span<const std::uint8_t> z = offsets_.add_frame(codes);
+  if (context_.checkpoint) {
+    // For the checkpoint's file: its tet count and byte count, then the bytes.
+    const std::uint32_t sizes[2] = {std::uint32_t(codes.size()), std::uint32_t(z.size())};
+    std::vector<std::uint8_t> block(sizeof sizes + z.size());
+    std::memcpy(block.data(), sizes, sizeof sizes);
+    std::copy(z.begin(), z.end(), block.begin() + sizeof sizes);
+    const std::lock_guard lock(unsaved_mutex_);
+    unsaved_offsets_.push_back(std::move(block));
+  }
   std::vector<std::uint64_t> next = async_->take_buffer();
   next.reserve(4 * s_.frame_tets + 4096);  // a frame and a group's overrun
   labels.swap(next);
   async_->add_tets(std::move(next));
-  async_->add_task([this, codes = std::vector<std::uint16_t>(codes)](io::TetWriter&) {
-    const std::span<const std::uint8_t> z = offsets_.add_frame(codes);
-    if (!context_.checkpoint) return;
-    const std::uint32_t sizes[2] = {std::uint32_t(codes.size()), std::uint32_t(z.size())};
-    offsets_file_->append(sizes, sizeof sizes);
-    offsets_file_->append(z.data(), z.size());
-  });
+}
+
+// On the writer's thread (or after a drain): the offsets of the frames written so far
+// into the checkpoint's file, which then holds exactly those of the committed frames.
+void KeepStage::save_offsets() {
+  const std::uint64_t frames = writer_->frames_written();
+  const std::lock_guard lock(unsaved_mutex_);
+  for (; offsets_in_file_ < frames; ++offsets_in_file_) {
+    if (unsaved_offsets_.empty()) throw std::logic_error("periodic keep: a frame written without its offsets");
+    offsets_file_->append(unsaved_offsets_.front().data(), unsaved_offsets_.front().size());
+    unsaved_offsets_.pop_front();
+  }
+  offsets_file_->sync();
 }
 
 // Records that the output holds every kept tet of the padded labels below
@@ -735,9 +761,9 @@ void KeepStage::record(std::uint64_t next_label, bool finishing) {
   });
   // On the writer's thread (or after a drain): the frames' offsets written so far are
   // those of the frames committed.
-  auto persist = [checkpoint, old, disk = context_.disk, offsets = &*offsets_file_](json saved,
-                                                                                    std::uint64_t committed) {
-    offsets->sync();
+  auto persist = [this, checkpoint, old, disk = context_.disk, offsets = &*offsets_file_](json saved,
+                                                                                          std::uint64_t committed) {
+    save_offsets();
     saved["keep"]["committed"] = committed;
     saved["keep"]["offsets_bytes"] = offsets->bytes();
     saved["keep"]["offsets_crc32c"] = offsets->crc();
