@@ -687,20 +687,27 @@ void KeepStage::write(const KeptTet& t) {
 // takes the frames queued together and encodes them on its threads, as the plain write
 // stage's (a task after each frame had it encode one frame at a time, on one thread).
 void KeepStage::emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {
-  const std::span<const std::uint8_t> z = offsets_.add_frame(codes);
-  if (context_.checkpoint) {
+  const auto compress = [this](std::span<const std::uint16_t> frame) {
+    const std::span<const std::uint8_t> z = offsets_.add_frame(frame);
+    if (!context_.checkpoint) return;
     // For the checkpoint's file: its tet count and byte count, then the bytes.
-    const std::uint32_t sizes[2] = {std::uint32_t(codes.size()), std::uint32_t(z.size())};
+    const std::uint32_t sizes[2] = {std::uint32_t(frame.size()), std::uint32_t(z.size())};
     std::vector<std::uint8_t> block(sizeof sizes + z.size());
     std::memcpy(block.data(), sizes, sizeof sizes);
     std::copy(z.begin(), z.end(), block.begin() + sizeof sizes);
     const std::lock_guard lock(unsaved_mutex_);
     unsaved_offsets_.push_back(std::move(block));
-  }
+  };
+  // With one encoder (a small budget) nothing is gathered: the writer's thread
+  // compresses the offsets too, as a task behind the frame.
+  const bool here = shares_.encoders > 1;
+  if (here) compress(codes);
   std::vector<std::uint64_t> next = async_->take_buffer();
   next.reserve(4 * s_.frame_tets + 4096);  // a frame and a group's overrun
   labels.swap(next);
   async_->add_tets(std::move(next));
+  if (!here)
+    async_->add_task([compress, frame = std::vector<std::uint16_t>(codes)](io::TetWriter&) { compress(frame); });
 }
 
 // On the writer's thread (or after a drain): the offsets of the frames written so far
