@@ -682,8 +682,8 @@ void KeepStage::write(const KeptTet& t) {
   feeder_->add_one(t);
 }
 
-// A frame to the writer's thread; its offsets compressed here (a few microseconds a
-// frame), so that nothing but frames goes between the frames in the writer's queue: it
+// A frame to the writer's thread; with several encoders its offsets compressed here (a
+// few microseconds a frame), so that nothing but frames goes between the frames in the writer's queue: it
 // takes the frames queued together and encodes them on its threads, as the plain write
 // stage's (a task after each frame had it encode one frame at a time, on one thread).
 void KeepStage::emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::uint16_t>& codes) {
