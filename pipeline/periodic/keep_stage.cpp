@@ -702,10 +702,12 @@ void KeepStage::emit_frame(std::vector<std::uint64_t>& labels, std::vector<std::
   // compresses the offsets too, as a task behind the frame.
   const bool here = shares_.encoders > 1;
   if (here) compress(codes);
-  std::vector<std::uint64_t> next = async_->take_buffer();
-  next.reserve(4 * s_.frame_tets + 4096);  // a frame and a group's overrun
-  labels.swap(next);
-  async_->add_tets(std::move(next));
+  // Queued before the next buffer is taken, as the plain write stage's FrameCutter:
+  // while the queue is full, 2 x encoders + 1 frames are alive, what the writer's
+  // share holds (taken first, the next was one more: 2 MiB over --memory 68M).
+  async_->add_tets(std::move(labels));
+  labels = async_->take_buffer();
+  labels.reserve(4 * s_.frame_tets + 4096);  // a frame and a group's overrun
   if (!here)
     async_->add_task([compress, frame = std::vector<std::uint16_t>(codes)](io::TetWriter&) { compress(frame); });
 }
@@ -800,16 +802,23 @@ std::uint64_t KeepStage::end_sort_bytes() const {
 }
 
 void KeepStage::merge_deferred() {
+  // The block the file is read back through is inside the share (an eighth of it, at
+  // most kBlockTets), and gone before the merge, whose windows and output take the
+  // sorter's whole budget: beside it, the block was 2.6 MB over --memory at 66M.
+  const std::size_t bytes = std::size_t(end_sort_bytes());
+  const std::size_t block_tets = std::clamp<std::size_t>(bytes / 8 / sizeof(KeptTet), 1024, kBlockTets);
   ExternalSorter<KeptTet, KeptTetLess> sorter(
-      sort_options(std::size_t(end_sort_bytes()), context_.dir, "periodic-tets"));
+      sort_options(bytes - block_tets * sizeof(KeptTet), context_.dir, "periodic-tets"));
   const int bits = label_bits_;
   sorter.set_run_sort([bits](KeptTet* d, std::size_t n) { radix_sort_kept(d, n, bits); }, sizeof(KeptTet));
-  std::vector<KeptTet> block(kBlockTets);
-  const std::uint64_t count = deferred_->bytes() / sizeof(KeptTet);
-  for (std::uint64_t first = 0; first < count; first += block.size()) {
-    const std::size_t k = std::size_t(std::min<std::uint64_t>(block.size(), count - first));
-    deferred_->read(first * sizeof(KeptTet), block.data(), k * sizeof(KeptTet));
-    sorter.push(std::span<const KeptTet>(block.data(), k));
+  {
+    std::vector<KeptTet> block(block_tets);
+    const std::uint64_t count = deferred_->bytes() / sizeof(KeptTet);
+    for (std::uint64_t first = 0; first < count; first += block.size()) {
+      const std::size_t k = std::size_t(std::min<std::uint64_t>(block.size(), count - first));
+      deferred_->read(first * sizeof(KeptTet), block.data(), k * sizeof(KeptTet));
+      sorter.push(std::span<const KeptTet>(block.data(), k));
+    }
   }
   sorter.merge([this](std::span<const KeptTet> batch) {
     for (const KeptTet& t : batch) write(t);

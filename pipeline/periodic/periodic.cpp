@@ -259,6 +259,7 @@ bool padded_job_keeping(const RunOptions& options, const PeriodicOptions& period
   inner.memory_stated = options.memory_bytes;
   inner.memory_reserved = keep_bytes;
   inner.points_stated = points.count;
+  inner.frame_tets = setup.frame_tets;  // the keep's frames, in the padded job's writer share
   KeepResult kept;
   const auto make = [&](const StageContext& context, const SortedPoints&, const SortedView& view,
                         const TriangulateShares& shares,

@@ -204,7 +204,8 @@ RunSummary Job::run() {
 
   // The triangulation's shares of the ledger, from the indexes as built, with the
   // frames of the budget the output was started with.
-  budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
+  budget_.set_frame_tets(options_.frame_tets != 0 ? options_.frame_tets
+                                                  : MemoryBudget::frame_tets_for(header_memory(state_, options_)));
   const TriangulatePlan plan = plan_triangulation(index, options_, budget_, threads_);
   stage_done("plan");
 

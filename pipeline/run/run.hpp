@@ -36,8 +36,13 @@ struct RunOptions {
   bool nested = false;
   std::uint64_t memory_stated = 0, memory_reserved = 0;
   std::uint64_t points_stated = 0;  // the user's points among the input's (0: all)
-  std::string tmpdir;               // empty: the output's directory
-  int threads = 0;                  // 0: all cores
+  // The frames the output stage writes when they are not this job's budget's: a
+  // periodic job's keep writes frames of the user's --memory (the header's), larger
+  // than the padded job's smaller budget gives, and the writer's share must hold
+  // them. 0: MemoryBudget::frame_tets_for the header's budget.
+  std::size_t frame_tets = 0;
+  std::string tmpdir;  // empty: the output's directory
+  int threads = 0;     // 0: all cores
   // Buffer thickness in point spacings. Thinner buffers insert fewer redundant points
   // and leave more tets to the emptiness queries; 1.5 is where the two costs meet on
   // uniform points (scripts/bench-pipeline --buffer compares others).
@@ -72,7 +77,8 @@ struct RunOptions {
   bool index_on_disk(std::uint64_t points) const;
   // What the zone plan reads of these options (pipeline/window/zone_plan.hpp).
   PlanOptions plan_options() const {
-    return {memory_bytes, buffer_spacings, segment_points, zones, memory_stated, memory_reserved, points_stated};
+    return {memory_bytes,  buffer_spacings, segment_points, zones,
+            memory_stated, memory_reserved, points_stated,  frame_tets};
   }
 };
 

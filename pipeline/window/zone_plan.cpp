@@ -26,8 +26,9 @@ constexpr double kWindowBytesPerPoint = 480;
 constexpr double kOutputBytesPerPoint = 125;
 
 // The windows' share of the ledger for a budget (pipeline/memory_budget.hpp).
-double window_share(std::uint64_t memory_bytes, const PlanInputs& in, int threads) {
+double window_share(std::uint64_t memory_bytes, std::size_t frame_tets, const PlanInputs& in, int threads) {
   MemoryBudget budget(memory_bytes, in.points, threads, omp_get_num_procs());
+  if (frame_tets != 0) budget.set_frame_tets(frame_tets);
   return budget.plan_triangulate(in.index_bytes).window_bytes;
 }
 
@@ -52,7 +53,7 @@ std::optional<ZonePlan> try_plan(const PlanInputs& in, const PlanOptions& o, int
   const double axis_buffers = std::min(n, 2 * w * n / std::max(extent[in.axis], 1e-300));
   const double strip_extent = std::max(extent[in.strip_axis], 1e-300);
   const double t = double(threads);
-  const double available = window_share(o.memory_bytes, in, threads);
+  const double available = window_share(o.memory_bytes, o.frame_tets, in, threads);
   auto share = [&](int k) { return k == 1 ? 1.0 : std::min(1.0, 1.0 / k + 2 * w / strip_extent); };
   auto evaluate = [&](int k, double segment_points) {  // redundancy, memory
     const double window = (segment_points + axis_buffers) * share(k);

@@ -54,6 +54,8 @@ struct PlanOptions {
   // The user's points among the job's (0: all of them; a periodic job's padded job
   // adds their images), so that the refusal counts what the user gave.
   std::uint64_t stated_points = 0;
+  // The output's frames (RunOptions::frame_tets), for the writer's share; 0: the budget's.
+  std::size_t frame_tets = 0;
 };
 
 // What the plan is made from: the sorted view and its index once they exist, or,

@@ -105,4 +105,34 @@ need=$(sed -n 's/.*use --memory \([0-9]*\)M or more.*/\1/p' err.txt)
   fail "where the work is kept: $(cat err.txt)"
 [ "$(wc -l < err.txt)" = 1 ] || fail "more than the error line: $(cat err.txt)"
 [ ! -e small.tets ] && [ ! -e small.tets.partial ] || fail "a refused job left an output: $(ls)"
+
+# At the budget it asks for, the job runs and --memory is its ceiling: each phase of
+# the ledger within it, the padded job's writer share holding the keep's frames (those
+# of the user's budget, twice the size the padded job's smaller budget gives), and the
+# peak resident set under it (it was 2% over at 66M-68M when the share was the padded
+# job's and the end sort's read-back block lay beside its share).
+python3 - "$T" "$need" <<'PY' || fail "the job at the budget it asked for"
+import json, resource, subprocess, sys
+t, need = sys.argv[1], int(sys.argv[2])
+run = subprocess.run([t, "-q", "--json", "run", "big.f64", "-o", "fit.tets", "--periodic", "1",
+                      "--memory", f"{need}M", "--no-checkpoint"], capture_output=True, text=True)
+assert run.returncode == 0, run.stderr
+s = json.loads(run.stdout)
+plan = s["memory_planned"]
+ceiling = plan["ceiling"]
+assert ceiling == need << 20, plan
+for phase in ("sort", "triangulate", "keep"):
+    assert sum(plan[phase].values()) <= ceiling, (phase, plan[phase])
+frame_tets = 4096  # MemoryBudget::frame_tets_for the user's budget
+while frame_tets < 1 << 18 and 2 * frame_tets <= ceiling // 1024:
+    frame_tets *= 2
+# One encoder: three frames alive (filled, queued, encoded) of 32 bytes a tet, and the
+# encoder's scratch of 40 (MemoryBudget::writer_bytes_for, less its 5% and the file buffer).
+frames = (3 * 32 + 40) * frame_tets
+assert plan["triangulate"]["writer"] >= frames, (plan["triangulate"], frame_tets)
+peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+assert peak <= ceiling, f"peak {peak} over --memory {ceiling}"
+print(f"periodic_cli: at --memory {need}M the peak is {peak / 2**20:.1f} MiB")
+PY
+rm -f fit.tets
 echo "periodic_cli: ok"
