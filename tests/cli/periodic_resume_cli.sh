@@ -22,7 +22,7 @@ segments_done() { python3 -c "import json,sys
 try: print(json.load(open('$nested/state.json'))['keep']['segments'])
 except Exception: print(-1)"; }
 
-# 2*10^4 points (and about as many images at this size), 50 segments of the padded job.
+# 2*10^4 points (and 10,260 images at this size), 38 segments of the padded job.
 "$T" -q gen --dist uniform --n 20000 --seed 7 -o u.f64
 opts=(-q run u.f64 -o out.tets --periodic 1 --memory 64M --segment-points 800)
 "$T" --threads 1 "${opts[@]}" --no-checkpoint
@@ -30,26 +30,28 @@ mv out.tets reference.tets
 
 kills=0
 source "$here/lib/kill_when.sh"
+# Inside the padded job, in three of its segments (a worker triangulating it), on 1
+# and 2 threads; then at the end: every segment in, the keep finishing (the deferred
+# tets sorted, the offsets and the index left), when the kill lands there (a short
+# phase); then at random moments (seeded, drawn here: a subshell would draw its own).
+for target in 5 19 33; do
+  kill_at segment:$target $((1 + target % 2))
+done
+kill_when 'grep -q "\"finishing\":true" $nested/state.json 2>/dev/null' 2
 RANDOM=20261128
 for _ in 1 2 3; do
-  kill_when "sleep $(printf '0.%02d' $((RANDOM % 40 + 2))); true" 2
+  pause=$(printf '0.%02d' $((RANDOM % 40 + 2)))
+  kill_when "sleep $pause; true" 2
 done
-for target in 5 23 41; do  # inside the padded job, between its segments
-  kill_when "[ \"\$(segments_done)\" -ge $target ]" $((1 + target % 2))
-done
-# At the end: every segment in, the keep finishing (the deferred tets sorted, the
-# offsets and the index left), when the kill lands there.
-kill_when 'grep -q "\"finishing\":true" $nested/state.json 2>/dev/null' 2
-[ $kills -ge 4 ] || fail "only $kills of 7 kills landed before the job ended"
 if [ -e $ckpt ]; then "$T" "${opts[@]}" --resume; fi
-cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills kills"
+cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills + $random_kills kills"
 [ ! -e $ckpt ] || fail "checkpoint left after the job finished: $(ls -R $ckpt)"
 [ "$(ls -A | sort | tr '\n' ' ')" = "out.tets reference.tets u.f64 " ] || fail "files left: $(ls -A)"
-echo "kill -9 at $kills moments: resumed output identical"
+echo "kill -9 at $kills chosen and $random_kills other moments: resumed output identical"
 rm out.tets
 
 # A checkpoint is refused without --resume (exit 2), and with other periodic options.
-kill_when '[ "$(segments_done)" -ge 5 ]' 1
+kill_at segment:5 1
 [ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
 set +e
 "$T" "${opts[@]}" 2>err.txt; rc=$?
@@ -66,7 +68,7 @@ cmp reference.tets out.tets || fail "--force: output differs"
 rm out.tets
 
 # Another --memory may resume the job (the header and the frames keep the first's).
-kill_when '[ "$(segments_done)" -ge 5 ]' 2
+kill_at segment:5 2
 [ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
 "$T" -q run u.f64 -o out.tets --periodic 1 --memory 256M --segment-points 800 --resume
 cmp reference.tets out.tets || fail "resumed with another --memory: output differs"
@@ -96,7 +98,7 @@ cmp reference.tets out.tets || fail "resumed in the second attempt: output diffe
 # `clean --checkpoints` removes a killed periodic job's checkpoint, the nested one in it,
 # and its partial output (the keep's, written as the segments finish).
 rm out.tets
-kill_when '[ "$(segments_done)" -ge 5 ]' 1
+kill_at segment:5 1
 [ -e $nested/state.json ] || fail "no nested checkpoint after a kill"
 "$T" -q clean --checkpoints .
 [ ! -e $ckpt ] && [ ! -e out.tets.partial ] || fail "clean --checkpoints left: $(ls -A . $ckpt 2>&1)"

@@ -32,25 +32,37 @@ mv out.tets reference.tets
 
 kills=0
 source "$here/lib/kill_when.sh"
-# At random moments first (seeded, so a failure can be replayed), then at chosen ones.
+# At chosen moments, along the job (each one ahead of where the last kill left it):
+# in the sort's runs (pass 2, after runs 0 and 2), before the merge (run 3, the last,
+# sorted), while the points are written, and in the segments (the writer taking
+# segment N's tets), on 1 and 2 threads.
+kill_at sort-run:0 2
+kill_at sort-run:2 1
+kill_at sort-run:3 2
+kill_when 'grep -q "\"sorted\"" out.tets.ckpt/state.json 2>/dev/null' 2  # writing the points
+for target in 3 11 12 29 36; do
+  kill_at write:$target $((1 + target % 2))
+done
+"$T" "${opts[@]}" --resume
+cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills kills"
+[ ! -e out.tets.ckpt ] || fail "checkpoint left after the job finished"
+echo "kill -9 at $kills chosen moments: resumed output identical"
+# Then at random moments of a fresh job (its last resume may find it done, or start it
+# again: --resume without a checkpoint runs the job).
+# (Seeded, so that a failure can be replayed; drawn here, not in a subshell, which
+# would draw its own.)
+rm out.tets
 RANDOM=20261121
 for _ in 1 2 3 4; do
-  kill_when "sleep $(printf '0.%02d' $((RANDOM % 60 + 5))); true" 2
+  pause=$(printf '0.%02d' $((RANDOM % 60 + 5)))
+  kill_when "sleep $pause; true" 2
 done
-kill_when '[ "$(runs_done)" -ge 1 ]' 2                                         # pass 2, after run 0
-kill_when '[ "$(runs_done)" -ge 3 ]' 1                                         # pass 2, after run 2
-kill_when '[ "$(runs_done)" -ge 4 ]' 2                                         # at the merge
-kill_when 'grep -q "\"sorted\"" out.tets.ckpt/state.json 2>/dev/null' 2     # writing the points
-for target in 3 11 12 29 36; do                                                # between segments
-  kill_when "[ \"\$(segments_done)\" -ge $target ]" $((1 + target % 2))
-done
-[ $kills -ge 8 ] || fail "only $kills of 13 kills landed before the job ended"
 # Finish the job (a kill may also have landed between the output's rename and the
 # checkpoint's removal: --resume then finds the output complete).
 if [ -e out.tets.ckpt ]; then "$T" "${opts[@]}" --resume; fi
-cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $kills kills"
+cmp reference.tets out.tets || fail "resumed output differs from the uninterrupted run's after $random_kills random kills"
 [ ! -e out.tets.ckpt ] || fail "checkpoint left after the job finished"
-echo "kill -9 at $kills moments: resumed output identical"
+echo "kill -9 at $random_kills random moments: resumed output identical"
 rm out.tets
 
 # A checkpoint is not overwritten by accident.
@@ -61,7 +73,7 @@ expect_refusal() {  # expected exit code, message pattern, command...
   echo "$msg" | grep -q -- "$pattern" || fail "message lacks '$pattern': $msg"
   [ -e out.tets.ckpt/state.json ] || fail "a refusal removed the checkpoint: $msg"
 }
-kill_when '[ "$(segments_done)" -ge 5 ]' 2
+kill_at write:5 2
 [ -e out.tets.ckpt/state.json ] || fail "no checkpoint after a kill"
 expect_refusal 2 "--resume" "$T" "${opts[@]}"
 # Two processes on one job: the second is refused while the first holds the lock
@@ -80,7 +92,7 @@ kill -9 $first; wait $first 2>/dev/null || true
 "$T" -q run points.f64 -o out.tets --memory 96M --sort-run-points 25000 --zone-points 2500 --resume
 cmp reference.tets out.tets || fail "resumed with another --memory, the output differs"
 rm out.tets
-kill_when '[ "$(segments_done)" -ge 5 ]' 2
+kill_at write:5 2
 expect_refusal 2 "option 'buffer_spacings'" "$T" "${opts[@]}" --buffer 3 --resume
 # A changed input (same size, other contents) is noticed.
 cp points.f64 saved.f64
@@ -95,7 +107,7 @@ cmp reference.tets out.tets || fail "--force output differs"
 rm out.tets
 
 # A damaged checkpoint is refused (exit 1) and left in place; undamaged, it resumes.
-kill_when '[ "$(segments_done)" -ge 7 ]' 2
+kill_at write:7 2
 cp out.tets.ckpt/state.json saved.json
 sed -i 's/"committed": \([0-9]\)/"committed": 9\1/' out.tets.ckpt/state.json
 expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
@@ -117,12 +129,10 @@ rm out.tets
 # disk, ends with the same bytes; the file goes with the checkpoint.
 saved_opts=("${opts[@]}")
 opts+=(--index disk)
-kill_when '[ "$(segments_done)" -ge 9 ]' 2
+kill_at write:9 2
 opts=("${saved_opts[@]}")
-if [ ! -e out.tets ]; then  # killed (a fast machine may finish first)
-  [ -e out.tets.ckpt/index.shared ] || fail "--index disk: no index file in the checkpoint"
-  "$T" "${opts[@]}" --resume
-fi
+[ -e out.tets.ckpt/index.shared ] || fail "--index disk: no index file in the checkpoint"
+"$T" "${opts[@]}" --resume
 cmp reference.tets out.tets || fail "a job resumed after a kill with --index disk differs"
 [ ! -e out.tets.ckpt ] || fail "--index disk: the checkpoint (and its index file) left behind"
 rm out.tets
