@@ -4,6 +4,7 @@
 #include "core/error.hpp"
 #include "io/tet_codec.hpp"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -305,8 +306,19 @@ void TetReader::release_point_pages(std::uint64_t first, std::uint64_t n) const 
 }
 
 void TetReader::verify_points() const {
+  // A slice at a time, each one's pages handed back once summed: the check reads the
+  // whole section, which would otherwise stay in the resident set beside the copy a
+  // caller makes next (verify at 10^7 points: 279 MB of mapped pages on top of the
+  // 231 MiB of coordinates that --memory counts, 558 MB at --memory 400M).
   const auto p = point_records();
-  if (crc32c(p.data(), p.size()) != get_u32(p.data() + p.size())) {
+  constexpr std::size_t kSlice = std::size_t(16) << 20;
+  std::uint32_t crc = 0;
+  for (std::size_t at = 0; at < p.size(); at += kSlice) {
+    const std::size_t n = std::min(kSlice, p.size() - at);
+    crc = crc32c(p.data() + at, n, crc);
+    release_range(p.data() + at, n);
+  }
+  if (crc != get_u32(p.data() + p.size())) {
     fail(points_offset_ - kSectionHeaderSize, "points: checksum mismatch (the file is damaged)");
   }
 }

@@ -72,7 +72,8 @@ class TetReader {
   void read_points(std::uint64_t first, std::size_t n, double* xyz, std::uint64_t* ids) const;
   // Replaces each label by its point's original index.
   void map_to_original(std::span<std::uint64_t> labels) const;
-  // Reads every point and checks PNTS's CRC32C; InputError if it does not match.
+  // Reads every point and checks PNTS's CRC32C (handing the pages back as it goes);
+  // InputError if it does not match.
   void verify_points() const;
   // The raw PNTS records (format.md §3.4), for bulk copies.
   std::span<const std::uint8_t> point_records() const;

@@ -43,8 +43,11 @@ MemoryBudget::MemoryBudget(std::uint64_t ceiling, std::uint64_t points, int thre
   // The chunks: 8 MiB a thread, less at small budgets, whose windows' label ranges
   // are a few MiB of records at most (a 32nd of the budget a thread).
   const std::uint64_t chunks = std::min<std::uint64_t>(8 * kMiB, ceiling / 32) * std::uint64_t(threads_);
-  runtime_ =
-      std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB) + chunks, ceiling / 8 * 5);
+  runtime_ = std::min<std::uint64_t>(process_reserve(ceiling) + chunks, ceiling / 8 * 5);
+}
+
+std::uint64_t MemoryBudget::process_reserve(std::uint64_t ceiling) {
+  return std::min<std::uint64_t>(std::clamp<std::uint64_t>(ceiling / 4, 20 * kMiB, 64 * kMiB), ceiling / 8 * 5);
 }
 
 void MemoryBudget::record(const std::string& phase, const std::string& name, std::uint64_t bytes) {

@@ -99,6 +99,11 @@ class MemoryBudget {
   void set_points(std::uint64_t points) { points_ = points; }
   // The reserve for the process and the allocator, in both phases.
   std::uint64_t runtime_bytes() const { return runtime_; }
+  // The part of it `verify` takes out of its --memory before it plans: the
+  // process's own pages (the code and the shared libraries: 13 MiB
+  // resident for `tetstream`), the threads' stacks and the allocator's slack, a quarter
+  // of the budget between 20 and 64 MiB (at most the budget's 5/8).
+  static std::uint64_t process_reserve(std::uint64_t ceiling);
 
   // The sort's shares, recorded in the ledger.
   SortShares plan_sort();

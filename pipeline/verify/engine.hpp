@@ -14,6 +14,7 @@
 
 #include "pipeline/util/communicator.hpp"
 #include "pipeline/util/interrupt.hpp"
+#include "pipeline/util/memory_budget.hpp"
 #include "pipeline/verify/exact_sum.hpp"
 #include "pipeline/verify/lower_stars.hpp"
 #include "pipeline/verify/records.hpp"

@@ -37,6 +37,25 @@ mkdir tmp
 [ "$(json "d['valid']" < small.json)" = "True" ] || fail "small budget: $(cat small.json)"
 [ -z "$(ls -A tmp)" ] || fail "temporary files left in tmp: $(ls tmp)"
 
+# --memory is verify's ceiling: 10^6 points written in small frames (run at 48M), so
+# that the points, not one frame's records, are most of the plan; at 80M the peak
+# resident set (getrusage of the child) stays under it. Before the points' checksum
+# handed its pages back and the points were loaded in small chunks, this peaked at
+# 87 MiB: the mapped section and two 24 MiB chunks beside the 23 MiB coordinates.
+"$T" -q gen --dist uniform --n 1000000 --seed 4 -o million.f64
+"$T" -q run million.f64 -o million.tets --memory 48M --no-checkpoint
+python3 - "$T" <<'PY' || fail "verify at --memory 80M"
+import json, resource, subprocess, sys
+run = subprocess.run([sys.argv[1], "-q", "--json", "verify", "million.tets", "--memory", "80M"],
+                     capture_output=True, text=True)
+assert run.returncode == 0 and json.loads(run.stdout)["valid"], run.stdout + run.stderr
+assert run.stderr == "", run.stderr  # no warning: the plan fits
+peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+assert peak <= 80 << 20, f"peak {peak / 2**20:.1f} MiB over --memory 80M"
+print(f"verify_cli: at --memory 80M the peak is {peak / 2**20:.1f} MiB")
+PY
+rm million.f64 million.tets
+
 # A damaged file: exit 1 and a one-line error naming the file.
 cp uniform.tets damaged.tets
 python3 - <<'EOF'
