@@ -42,7 +42,15 @@ class Accumulator {
         voronoi_(sinks.voronoi),
         terms_(sinks.hull_terms || !sinks.row),
         points_(reader, plan.ring_labels),
-        acc_(plan.ring_labels) {}
+        acc_(plan.ring_labels) {
+    // The per-tet buffers at the largest batch's size at once: grown batch by batch,
+    // a resize past the capacity doubles it and copies, the old and the new buffers
+    // alive together (the 10^7-point density at --memory 1G peaked at 542,120 KB that
+    // way, 516,580 KB this way).
+    if (terms_) contrib_.reserve(plan.largest_batch_tets);
+    if (sinks_.row) edges_.reserve(6 * plan.largest_batch_tets);
+    if (!terms_) volumes_.reserve(plan.largest_batch_tets);
+  }
 
   AccumulateStats run() {
     for (const FrameBatch& b : plan_.batches) {
