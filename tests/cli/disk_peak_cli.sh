@@ -24,7 +24,9 @@ sample() {
   echo 0 >peak.txt
   while :; do
     now=$(du -s -B1 --exclude='pending-*' out 2>/dev/null | cut -f1) || now=0
-    if [ "${now:-0}" -gt "$peak" ]; then peak=$now; echo "$peak" >peak.txt; fi
+    # Renamed into place: the kill below may land at any moment, and a truncated
+    # peak.txt read as "" failed the check once.
+    if [ "${now:-0}" -gt "$peak" ]; then peak=$now; echo "$peak" >peak.tmp && mv peak.tmp peak.txt; fi
     sleep 0.02
   done
 }
