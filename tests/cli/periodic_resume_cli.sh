@@ -18,9 +18,6 @@ cd "$dir"
 fail() { echo "FAIL: $*" >&2; exit 1; }
 ckpt=out.tets.ckpt
 nested=$ckpt/periodic-padded.tets.ckpt
-segments_done() { python3 -c "import json,sys
-try: print(json.load(open('$nested/state.json'))['keep']['segments'])
-except Exception: print(-1)"; }
 
 # 2*10^4 points (and 10,260 images at this size), 38 segments of the padded job.
 "$T" -q gen --dist uniform --n 20000 --seed 7 -o u.f64

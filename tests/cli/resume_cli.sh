@@ -14,13 +14,6 @@ dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 cd "$dir"
 fail() { echo "FAIL: $*" >&2; exit 1; }
-state() { cat out.tets.ckpt/state.json 2>/dev/null || true; }
-segments_done() { state | python3 -c "import json,sys
-try: print(json.load(sys.stdin)['output']['segments'])
-except Exception: print(-1)"; }
-runs_done() { state | python3 -c "import json,sys
-try: print(len(json.load(sys.stdin)['sort']['runs']))
-except Exception: print(-1)"; }
 
 # 10^5 points; the sort writes 4 runs (--sort-run-points, a testing option) and the
 # job has 40 segments.
@@ -77,11 +70,14 @@ kill_at write:5 2
 [ -e out.tets.ckpt/state.json ] || fail "no checkpoint after a kill"
 expect_refusal 2 "--resume" "$T" "${opts[@]}"
 # Two processes on one job: the second is refused while the first holds the lock
-# (stopped, so that it cannot finish in between).
-"$T" "${opts[@]}" --resume 2>/dev/null &
+# (stalled in segment 6, so that it cannot finish in between).
+TETSTREAM_STALL=write:6 "$T" "${opts[@]}" --resume 2>first.err &
 first=$!
-for _ in $(seq 1 500); do [ "$(segments_done)" -ge 6 ] && break; sleep 0.01; done
-kill -STOP $first
+until grep -qF "stalled at write:6 " first.err; do
+  kill -0 $first 2>/dev/null || fail "the first process ended without reaching segment 6: $(cat first.err)"
+  sleep 0.005
+done
+rm first.err
 # (Refused at the output's lock, taken before the checkpoint's: the message says so.)
 set +e; msg=$("$T" "${opts[@]}" --resume 2>&1); rc=$?; set -e
 kill -9 $first; wait $first 2>/dev/null || true
