@@ -150,9 +150,12 @@ inline bool volume_fits_double(const double* xyz, std::size_t n) {
   return true;
 }
 
-// The points by label, for random access: floats when every coordinate is a float
-// (a float32 container: the predicates then see exactly the stored values, as doubles),
-// else doubles. Half the memory for float32 input: 12 GB instead of 24 at 10^9 points.
+// The points by label, read in place from the source's records (VerifySource::points:
+// a container's mapped PNTS section, a caller's array): floats for a float32 container
+// (the predicates then see exactly the stored values, as doubles), else doubles. Not a
+// copy: the pass touches a window of labels at a time (a frame's tets lie a few slabs
+// apart) and hands the pages behind it back (Engine::release_points_behind), so at
+// 10^9 float32 points the resident points are that window, not 12 GB.
 class PointCoords {
  public:
   // A point's coordinates as doubles; converts to the const double* the predicates
@@ -161,38 +164,25 @@ class PointCoords {
     double c[3];
     operator const double*() const { return c; }
   };
-  void assign(std::uint64_t n, bool floats) {
-    floats_ = floats;
-    if (floats)
-      f_.resize(3 * std::size_t(n)), d_ = {};
-    else
-      d_.resize(3 * std::size_t(n)), f_ = {};
-  }
-  bool floats() const { return floats_; }
-  static std::size_t bytes_per_point(bool floats) { return floats ? 3 * sizeof(float) : 3 * sizeof(double); }
-  // Fills labels [first, first + n) from doubles that (when floats()) are floats.
-  void store(std::uint64_t first, std::size_t n, const double* xyz) {
-    if (floats_)
-      std::transform(xyz, xyz + 3 * n, f_.begin() + std::ptrdiff_t(3 * first), [](double x) { return float(x); });
-    else
-      std::copy(xyz, xyz + 3 * n, d_.begin() + std::ptrdiff_t(3 * first));
-  }
+  void assign(const VerifySource::PointRecords& records) { r_ = records; }
+  bool floats() const { return r_.floats; }
+  std::size_t stride() const { return r_.stride; }
   TS_FORCE_INLINE Point operator()(std::uint64_t l) const {
-    if (floats_) return {{f_[3 * l], f_[3 * l + 1], f_[3 * l + 2]}};
-    return {{d_[3 * l], d_[3 * l + 1], d_[3 * l + 2]}};
+    const std::uint8_t* p = r_.base + l * r_.stride;
+    if (r_.floats) {
+      float f[3];
+      std::memcpy(f, p, sizeof f);
+      return {{f[0], f[1], f[2]}};
+    }
+    Point q;
+    std::memcpy(q.c, p, sizeof q.c);
+    return q;
   }
   // Asks for point l's coordinates ahead of their use (the tets' labels jump about).
-  TS_FORCE_INLINE void prefetch(std::uint64_t l) const {
-    if (floats_)
-      TS_PREFETCH(f_.data() + 3 * l);
-    else
-      TS_PREFETCH(d_.data() + 3 * l);
-  }
+  TS_FORCE_INLINE void prefetch(std::uint64_t l) const { TS_PREFETCH(r_.base + l * r_.stride); }
 
  private:
-  bool floats_ = false;
-  std::vector<float> f_;
-  std::vector<double> d_;
+  VerifySource::PointRecords r_;
 };
 
 // Bit set over labels with atomic set.
@@ -336,6 +326,8 @@ class Engine {
   std::string make_tmpdir();
   void plan_memory();
   void load_points();
+  std::size_t plan_point_window();
+  void release_points_behind(std::uint64_t frame_min);
   // Checks a decoded frame (its count, every good tet's labels within the frame's
   // declared [min_label, max_label]: InputError otherwise) and puts each tet in
   // canonical form (labels sorted; flags bit 0: odd permutation, bit 1: broken, i.e. a
@@ -415,7 +407,9 @@ class Engine {
   std::uint64_t sample_cut_ = ~0ull;
 
   PointCoords xyz_;
-  double origin_[3] = {0, 0, 0};  // the lexicographically smallest point: a hull vertex
+  std::uint64_t behind_labels_ = 0, release_slice_labels_ = 1;  // plan_point_window()
+  std::uint64_t released_below_ = 0, point_releases_ = 0;       // release_points_behind()
+  double origin_[3] = {0, 0, 0};                                // the lexicographically smallest point: a hull vertex
   Bitmap used_, hull_used_;
 
   // Budgets (bytes).

@@ -62,10 +62,46 @@ std::string Engine<L>::make_tmpdir() {
   return tmp_->dir();
 }
 
+// The points' resident window. The pass reads the points of the frames in flight,
+// which lie within about a frame's label span above the frames' smallest labels (a
+// frame's tets are a few slabs thick), and its pairs' tests reach about as far below;
+// release_points_behind() hands back the pages further below, a slice at a time. Planned:
+// twice the median frame's span below the frame being consumed, one span above the
+// furthest frame in flight, the frames in flight (as many as threads and one) at the
+// median step between frames' smallest labels, and two slices. Returns the bytes.
+template <class L>
+std::size_t Engine<L>::plan_point_window() {
+  const std::size_t stride = src_.points().stride, frames = src_.batch_count();
+  std::vector<std::uint64_t> spans(frames), mins(frames), steps;
+  for (std::size_t k = 0; k < frames; ++k) {
+    const VerifySource::Batch b = src_.batch(k);
+    mins[k] = b.min_label;
+    spans[k] = b.max_label >= b.min_label ? std::min(n_, b.max_label - b.min_label + 1) : n_;
+  }
+  std::sort(mins.begin(), mins.end());
+  for (std::size_t k = 1; k < frames; ++k) steps.push_back(mins[k] - mins[k - 1]);
+  auto median = [](std::vector<std::uint64_t>& v) -> std::uint64_t {
+    if (v.empty()) return 0;
+    std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  const std::uint64_t span = median(spans), step = median(steps);
+  std::sort(spans.begin(), spans.end());
+  auto quantile = [&](double q) { return spans.empty() ? 0 : spans[std::size_t(q * double(spans.size() - 1))]; };
+  const std::uint64_t threads = std::uint64_t(std::max(1, omp_get_max_threads()));
+  release_slice_labels_ = std::max<std::uint64_t>(1, (std::uint64_t(4) << 20) / std::max<std::size_t>(1, stride));
+  behind_labels_ = 2 * span;
+  const std::uint64_t window = std::min(n_, 3 * span + (threads + 1) * step + 2 * release_slice_labels_);
+  spdlog::debug(
+      "verify: points in place, {} bytes a record; frames span {} labels (median; 90%: {}, 99%: {}, widest: {}), "
+      "step {}; window {} labels",
+      stride, span, quantile(0.9), quantile(0.99), quantile(1), step, window);
+  return std::size_t(window) * stride;
+}
+
 template <class L>
 void Engine<L>::plan_memory() {
-  const std::size_t points =
-      std::size_t(n_) * PointCoords::bytes_per_point(src_.points_are_floats()) + used_.bytes() + hull_used_.bytes();
+  const std::size_t points = plan_point_window() + used_.bytes() + hull_used_.bytes();
   // A frame: two label buffers (one decoding) and flags. A step, per tet: the slices'
   // A, B, merged and radix buffers (11 facets, 15 edges), the merged copy (4 facets,
   // 6 edges) and up to 2 pair checks.
@@ -138,39 +174,39 @@ void Engine<L>::plan_memory() {
 template <class L>
 void Engine<L>::load_points() {
   const auto t0 = Clock::now();
-  xyz_.assign(n_, src_.points_are_floats());
-  // Chunks of 1.5 MiB a thread (the copy before the store, and the mapped pages that
-  // read_points hands back after it): 2^20 points took 24 MiB a thread, 33 MiB over a
-  // 80M plan at 10^6 points.
+  xyz_.assign(src_.points());
+  // One pass over the points, a chunk of 2^16 a thread at a time, each chunk's pages
+  // handed back once read (the frames read them again, a window at a time): the
+  // lexicographically smallest point, a vertex of the convex hull (the cones from it
+  // over the hull facets then have non-negative volume: no cancellation), and whether
+  // the volumes fit doubles (floats always do: magnitudes in [2^-149, 2^128]).
   constexpr std::uint64_t kChunk = 1 << 16;
-  const std::int64_t chunks = std::int64_t((n_ + kChunk - 1) / kChunk);
-  std::exception_ptr error;
-  std::mutex error_mutex;
+  const std::size_t chunks = std::size_t((n_ + kChunk - 1) / kChunk);
+  std::vector<std::uint64_t> best_of(chunks);
+  std::vector<char> wide_of(chunks, 0);
+  auto lex_less = [](const PointCoords::Point& p, const PointCoords::Point& b) {
+    return p[0] < b[0] || (p[0] == b[0] && (p[1] < b[1] || (p[1] == b[1] && p[2] < b[2])));
+  };
 #pragma omp parallel for schedule(dynamic, 1)
-  for (std::int64_t c = 0; c < chunks; ++c) {
-    const std::uint64_t first = std::uint64_t(c) * kChunk;
-    try {
-      const std::size_t n = std::size_t(std::min(kChunk, n_ - first));
-      std::vector<double> chunk(3 * n);
-      src_.read_points(first, n, chunk.data());
-      xyz_.store(first, n, chunk.data());
-    } catch (...) {
-      std::lock_guard<std::mutex> lock(error_mutex);
-      if (!error) error = std::current_exception();
+  for (std::size_t c = 0; c < chunks; ++c) {
+    const std::uint64_t first = std::uint64_t(c) * kChunk, end = std::min(n_, first + kChunk);
+    std::uint64_t best = first;
+    bool wide = false;
+    for (std::uint64_t i = first; i < end; ++i) {
+      const PointCoords::Point p = P(i);
+      if (i > first && lex_less(p, P(best))) best = i;
+      if (!xyz_.floats() && !wide) wide = !volume_fits_double(p, 1);
     }
+    best_of[c] = best, wide_of[c] = wide;
+    src_.release_points(first, end - first);
   }
-  if (error) std::rethrow_exception(error);
-  // The lexicographically smallest point is a vertex of the convex hull: the cones
-  // from it over the hull facets have non-negative volume (no cancellation).
+  // The first smallest in label order, as one scan finds it.
   std::uint64_t best = 0;
-  for (std::uint64_t i = 1; i < n_; ++i) {
-    const PointCoords::Point p = P(i), b = P(best);
-    if (p[0] < b[0] || (p[0] == b[0] && (p[1] < b[1] || (p[1] == b[1] && p[2] < b[2])))) best = i;
-  }
+  for (std::size_t c = 0; c < chunks; ++c)
+    if (c == 0 || lex_less(P(best_of[c]), P(best))) best = best_of[c];
   if (n_ > 0) std::copy_n(P(best).c, 3, origin_);
-  // Floats always fit (nonzero magnitudes in [2^-149, 2^128]).
-  wide_volume_ = false;
-  for (std::uint64_t i = 0; i < n_ && !xyz_.floats() && !wide_volume_; ++i) wide_volume_ = !volume_fits_double(P(i), 1);
+  wide_volume_ = std::any_of(wide_of.begin(), wide_of.end(), [](char w) { return w != 0; });
+  src_.release_points(0, n_);
   seconds_points_ = since(t0);
 }
 
@@ -261,10 +297,12 @@ void Engine<L>::run() {
         std::exception_ptr failed;
         if (!consuming && next_consume < last && ready[slot_of(next_consume)]) {
           const std::size_t s = slot_of(next_consume);
+          const std::uint64_t frame_min = mins[next_consume];
           consuming = true;
           lock.unlock();
           try {
             consume_frame(slot_[s]);
+            release_points_behind(frame_min);
             progress.add(slot_[s].tets);
             check_interrupted();
           } catch (...) {
@@ -330,6 +368,21 @@ void Engine<L>::run() {
   rep_.seconds = since(t0);
   spdlog::debug("verify: points {:.2f}s, tets {:.2f}s, final merges {:.2f}s", seconds_points_, seconds_tets_,
                 seconds_final_);
+}
+
+// Hands back the points' pages more than behind_labels_ below the smallest label of the
+// frame just consumed (plan_point_window()): the frames still to come start at or above
+// it and their pairs reach about that far back. A slice at a time; every 32nd time from
+// label 0, for the pages that a test reaching further back faulted in again. Reads below
+// are still right (the pages fault back in): this bounds the resident set, nothing else.
+// Called by the consuming thread only.
+template <class L>
+void Engine<L>::release_points_behind(std::uint64_t frame_min) {
+  const std::uint64_t floor = frame_min > behind_labels_ ? frame_min - behind_labels_ : 0;
+  if (floor < released_below_ + release_slice_labels_) return;
+  const std::uint64_t from = ++point_releases_ % 32 == 0 ? 0 : released_below_;
+  src_.release_points(from, floor - from);
+  released_below_ = floor;
 }
 
 // One frame: storage, orientation and volume of every tet, then its facets and edges

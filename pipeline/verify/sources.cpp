@@ -5,6 +5,7 @@
 #include "io/tet_reader.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -33,8 +34,8 @@ MemorySource::MemorySource(std::vector<double> xyz, std::vector<std::uint64_t> t
   }
 }
 
-void MemorySource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
-  std::copy(xyz_.begin() + std::ptrdiff_t(3 * first), xyz_.begin() + std::ptrdiff_t(3 * (first + n)), xyz);
+VerifySource::PointRecords MemorySource::points() const {
+  return {reinterpret_cast<const std::uint8_t*>(xyz_.data()), 3 * sizeof(double), false};
 }
 
 void MemorySource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
@@ -61,16 +62,20 @@ VerifySource::Batch ContainerSource::batch(std::size_t k) const {
   const io::FrameEntry& f = reader_.frames()[k];
   return Batch{f.first_tet, f.tet_count, f.base_label, f.max_label};
 }
-// The reader maps the whole file; records and frames are read once (the replay of the
-// distributed check reads a frame again, from the file), so their pages leave this
-// process's resident set once copied: a read-only file mapping's pages counted in the
-// peak RSS that --memory bounds (23.2 GiB at --memory 16G on a 40 GiB container
-// before the frames were released too).
-void ContainerSource::read_points(std::uint64_t first, std::size_t n, double* xyz) const {
-  reader_.read_points(first, n, xyz, nullptr);
+// The reader maps the whole file; the points are read in place and frames are read
+// once (the replay of the distributed check reads a frame again, from the file), so
+// pages leave this process's resident set once used: a read-only file mapping's pages
+// count in the peak RSS that --memory bounds (23.2 GiB at --memory 16G on a 40 GiB
+// container before the frames were released too).
+VerifySource::PointRecords ContainerSource::points() const {
+  // format.md §3.4: little-endian coordinates, then the original index.
+  static_assert(std::endian::native == std::endian::little, "verify reads the container's points in place");
+  const io::TetFileHeader& h = reader_.header();
+  return {reader_.point_records().data(), h.point_record_bytes(), h.coord_type == io::CoordType::kFloat32};
+}
+void ContainerSource::release_points(std::uint64_t first, std::uint64_t n) const {
   reader_.release_point_pages(first, n);
 }
-bool ContainerSource::points_are_floats() const { return reader_.header().coord_type == io::CoordType::kFloat32; }
 void ContainerSource::read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const {
   reader_.read_frame(k, labels);
   reader_.release_frame_pages(k);

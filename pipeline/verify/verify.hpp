@@ -142,11 +142,19 @@ class VerifySource {
   virtual std::uint64_t tet_count() const = 0;
   virtual std::size_t batch_count() const = 0;
   virtual Batch batch(std::size_t k) const = 0;
-  // Coordinates of labels [first, first + n), 3 doubles each.
-  virtual void read_points(std::uint64_t first, std::size_t n, double* xyz) const = 0;
-  // True when every coordinate read_points gives is a float (verify then holds them in
-  // 12 bytes a point instead of 24).
-  virtual bool points_are_floats() const { return false; }
+  // The points where they lie, read by label in place (not copied: a copy of 10^9
+  // float32 points is 12 GB, more than an 8G budget): record l at base + l * stride,
+  // three coordinates first, as floats or as doubles. Valid while the source lives.
+  struct PointRecords {
+    const std::uint8_t* base = nullptr;
+    std::size_t stride = 0;
+    bool floats = false;
+  };
+  virtual PointRecords points() const = 0;
+  // Hands the memory of the points [first, first + n) back where the source can (a
+  // mapped file's pages: later reads fault them in again), so that a pass that reads a
+  // window of labels at a time keeps a window of them resident.
+  virtual void release_points(std::uint64_t /*first*/, std::uint64_t /*n*/) const {}
   // Batch k, 4 labels per tet in stored order. May be called from several threads at
   // once for different k.
   virtual void read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const = 0;
@@ -165,7 +173,7 @@ class MemorySource : public VerifySource {
   std::uint64_t tet_count() const override { return tets_.size() / 4; }
   std::size_t batch_count() const override { return batches_.size(); }
   Batch batch(std::size_t k) const override { return batches_[k]; }
-  void read_points(std::uint64_t first, std::size_t n, double* xyz) const override;
+  PointRecords points() const override;
   void read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const override;
   void read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const override;
   std::string name() const override { return "memory"; }
@@ -184,8 +192,8 @@ class ContainerSource : public VerifySource {
   std::uint64_t tet_count() const override;
   std::size_t batch_count() const override;
   Batch batch(std::size_t k) const override;
-  void read_points(std::uint64_t first, std::size_t n, double* xyz) const override;
-  bool points_are_floats() const override;  // a float32 container
+  PointRecords points() const override;  // the mapped PNTS records
+  void release_points(std::uint64_t first, std::uint64_t n) const override;
   void read_batch(std::size_t k, std::vector<std::uint32_t>& labels) const override;
   void read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const override;
   std::string name() const override;
