@@ -1,6 +1,7 @@
 #include "pipeline/util/fault.hpp"
 
 #include "core/error.hpp"
+#include "pipeline/util/interrupt.hpp"
 
 #include <chrono>
 #include <cstdio>
@@ -47,7 +48,12 @@ void maybe_inject_fault(const char* site, std::uint64_t index) {
     // kill the process here; then never returns.
     std::fprintf(stderr, "tetstream: stalled at %s (TETSTREAM_STALL)\n", want.c_str());
     std::fflush(stderr);
-    for (;;) std::this_thread::sleep_for(std::chrono::seconds(1));
+    // A SIGTERM or Ctrl-C here ends the job as a signal arriving at this passage would
+    // (the interrupt tests); SIGKILL ends it where it stands (the resume tests).
+    for (;;) {
+      check_interrupted();
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
   }
 }
 

@@ -160,6 +160,26 @@ no_leftovers
 # Without a checkpoint, Ctrl-C leaves nothing behind.
 interrupt_run big2.tets --no-checkpoint
 no_leftovers
+# SIGTERM at an external sort's merge of its spilled runs (the sort of 10^6 points at
+# 40M spills; TETSTREAM_STALL holds the job where the merge starts): exit 130, no
+# output, the checkpoint kept, and --resume finishes (at 48M: past the sort, the plan
+# of the zones asks for 47M at least, and says so). That the merge itself polls
+# between its batches: ExternalSort.MergeStopsWhenInterrupted (verify_test).
+TETSTREAM_STALL=merge:0 "$T" -q run big.f64 -o merged.tets --tmpdir tmp --memory 40M 2>stall.err &
+pid=$!
+for _ in $(seq 1 6000); do
+  if grep -q "stalled at merge:0" stall.err || ! kill -0 $pid 2>/dev/null; then break; fi
+  sleep 0.01
+done
+grep -q "stalled at merge:0" stall.err || fail "the run did not reach its sort's merge: $(cat stall.err)"
+kill -TERM $pid
+set +e; wait $pid; rc=$?; set -e
+[ $rc = 130 ] || fail "SIGTERM at the sort's merge: exit $rc ($(cat stall.err))"
+[ ! -e merged.tets ] || fail "SIGTERM at the sort's merge left merged.tets"
+[ -e tmp/merged.tets.ckpt/state.json ] || fail "SIGTERM at the sort's merge kept no checkpoint"
+"$T" -q run big.f64 -o merged.tets --tmpdir tmp --memory 48M --resume
+"$T" -q verify merged.tets >/dev/null || fail "verify rejected the output resumed after the merge"
+no_leftovers
 # More threads than the cores the process may use (as under mpirun's default binding):
 # one warning that says so and how to fix it; the job goes on.
 if command -v taskset >/dev/null; then

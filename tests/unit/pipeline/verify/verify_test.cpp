@@ -12,15 +12,18 @@
 #include "io/tet_writer.hpp"
 #include "pipeline/files/external_sort.hpp"
 #include "pipeline/files/temp_files.hpp"
+#include "pipeline/util/interrupt.hpp"
 #include "pipeline/verify/verify.hpp"
 #include "thread_ranks.hpp"
 #include "test_points.hpp"
 
 #include <gtest/gtest.h>
+#include <omp.h>
 #include <sys/stat.h>
 
 #include <algorithm>
 #include <array>
+#include <csignal>
 #include <cstdlib>
 #include <filesystem>
 #include <map>
@@ -850,6 +853,40 @@ TEST(ExternalSort, InMemoryAndSpilledAgree) {
       EXPECT_TRUE(name == pipeline::WorkDir::kLock || name == pipeline::WorkDir::kMarker) << name;
     }
   }
+}
+
+// A merge of spilled runs can take minutes: it polls for Ctrl-C / SIGTERM between its
+// batches (sequential and in rounds) and unwinds with Interrupted, the runs removed.
+TEST(ExternalSort, MergeStopsWhenInterrupted) {
+  const int threads = omp_get_max_threads();
+  for (int t : {1, 2}) {
+    SCOPED_TRACE(t);
+    omp_set_num_threads(t);
+    pipeline::TempDir tmp(temp().dir().string(), "xsort-interrupt");
+    std::size_t batches = 0;
+    {
+      pipeline::ExternalSortOptions o;
+      o.memory_bytes = std::size_t(64) << 10;
+      o.dir = tmp.dir();
+      o.min_block_bytes = 4096;
+      o.batch_records = 1000;
+      pipeline::ExternalSorter<Rec, RecLess> s(o);
+      std::mt19937_64 g(3);
+      for (std::uint32_t i = 0; i < 100000; ++i) s.push(Rec{g() % 50000, i, 0});
+      ASSERT_TRUE(s.spilled());
+      EXPECT_THROW(s.merge([&](std::span<const Rec>) {
+        if (++batches == 1) pipeline::request_interrupt(SIGTERM);  // as the handler does
+      }),
+                   pipeline::Interrupted);
+    }
+    pipeline::clear_interrupt();
+    EXPECT_EQ(batches, 1u);  // stopped at the next batch, not at the end
+    for (const auto& e : fs::directory_iterator(tmp.dir())) {
+      const std::string name = e.path().filename().string();
+      EXPECT_TRUE(name == pipeline::WorkDir::kLock || name == pipeline::WorkDir::kMarker) << name;
+    }
+  }
+  omp_set_num_threads(threads);
 }
 
 TEST(ExternalSort, ReducerAndSortedRunsAndTies) {
