@@ -154,7 +154,7 @@ inline bool volume_fits_double(const double* xyz, std::size_t n) {
 // a container's mapped PNTS section, a caller's array): floats for a float32 container
 // (the predicates then see exactly the stored values, as doubles), else doubles. Not a
 // copy: the pass touches a window of labels at a time (a frame's tets lie a few slabs
-// apart) and hands the pages behind it back (Engine::release_points_behind), so at
+// apart) and hands the pages behind it back (Engine::release_points_outside), so at
 // 10^9 float32 points the resident points are that window, not 12 GB.
 class PointCoords {
  public:
@@ -327,7 +327,7 @@ class Engine {
   void plan_memory();
   void load_points();
   std::size_t plan_point_window();
-  void release_points_behind(std::uint64_t frame_min);
+  void release_points_outside(std::uint64_t frame_min);
   // Checks a decoded frame (its count, every good tet's labels within the frame's
   // declared [min_label, max_label]: InputError otherwise) and puts each tet in
   // canonical form (labels sorted; flags bit 0: odd permutation, bit 1: broken, i.e. a
@@ -407,9 +407,9 @@ class Engine {
   std::uint64_t sample_cut_ = ~0ull;
 
   PointCoords xyz_;
-  std::uint64_t behind_labels_ = 0, release_slice_labels_ = 1;  // plan_point_window()
-  std::uint64_t released_below_ = 0, point_releases_ = 0;       // release_points_behind()
-  double origin_[3] = {0, 0, 0};                                // the lexicographically smallest point: a hull vertex
+  std::uint64_t behind_labels_ = 0, ahead_labels_ = 0, release_slice_labels_ = 1;  // plan_point_window()
+  std::uint64_t released_below_ = 0;                                               // release_points_outside()
+  double origin_[3] = {0, 0, 0};  // the lexicographically smallest point: a hull vertex
   Bitmap used_, hull_used_;
 
   // Budgets (bytes).
