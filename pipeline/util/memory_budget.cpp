@@ -158,15 +158,24 @@ TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, doub
   const double fixed = double(runtime_) + double(t.writer_bytes);
   const double rest = std::max(0.0, double(ceiling_) - fixed);
   t.window_bytes = 0.75 * rest - double(index_bytes);
-  // The shared rim tets (pipeline/window/shared_rim.hpp): a 32nd of that, and no more
-  // than 64 bytes a point (two slots a point: the tets that cross zones are a fraction
-  // of the ~6.5 a point), out of the query pages' share, which keeps at least one
-  // region. Not out of the windows': smaller windows made more zones, whose rims cost
-  // more queries than the table saved (indoor 10^6 at 128M: 11 segments became 14).
-  const double query_pages = std::min({double(ceiling_ / 8), double(points_) * 32 + 2.0 * kMiB, 0.25 * rest});
-  t.shared_rim_bytes =
-      std::uint64_t(std::clamp(query_pages - 2.0 * kMiB, 0.0, std::min(rest / 32, 64.0 * double(points_))));
-  t.query_page_bytes = std::uint64_t(query_pages) - t.shared_rim_bytes;
+  // The shared rim tets (pipeline/window/shared_rim.hpp), out of the other 25%, never
+  // out of the windows' (smaller windows made more zones, whose rims cost more queries
+  // than the table saved: indoor 10^6 at 128M, 11 segments became 14). Up to an eighth
+  // of what the reserve and the writer leave, and no more than 64 bytes a point (two
+  // slots a point: the tets that cross zones are a fraction of the ~6.5 a point): what
+  // the query pages leave of the 25%, and half of the query pages above 8 MiB. A 32nd
+  // (still the least: a 32nd, out of the query pages above one region) was too small:
+  // on `hills` 10^6 at 128M, 1.57 M rim tets were offered and 0.10 M found room, and the
+  // zones after proved the rest again by their queries. Small budgets keep their query
+  // pages: at 64M, taking 1.8 of their 6.6 MiB made `hills` 10% slower on two threads.
+  const double room = 0.25 * rest;
+  const double query_pages = std::min({double(ceiling_ / 8), double(points_) * 32 + 2.0 * kMiB, room});
+  const double rim_least = std::clamp(query_pages - 2.0 * kMiB, 0.0, std::min(rest / 32, 64.0 * double(points_)));
+  const double rim_most =
+      std::min({rest / 8, 64.0 * double(points_), room - query_pages + std::max(0.0, query_pages - 8.0 * kMiB) / 2});
+  const double rim = std::max(rim_least, rim_most);
+  t.shared_rim_bytes = std::uint64_t(rim);
+  t.query_page_bytes = std::uint64_t(std::min(query_pages, room - rim));
   record("triangulate", "runtime", runtime_);
   record("triangulate", "writer", t.writer_bytes);
   record("triangulate", "query_pages", t.query_page_bytes);
