@@ -84,6 +84,29 @@ TEST(MemoryBudget, SmallInputsTakeLittleOfALargeBudget) {
   }
 }
 
+// The shared rim's table: a large budget gives it room beyond the old 32nd of the rest
+// (at 1G and 10^7 points the old rule gave 27.3 MiB, and on surfaces the zones after a
+// full table proved its tets again), and a small one keeps its query pages (at 64M
+// taking them for the table made `hills` 10% slower).
+TEST(MemoryBudget, TheRimTableGrowsWithTheBudgetAndSmallBudgetsKeepTheirQueryPages) {
+  {
+    MemoryBudget budget(1024 * kMiB, 10000000, 2, 2);
+    budget.plan_sort();
+    const TriangulateShares t = budget.plan_triangulate(80000000);
+    EXPECT_GE(t.shared_rim_bytes, 64 * kMiB);
+    EXPECT_GE(t.query_page_bytes, 64 * kMiB);
+    EXPECT_LE(budget.phase_total("triangulate"), 1024 * kMiB);
+  }
+  {
+    MemoryBudget budget(64 * kMiB, 1000000, 2, 2);
+    budget.plan_sort();
+    const TriangulateShares t = budget.plan_triangulate(8000000);
+    EXPECT_GE(t.query_page_bytes, 64 * kMiB / 8 - 64 * kMiB / 32);
+    EXPECT_LE(t.shared_rim_bytes, 64 * kMiB / 32);
+    EXPECT_LE(budget.phase_total("triangulate"), 64 * kMiB);
+  }
+}
+
 TEST(MemoryBudget, SharesAreNamedOncePerPhase) {
   MemoryBudget budget(256 * kMiB, 1000000, 2, 2);
   budget.plan_sort();
