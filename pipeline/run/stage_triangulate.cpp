@@ -35,6 +35,14 @@ TriangulatePlan plan_triangulation(const IndexStage& indexed, const RunOptions& 
 // (MappedRegions), within an eighth of the budget (MemoryBudget::plan_triangulate).
 // The queries of a zone read the file along the sort axis, and a share that holds
 // their sweep saves faulting regions in again.
+std::vector<std::size_t> zone_start_order(std::size_t zones) {
+  std::vector<std::size_t> order;
+  order.reserve(zones);
+  for (std::size_t first : {0, 1})
+    for (std::size_t z = first; z < zones; z += 2) order.push_back(z);
+  return order;
+}
+
 TriangulateStage::TriangulateStage(const RunOptions& options, IndexStage& indexed, const ZonePlan& plan,
                                    std::uint64_t query_page_bytes, std::uint64_t shared_rim_bytes, int threads)
     : options_(options),
@@ -58,8 +66,11 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
   SegmentCut cut = cut_segments(view, plan_, first_label, threads_, end_label_);
   plans_ = std::move(cut.plans);
   window_bytes_ = cut.window_bytes;
-  for (std::size_t s = 0; s < plans_.size(); ++s)
+  for (std::size_t s = 0; s < plans_.size(); ++s) {
+    const std::size_t first = units_.size();
     for (std::size_t z = 0; z < plans_[s].zones.size(); ++z) units_.push_back({s, z});
+    for (std::size_t z : zone_start_order(plans_[s].zones.size())) run_order_.push_back(first + z);
+  }
   spdlog::debug("windows measured: largest ~{} points, {} (the plan's share {})", cut.largest_window,
                 human_bytes(window_bytes_), human_bytes(plan_.available));
   // No cut fits the windows' share (a slab through a dense cluster is mostly buffers,
@@ -77,8 +88,9 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
                plan_.buffer_width, options_.buffer_spacings, view.hull_points.size());
 }
 
-// Each thread triangulates whole zones (they are independent given the sorted file).
-// The ordered region collects a segment's zones in plan order; after its last one the
+// Each thread triangulates whole zones (they are independent given the sorted file),
+// taking them in run_order_ (zone_start_order within each segment, the segments in
+// order). The ordered region collects a segment's zones in that order; after its last one the
 // write stage merges them by minimum label into its frames, so the bytes depend
 // neither on the thread count nor on the plan. A finished zone waits there for its
 // predecessors: at most `threads` zones are in flight, and the outputs of at most one
@@ -104,7 +116,8 @@ void TriangulateStage::run(SegmentSink& out) {
   std::vector<std::unique_ptr<ZoneTriangulator>> triangulators(static_cast<std::size_t>(threads_));
 #pragma omp parallel for ordered schedule(dynamic, 1) num_threads(threads_)
   for (std::int64_t i = 0; i < unit_count; ++i) {
-    const Unit unit = units_[std::size_t(i)];
+    const std::size_t u = run_order_[std::size_t(i)];
+    const Unit unit = units_[u];
     const SegmentPlan& plan = plans_[unit.segment];
     ZoneTets tets;
     SegmentStats s;
@@ -115,7 +128,7 @@ void TriangulateStage::run(SegmentSink& out) {
         auto& triangulator = triangulators[std::size_t(omp_get_thread_num())];
         if (!triangulator) triangulator = std::make_unique<ZoneTriangulator>(view, &output_pool_, &shared_rim_);
         s = triangulator->run(plan, plan.zones[unit.zone], tets);
-        out.zone_done(std::size_t(i), tets);
+        out.zone_done(u, tets);
         tets.xyz = {};  // the worker's, refilled by its next zone
       } catch (...) {
         // A worker never throws out of the parallel region (that would terminate the
@@ -166,14 +179,16 @@ void TriangulateStage::run(SegmentSink& out) {
   progress.finish();
 }
 
-// In the ordered region: a zone's tets and work, in plan order. After a segment's
-// last zone, its tets go to the write stage and its buffers back to the pool (also
+// In the ordered region: a zone's tets and work, its segment's in the start order.
+// After a segment's last zone, its tets go, in plan order, to the write stage and its buffers back to the pool (also
 // when the write stage fails: the zones' outputs are never held past their segment).
 void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentStats& stats, SegmentSink& out) {
   const SegmentPlan& plan = plans_[unit.segment];
-  parts_.push_back(std::move(tets));
+  if (parts_in_ == 0) parts_.resize(plan.zones.size());
+  parts_[unit.zone] = std::move(tets);
   segment_work_ += stats;
-  if (unit.zone + 1 < plan.zones.size()) return;
+  if (++parts_in_ < plan.zones.size()) return;
+  parts_in_ = 0;
   std::exception_ptr failure;
   try {
     const auto t0 = StageClock::now();

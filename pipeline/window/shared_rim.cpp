@@ -7,8 +7,13 @@
 namespace tetstream::pipeline {
 
 namespace {
-// The table is at most 3/4 full: linear probing stays short, and a table that doubles
-// at that load is 3/8 full after, so it takes 32-85 bytes a tet.
+// The table is at most 3/4 full: linear probing stays short. Its slots need not be a
+// power of two (a tet's first slot is its hash scaled to the table, home()), so it
+// grows to what its share holds: growing holds the old table and the new one, and a
+// table of powers of two stopped at a third to two thirds of its share (5 MiB held 2:
+// on `hills`, 10^6 points at 128M on two threads, half the rim tets found no room).
+// It grows fourfold, and at the last step to what the old one leaves of the share:
+// at least 4/5 of it.
 constexpr std::size_t kMinSlots = 1024;
 bool too_full(std::size_t size, std::size_t slots) { return 4 * size > 3 * slots; }
 }  // namespace
@@ -22,19 +27,21 @@ std::size_t SharedRim::hash(const Labels& t) {
   return std::size_t(h ^ (h >> 31));
 }
 
+std::size_t SharedRim::home(const Labels& t) const {
+  return std::size_t((unsigned __int128)hash(t) * slots_.size() >> 64);
+}
+
 bool SharedRim::contains(const Labels& tet) const {
   std::shared_lock lock(mutex_);
   if (slots_.empty()) return false;
-  const std::size_t mask = slots_.size() - 1;
-  for (std::size_t i = hash(tet) & mask;; i = (i + 1) & mask) {
+  for (std::size_t i = home(tet);; i = next(i)) {
     if (slots_[i][0] == kEmpty) return false;
     if (slots_[i] == tet) return true;
   }
 }
 
 bool SharedRim::insert_locked(const Labels& t) {
-  const std::size_t mask = slots_.size() - 1;
-  for (std::size_t i = hash(t) & mask;; i = (i + 1) & mask) {
+  for (std::size_t i = home(t);; i = next(i)) {
     if (slots_[i][0] == kEmpty) {
       slots_[i] = t;
       ++size_;
@@ -42,6 +49,23 @@ bool SharedRim::insert_locked(const Labels& t) {
     }
     if (slots_[i] == t) return false;
   }
+}
+
+// Empties slot `hole` and moves up the tets after it whose probe passed it
+// (backward-shift deletion: every tet stays reachable from its home without
+// markers for the removed ones).
+void SharedRim::erase_locked(std::size_t hole) {
+  for (std::size_t p = next(hole); slots_[p][0] != kEmpty; p = next(p)) {
+    const std::size_t q = home(slots_[p]);
+    // The tet at p may fill the hole unless its home lies in (hole, p], cyclically.
+    const bool after_hole = hole <= p ? (hole < q && q <= p) : (hole < q || q <= p);
+    if (!after_hole) {
+      slots_[hole] = slots_[p];
+      hole = p;
+    }
+  }
+  slots_[hole][0] = kEmpty;
+  --size_;
 }
 
 void SharedRim::rebuild_locked(std::size_t capacity, std::uint64_t keep_from) {
@@ -54,13 +78,16 @@ void SharedRim::rebuild_locked(std::size_t capacity, std::uint64_t keep_from) {
 
 std::size_t SharedRim::publish(std::span<const Labels> tets) {
   std::unique_lock lock(mutex_);
+  const std::size_t max_slots = max_bytes_ / sizeof(Labels);
   std::size_t published = 0;
   for (const Labels& t : tets) {
     if (too_full(size_ + 1, slots_.size())) {
-      // The old table and the new one are both held while it grows (and while
-      // forget_below rebuilds): together within the share.
-      const std::size_t grown = std::max(kMinSlots, 2 * slots_.size());
-      if ((grown + slots_.size()) * sizeof(Labels) > max_bytes_) break;
+      // The old table and the new one are both held while it grows: together within
+      // the share.
+      const std::size_t old = slots_.size(), room = max_slots > old ? max_slots - old : 0;
+      std::size_t grown = std::max(kMinSlots, 4 * old);
+      if (5 * grown > max_slots) grown = room;  // the last step: no fourfold one would follow
+      if (grown <= old || too_full(size_ + 1, grown)) break;
       rebuild_locked(grown, 0);
       peak_bytes_ = std::max(peak_bytes_, slots_.size() * sizeof(Labels));
     }
@@ -74,11 +101,21 @@ void SharedRim::forget_below(std::uint64_t label) {
   if (slots_.empty()) return;
   std::size_t kept = 0;
   for (const Labels& t : slots_) kept += t[0] != kEmpty && t[3] >= label;
-  // The smallest table that holds the rest below the load limit (memory goes back;
-  // never larger than the old one, so the two fit the share together).
+  // Few left: a smaller table (memory goes back; with the old one within the share).
+  // Otherwise the tets go where they are, and the table keeps its size for the
+  // zones to come.
   std::size_t capacity = kMinSlots;
   while (too_full(kept, capacity)) capacity *= 2;
-  rebuild_locked(kept == 0 ? 0 : std::min(capacity, slots_.size()), label);
+  const std::size_t max_slots = max_bytes_ / sizeof(Labels);
+  if (kept == 0) {
+    std::vector<Labels>().swap(slots_);
+    size_ = 0;
+  } else if (4 * capacity <= slots_.size() && capacity + slots_.size() <= max_slots) {
+    rebuild_locked(capacity, label);
+  } else {
+    for (std::size_t i = 0; i < slots_.size(); ++i)
+      while (slots_[i][0] != kEmpty && slots_[i][3] < label) erase_locked(i);
+  }
 }
 
 std::size_t SharedRim::size() const {

@@ -61,7 +61,10 @@ class SharedRim {
   static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);  // never a label
   std::shared_lock<std::shared_mutex> read_lock() const;
   static std::size_t hash(const Labels& t);
+  std::size_t home(const Labels& t) const;  // the first slot a tet's probe tries
+  std::size_t next(std::size_t i) const { return i + 1 == slots_.size() ? 0 : i + 1; }
   bool insert_locked(const Labels& t);  // false: already there
+  void erase_locked(std::size_t slot);
   void rebuild_locked(std::size_t capacity, std::uint64_t keep_from);
 
   const std::size_t max_bytes_;

@@ -7,8 +7,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
+#include <random>
+#include <set>
 #include <thread>
 #include <vector>
 
@@ -60,6 +63,49 @@ TEST(SharedRim, StaysWithinItsShare) {
   // Forgetting makes room again.
   rim.forget_below(4 * 10000);
   EXPECT_EQ(rim.publish(tets), published);
+}
+
+// Forgetting most of a full table removes the tets where they lie (the table keeps
+// its size) and every tet left stays reachable from its first slot, across the
+// table's end too: against a std::set of what was published and not yet forgotten,
+// over rounds of random tets with clusters in the probes.
+TEST(SharedRim, ForgetsInPlaceAndFindsEveryTetLeft) {
+  const std::size_t share = 100'000 * sizeof(Labels);  // not a power of two
+  SharedRim rim(share);
+  std::mt19937_64 random(7);
+  std::set<Labels> expected;
+  std::uint64_t floor = 0;
+  for (int round = 0; round < 40; ++round) {
+    std::vector<Labels> tets;
+    for (int i = 0; i < 20000; ++i) {
+      Labels t;
+      for (auto& l : t) l = floor + random() % 200'000;
+      std::sort(t.begin(), t.end());
+      if (t[0] == t[1] || t[1] == t[2] || t[2] == t[3]) continue;
+      tets.push_back(t);
+    }
+    const std::size_t before = rim.size();
+    const std::size_t published = rim.publish(tets);
+    ASSERT_EQ(rim.size(), before + published);
+    // publish stops at the first tet without room: the ones before it are in.
+    std::size_t seen = 0;
+    for (const Labels& t : tets) {
+      if (expected.count(t)) continue;
+      if (seen == published) break;
+      expected.insert(t);
+      ++seen;
+    }
+    ASSERT_LE(rim.bytes(), share);
+    floor += 40'000;
+    rim.forget_below(floor);
+    for (auto it = expected.begin(); it != expected.end();) it = (*it)[3] < floor ? expected.erase(it) : std::next(it);
+    ASSERT_EQ(rim.size(), expected.size()) << "round " << round;
+    for (const Labels& t : expected) ASSERT_TRUE(rim.contains(t)) << "round " << round;
+    for (const Labels& t : tets) ASSERT_EQ(rim.contains(t), expected.count(t) == 1) << "round " << round;
+  }
+  // The table grew past two thirds of its share (powers of two could not) and kept
+  // its size while forgetting.
+  EXPECT_GT(rim.peak_bytes(), share * 4 / 5);
 }
 
 TEST(SharedRim, LookupsWhilePublishingAndForgetting) {
