@@ -35,14 +35,6 @@ TriangulatePlan plan_triangulation(const IndexStage& indexed, const RunOptions& 
 // (MappedRegions), within an eighth of the budget (MemoryBudget::plan_triangulate).
 // The queries of a zone read the file along the sort axis, and a share that holds
 // their sweep saves faulting regions in again.
-std::vector<std::size_t> zone_start_order(std::size_t zones) {
-  std::vector<std::size_t> order;
-  order.reserve(zones);
-  for (std::size_t first : {0, 1})
-    for (std::size_t z = first; z < zones; z += 2) order.push_back(z);
-  return order;
-}
-
 TriangulateStage::TriangulateStage(const RunOptions& options, IndexStage& indexed, const ZonePlan& plan,
                                    std::uint64_t query_page_bytes, std::uint64_t shared_rim_bytes, int threads)
     : options_(options),

@@ -47,15 +47,6 @@ struct TriangulatePlan {
   ZonePlan zones;
   TriangulateShares shares;
 };
-// The order in which the zones of one segment of `zones` strips start: every other
-// strip, then the strips between them (0, 2, 4, ..., 1, 3, ...). Zones that run at the
-// same time cannot use each other's rims (docs/certificate.md, Lemma 7: a zone hands
-// its rim on when it ends), so two neighbouring strips running side by side each
-// prove the rim between them; in this order a strip between two others starts after
-// both. On `hills`, 10^6 points, the same plan of 9 x 5 zones: 3.30 M queries on one
-// thread, 3.75 M on two in plan order.
-std::vector<std::size_t> zone_start_order(std::size_t zones);
-
 // Plans the triangulation for the indexed points on `threads` threads and records
 // its shares in `budget`. UsageError, naming the budget that would work, when the
 // windows do not fit.

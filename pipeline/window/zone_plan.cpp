@@ -150,9 +150,9 @@ std::uint64_t estimate_window(const SortedView& view, const SegmentPlan& p, cons
 }
 
 // The segments of segment_points labels each and their zones, with the windows' bytes
-// as their points are estimated: the largest run of `threads` consecutive zones'
-// windows, and the zones' outputs. local_buffers: each segment's buffers at its own
-// points' spacing.
+// as their points are estimated: the largest run of `threads` zones' windows
+// consecutive in the order they start (zone_start_order), and the zones' outputs. local_buffers: each segment's buffers
+// at its own points' spacing.
 SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64_t segment_points, bool local_buffers,
                        std::uint64_t first_label, double t, std::uint64_t end_label) {
   SegmentCut cut;
@@ -175,8 +175,8 @@ SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64
       p.window_end = view.upper_bound(view.read_key(p.label_end - 1) + local);
     }
     split_into_zones(view, p, plan.zones);
-    for (const Zone& st : p.zones) {
-      windows.push_back(estimate_window(view, p, st));
+    for (std::size_t z : zone_start_order(p.zones.size())) {
+      windows.push_back(estimate_window(view, p, p.zones[z]));
       cut.largest_window = std::max(cut.largest_window, windows.back());
     }
     largest_zone =
@@ -191,8 +191,8 @@ SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64
     // of the file resident, its share 12.5 MiB). Pages not mapped cost nothing here.
     if (view.query_regions) release_mapped_pages(view.points.record(0), view.count * view.points.record_bytes());
   }
-  // The zones run in order, `threads` at a time: the windows in flight are about
-  // `threads` consecutive ones, and the largest such run is what the kernels hold.
+  // The zones run in their start order, `threads` at a time: the windows in flight
+  // are about `threads` consecutive ones, and the largest such run is what the kernels hold.
   const std::size_t run = std::min<std::size_t>(std::size_t(t), windows.size());
   std::uint64_t in_flight = 0, sum = 0;
   for (std::size_t i = 0; i < windows.size(); ++i) {
@@ -205,6 +205,14 @@ SegmentCut measure_cut(const SortedView& view, const ZonePlan& plan, std::uint64
 }
 
 }  // namespace
+
+std::vector<std::size_t> zone_start_order(std::size_t zones) {
+  std::vector<std::size_t> order;
+  order.reserve(zones);
+  for (std::size_t first : {0, 1})
+    for (std::size_t z = first; z < zones; z += 2) order.push_back(z);
+  return order;
+}
 
 SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads,
                         std::uint64_t end_label) {

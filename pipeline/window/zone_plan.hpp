@@ -6,7 +6,9 @@
 #include "pipeline/sort/point_sort.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
 
+#include <cstddef>
 #include <cstdint>
+#include <vector>
 
 namespace tetstream::pipeline {
 
@@ -95,6 +97,15 @@ struct SegmentCut {
 // to the last label) and their zones.
 SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint64_t first_label, int threads,
                         std::uint64_t end_label = ~std::uint64_t(0));
+
+// The order in which the zones of one segment of `zones` strips start: every other
+// strip, then the strips between them (0, 2, 4, ..., 1, 3, ...). Zones that run at the
+// same time cannot use each other's rims (docs/certificate.md, Lemma 7: a zone hands
+// its rim on when it ends), so two neighbouring strips running side by side each
+// prove the rim between them; in this order a strip between two others starts after
+// both. On `hills`, 10^6 points, the same plan of 9 x 5 zones: 3.30 M queries on one
+// thread, 3.75 M on two in plan order.
+std::vector<std::size_t> zone_start_order(std::size_t zones);
 
 // A budget refused before the sort: nothing worth keeping was done.
 class BudgetTooSmall : public UsageError {

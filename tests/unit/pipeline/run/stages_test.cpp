@@ -218,22 +218,6 @@ TEST_F(StagesTest, TriangulateStageEqualsTheInCoreKernel) {
   EXPECT_EQ(out.quads, sorted_quads(incore_tets(index.view())));
 }
 
-// A segment's zones start every other strip first, then the strips between them: each
-// zone once, and (from three strips) no two neighbouring strips one after the other
-// among the first half, which run side by side on two threads.
-TEST(ZoneStartOrder, EveryOtherStripFirstThenTheOnesBetween) {
-  EXPECT_EQ(zone_start_order(5), (std::vector<std::size_t>{0, 2, 4, 1, 3}));
-  EXPECT_EQ(zone_start_order(1), (std::vector<std::size_t>{0}));
-  EXPECT_TRUE(zone_start_order(0).empty());
-  for (std::size_t zones = 1; zones <= 12; ++zones) {
-    std::vector<std::size_t> order = zone_start_order(zones);
-    const std::size_t first_half = (zones + 1) / 2;
-    for (std::size_t i = 1; i < first_half; ++i) EXPECT_EQ(order[i] - order[i - 1], 2u) << zones;
-    std::sort(order.begin(), order.end());
-    for (std::size_t z = 0; z < zones; ++z) ASSERT_EQ(order[z], z) << zones;
-  }
-}
-
 // The write stage fed the in-core kernel's tets as two segments (grouped by minimum
 // label, as zones emit them): the container holds the points and exactly those tets.
 // Its points come from the sorted file, or (a claimed output) the sort merged them

@@ -1,4 +1,5 @@
 // split_into_zones: strips of about equal size whose cuts avoid dense places.
+#include "pipeline/window/zone_plan.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
 
 #include <gtest/gtest.h>
@@ -57,6 +58,22 @@ TEST(ZoneSplit, CutsAvoidAClusterAndStayBalanced) {
   for (const Zone& st : s.plan.zones) EXPECT_NEAR(double(s.own(st)), 100000.0, 12000.0);
   const double cut = s.plan.zones[0].hi;
   EXPECT_TRUE(cut < 0.498 - s.plan.buffer_width || cut > 0.502 + s.plan.buffer_width) << "cut at " << cut;
+}
+
+// A segment's zones start every other strip first, then the strips between them: each
+// zone once, and (from three strips) no two neighbouring strips one after the other
+// among the first half, which run side by side on two threads.
+TEST(ZoneStartOrder, EveryOtherStripFirstThenTheOnesBetween) {
+  EXPECT_EQ(zone_start_order(5), (std::vector<std::size_t>{0, 2, 4, 1, 3}));
+  EXPECT_EQ(zone_start_order(1), (std::vector<std::size_t>{0}));
+  EXPECT_TRUE(zone_start_order(0).empty());
+  for (std::size_t zones = 1; zones <= 12; ++zones) {
+    std::vector<std::size_t> order = zone_start_order(zones);
+    const std::size_t first_half = (zones + 1) / 2;
+    for (std::size_t i = 1; i < first_half; ++i) EXPECT_EQ(order[i] - order[i - 1], 2u) << zones;
+    std::sort(order.begin(), order.end());
+    for (std::size_t z = 0; z < zones; ++z) ASSERT_EQ(order[z], z) << zones;
+  }
 }
 
 }  // namespace
