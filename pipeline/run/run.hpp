@@ -92,6 +92,7 @@ struct RunSummary {
   std::uint64_t tets_by_rim = 0;          // tets certified by the rim
   std::uint64_t tets_by_neighbour = 0;    // tets a finished zone had certified (the rest: by the range test)
   std::uint64_t rim_published = 0;        // rim tets finished zones handed to the running ones
+  std::uint64_t rim_no_room = 0;          // rim tets finished zones offered to a full table
   std::uint64_t rim_from_neighbours = 0;  // rim tets the running zones found there (no ball, no query)
   std::uint64_t rim_rechecks = 0;         // rim tets left unproved by a round, checked again in the next
   std::uint64_t queries_spared = 0;       // queued tets in conflict with a repair point the round had found (no query)

@@ -52,6 +52,7 @@ constexpr Counter kCounters[] = {
     {"empty_reach_farther", &SegmentStats::empty_reach_farther, &RunSummary::empty_reach_farther, true},
     {"tets_by_neighbour", &SegmentStats::tets_by_neighbour, &RunSummary::tets_by_neighbour, true},
     {"rim_published", &SegmentStats::rim_published, &RunSummary::rim_published, true},
+    {"rim_no_room", &SegmentStats::rim_no_room, &RunSummary::rim_no_room, true},
     {"rim_from_neighbours", &SegmentStats::rim_from_neighbours, &RunSummary::rim_from_neighbours, true},
 };
 

@@ -47,6 +47,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
         {"under_two_segments", s.empty_reach_two},
         {"farther", s.empty_reach_farther}}},
       {"rim_published", s.rim_published},
+      {"rim_no_room", s.rim_no_room},
       {"rim_from_neighbours", s.rim_from_neighbours},
       {"output_bytes", s.output_bytes},
       {"disk_planned_bytes", s.disk_planned_bytes},

@@ -18,7 +18,7 @@ constexpr std::size_t kMinSlots = 1024;
 bool too_full(std::size_t size, std::size_t slots) { return 4 * size > 3 * slots; }
 }  // namespace
 
-std::size_t SharedRim::hash(const Labels& t) {
+std::size_t SharedRim::hash(const Slot& t) {
   std::uint64_t h = 0x9E3779B97F4A7C15ull;
   for (std::uint64_t l : t) {
     h ^= l + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
@@ -27,22 +27,24 @@ std::size_t SharedRim::hash(const Labels& t) {
   return std::size_t(h ^ (h >> 31));
 }
 
-std::size_t SharedRim::home(const Labels& t) const {
+std::size_t SharedRim::home(const Slot& t) const {
   return std::size_t((unsigned __int128)hash(t) * slots_.size() >> 64);
 }
 
 bool SharedRim::contains(const Labels& tet) const {
+  if (tet[3] >= kLabelLimit) return false;  // never published
+  const Slot slot = pack(tet);
   std::shared_lock lock(mutex_);
   if (slots_.empty()) return false;
-  for (std::size_t i = home(tet);; i = next(i)) {
-    if (slots_[i][0] == kEmpty) return false;
-    if (slots_[i] == tet) return true;
+  for (std::size_t i = home(slot);; i = next(i)) {
+    if (empty(slots_[i])) return false;
+    if (slots_[i] == slot) return true;
   }
 }
 
-bool SharedRim::insert_locked(const Labels& t) {
+bool SharedRim::insert_locked(const Slot& t) {
   for (std::size_t i = home(t);; i = next(i)) {
-    if (slots_[i][0] == kEmpty) {
+    if (empty(slots_[i])) {
       slots_[i] = t;
       ++size_;
       return true;
@@ -55,7 +57,7 @@ bool SharedRim::insert_locked(const Labels& t) {
 // (backward-shift deletion: every tet stays reachable from its home without
 // markers for the removed ones).
 void SharedRim::erase_locked(std::size_t hole) {
-  for (std::size_t p = next(hole); slots_[p][0] != kEmpty; p = next(p)) {
+  for (std::size_t p = next(hole); !empty(slots_[p]); p = next(p)) {
     const std::size_t q = home(slots_[p]);
     // The tet at p may fill the hole unless its home lies in (hole, p], cyclically.
     const bool after_hole = hole <= p ? (hole < q && q <= p) : (hole < q || q <= p);
@@ -69,29 +71,38 @@ void SharedRim::erase_locked(std::size_t hole) {
 }
 
 void SharedRim::rebuild_locked(std::size_t capacity, std::uint64_t keep_from) {
-  std::vector<Labels> old(capacity, Labels{kEmpty, kEmpty, kEmpty, kEmpty});
+  std::vector<Slot> old(capacity, Slot{kEmpty, kEmpty, kEmpty});
   old.swap(slots_);
   size_ = 0;
-  for (const Labels& t : old)
-    if (t[0] != kEmpty && t[3] >= keep_from) insert_locked(t);
+  for (const Slot& t : old)
+    if (!empty(t) && largest(t) >= keep_from) insert_locked(t);
 }
 
-std::size_t SharedRim::publish(std::span<const Labels> tets) {
+std::size_t SharedRim::publish(std::span<const Labels> tets, std::uint64_t* no_room) {
   std::unique_lock lock(mutex_);
-  const std::size_t max_slots = max_bytes_ / sizeof(Labels);
-  std::size_t published = 0;
+  const std::size_t max_slots = max_bytes_ / sizeof(Slot);
+  std::size_t published = 0, tried = 0;
   for (const Labels& t : tets) {
+    if (t[3] >= kLabelLimit) {  // past what a slot holds: the zones check it themselves
+      if (no_room) ++*no_room;
+      ++tried;
+      continue;
+    }
     if (too_full(size_ + 1, slots_.size())) {
       // The old table and the new one are both held while it grows: together within
       // the share.
       const std::size_t old = slots_.size(), room = max_slots > old ? max_slots - old : 0;
       std::size_t grown = std::max(kMinSlots, 4 * old);
       if (5 * grown > max_slots) grown = room;  // the last step: no fourfold one would follow
-      if (grown <= old || too_full(size_ + 1, grown)) break;
+      if (grown <= old || too_full(size_ + 1, grown)) {
+        if (no_room) *no_room += tets.size() - tried;
+        break;
+      }
       rebuild_locked(grown, 0);
-      peak_bytes_ = std::max(peak_bytes_, slots_.size() * sizeof(Labels));
+      peak_bytes_ = std::max(peak_bytes_, slots_.size() * sizeof(Slot));
     }
-    published += insert_locked(t);
+    published += insert_locked(pack(t));
+    ++tried;
   }
   return published;
 }
@@ -100,21 +111,21 @@ void SharedRim::forget_below(std::uint64_t label) {
   std::unique_lock lock(mutex_);
   if (slots_.empty()) return;
   std::size_t kept = 0;
-  for (const Labels& t : slots_) kept += t[0] != kEmpty && t[3] >= label;
+  for (const Slot& t : slots_) kept += !empty(t) && largest(t) >= label;
   // Few left: a smaller table (memory goes back; with the old one within the share).
   // Otherwise the tets go where they are, and the table keeps its size for the
   // zones to come.
   std::size_t capacity = kMinSlots;
   while (too_full(kept, capacity)) capacity *= 2;
-  const std::size_t max_slots = max_bytes_ / sizeof(Labels);
+  const std::size_t max_slots = max_bytes_ / sizeof(Slot);
   if (kept == 0) {
-    std::vector<Labels>().swap(slots_);
+    std::vector<Slot>().swap(slots_);
     size_ = 0;
   } else if (4 * capacity <= slots_.size() && capacity + slots_.size() <= max_slots) {
     rebuild_locked(capacity, label);
   } else {
     for (std::size_t i = 0; i < slots_.size(); ++i)
-      while (slots_[i][0] != kEmpty && slots_[i][3] < label) erase_locked(i);
+      while (!empty(slots_[i]) && largest(slots_[i]) < label) erase_locked(i);
   }
 }
 
@@ -125,7 +136,7 @@ std::size_t SharedRim::size() const {
 
 std::size_t SharedRim::bytes() const {
   std::shared_lock lock(mutex_);
-  return slots_.size() * sizeof(Labels);
+  return slots_.size() * sizeof(Slot);
 }
 
 std::size_t SharedRim::peak_bytes() const {

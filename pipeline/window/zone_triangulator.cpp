@@ -504,9 +504,10 @@ void ZoneWorker::publish_rim() {
     std::sort(l.begin(), l.end());
     publish_.push_back(l);
     // In batches: the scratch stays small (a zone's rim is tens of thousands of tets).
-    if (publish_.size() == kPublishBatch) stats_.rim_published += shared_->publish(publish_), publish_.clear();
+    if (publish_.size() == kPublishBatch)
+      stats_.rim_published += shared_->publish(publish_, &stats_.rim_no_room), publish_.clear();
   }
-  stats_.rim_published += shared_->publish(publish_);
+  stats_.rim_published += shared_->publish(publish_, &stats_.rim_no_room);
 }
 
 void ZoneWorker::mark_beyond(VertexId first, VertexId end) {

@@ -44,6 +44,7 @@ struct SegmentStats {
   std::uint64_t tets_by_rim = 0;                // of those, by the rim
   std::uint64_t tets_by_neighbour = 0;          // of those, by a finished zone (the rest: by the range test)
   std::uint64_t rim_published = 0;              // rim tets handed to the zones still running (SharedRim)
+  std::uint64_t rim_no_room = 0;                // rim tets a finished zone offered that found the table full
   std::uint64_t rim_from_neighbours = 0;        // rim tets certified by finding them there
   std::uint64_t rim_rechecks = 0;               // rim tets left unproved by a round, checked again
   std::uint64_t queries_spared = 0;             // queued tets in conflict with a repair point already found
@@ -73,7 +74,7 @@ struct SegmentStats {
     empty_reach_none += o.empty_reach_none, empty_reach_half += o.empty_reach_half,
         empty_reach_one += o.empty_reach_one, empty_reach_two += o.empty_reach_two,
         empty_reach_farther += o.empty_reach_farther;
-    tets_by_neighbour += o.tets_by_neighbour, rim_published += o.rim_published,
+    tets_by_neighbour += o.tets_by_neighbour, rim_published += o.rim_published, rim_no_room += o.rim_no_room,
         rim_from_neighbours += o.rim_from_neighbours;
     kernel_bytes += o.kernel_bytes, seconds_build += o.seconds_build, seconds_check += o.seconds_check;
     return *this;
