@@ -11,7 +11,8 @@ namespace {
 // power of two (a tet's first slot is its hash scaled to the table, home()), so it
 // grows to what its share holds: growing holds the old table and the new one, and a
 // table of powers of two stopped at a third to two thirds of its share (5 MiB held 2:
-// on `hills`, 10^6 points at 128M on two threads, half the rim tets found no room).
+// on `hills`, 10^6 points at 128M on two threads, finished zones published half the
+// rim tets they did on one thread with a 6 MiB share, the same plan).
 // It grows fourfold, and at the last step to what the old one leaves of the share:
 // at least 4/5 of it.
 constexpr std::size_t kMinSlots = 1024;
