@@ -82,8 +82,8 @@ void TriangulateStage::prepare(std::uint64_t first_label, std::uint64_t first_se
 
 // Each thread triangulates whole zones (they are independent given the sorted file),
 // taking them in run_order_ (zone_start_order within each segment, the segments in
-// order). The ordered region collects a segment's zones in that order; after its last one the
-// write stage merges them by minimum label into its frames, so the bytes depend
+// order). The ordered region collects a segment's zones in that order; after its last
+// one the write stage merges them by minimum label into its frames, so the bytes depend
 // neither on the thread count nor on the plan. A finished zone waits there for its
 // predecessors: at most `threads` zones are in flight, and the outputs of at most one
 // segment plus `threads` - 1 zones are held, which is what the plan was sized for.
@@ -172,8 +172,9 @@ void TriangulateStage::run(SegmentSink& out) {
 }
 
 // In the ordered region: a zone's tets and work, its segment's in the start order.
-// After a segment's last zone, its tets go, in plan order, to the write stage and its buffers back to the pool (also
-// when the write stage fails: the zones' outputs are never held past their segment).
+// After a segment's last zone, its tets go, in plan order, to the write stage and its
+// buffers back to the pool (also when the write stage fails: the zones' outputs are
+// never held past their segment).
 void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentStats& stats, SegmentSink& out) {
   const SegmentPlan& plan = plans_[unit.segment];
   if (parts_in_ == 0) parts_.resize(plan.zones.size());

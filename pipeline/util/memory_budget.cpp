@@ -161,8 +161,8 @@ TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, doub
   // The shared rim tets (pipeline/window/shared_rim.hpp), out of the other 25%, never
   // out of the windows' (smaller windows made more zones, whose rims cost more queries
   // than the table saved: indoor 10^6 at 128M, 11 segments became 14). Up to an eighth
-  // of what the reserve and the writer leave, and no more than 64 bytes a point (two
-  // slots a point: the tets that cross zones are a fraction of the ~6.5 a point): what
+  // of what the reserve and the writer leave, and no more than 64 bytes a point (under
+  // three 24-byte slots a point: the tets that cross zones are a fraction of the ~6.5 a point): what
   // the query pages leave of the 25%, and half of the query pages above 8 MiB. A 32nd
   // (still the least: a 32nd, out of the query pages above one region) was too small:
   // on `hills` 10^6 at 128M, 1.57 M rim tets were offered and 0.10 M found room, and the

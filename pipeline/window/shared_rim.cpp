@@ -32,15 +32,19 @@ std::size_t SharedRim::home(const Slot& t) const {
   return std::size_t((unsigned __int128)hash(t) * slots_.size() >> 64);
 }
 
-bool SharedRim::contains(const Labels& tet) const {
-  if (tet[3] >= kLabelLimit) return false;  // never published
-  const Slot slot = pack(tet);
-  std::shared_lock lock(mutex_);
+bool SharedRim::find_locked(const Slot& slot) const {
   if (slots_.empty()) return false;
   for (std::size_t i = home(slot);; i = next(i)) {
     if (empty(slots_[i])) return false;
     if (slots_[i] == slot) return true;
   }
+}
+
+bool SharedRim::contains(const Labels& tet) const {
+  if (tet[3] >= kLabelLimit) return false;  // never published
+  const Slot slot = pack(tet);
+  std::shared_lock lock(mutex_);
+  return find_locked(slot);
 }
 
 bool SharedRim::insert_locked(const Slot& t) {
@@ -79,31 +83,35 @@ void SharedRim::rebuild_locked(std::size_t capacity, std::uint64_t keep_from) {
     if (!empty(t) && largest(t) >= keep_from) insert_locked(t);
 }
 
+bool SharedRim::grow_locked() {
+  // The old table and the new one are both held while it grows: together within the
+  // share.
+  const std::size_t old = slots_.size(), most = max_slots(), room = most > old ? most - old : 0;
+  std::size_t grown = std::max(kMinSlots, 4 * old);
+  if (5 * grown > most) grown = room;  // the last step: no fourfold one would follow
+  if (grown <= old || too_full(size_ + 1, grown)) return false;
+  rebuild_locked(grown, 0);
+  peak_bytes_ = std::max(peak_bytes_, slots_.size() * sizeof(Slot));
+  return true;
+}
+
 std::size_t SharedRim::publish(std::span<const Labels> tets, std::uint64_t* no_room) {
+  // A label past what a slot holds: the zones check that tet themselves.
+  const auto fits = [](const Labels& t) { return t[3] < kLabelLimit; };
   std::unique_lock lock(mutex_);
-  const std::size_t max_slots = max_bytes_ / sizeof(Slot);
-  std::size_t published = 0, tried = 0;
-  for (const Labels& t : tets) {
-    if (t[3] >= kLabelLimit) {  // past what a slot holds: the zones check it themselves
+  std::size_t published = 0;
+  for (std::size_t i = 0; i < tets.size(); ++i) {
+    if (!fits(tets[i])) {
       if (no_room) ++*no_room;
-      ++tried;
       continue;
     }
-    if (too_full(size_ + 1, slots_.size())) {
-      // The old table and the new one are both held while it grows: together within
-      // the share.
-      const std::size_t old = slots_.size(), room = max_slots > old ? max_slots - old : 0;
-      std::size_t grown = std::max(kMinSlots, 4 * old);
-      if (5 * grown > max_slots) grown = room;  // the last step: no fourfold one would follow
-      if (grown <= old || too_full(size_ + 1, grown)) {
-        if (no_room) *no_room += tets.size() - tried;
-        break;
-      }
-      rebuild_locked(grown, 0);
-      peak_bytes_ = std::max(peak_bytes_, slots_.size() * sizeof(Slot));
+    if (too_full(size_ + 1, slots_.size()) && !grow_locked()) {
+      // Full: the tets left that are not here already found no room.
+      if (no_room)
+        for (std::size_t j = i; j < tets.size(); ++j) *no_room += !fits(tets[j]) || !find_locked(pack(tets[j]));
+      break;
     }
-    published += insert_locked(pack(t));
-    ++tried;
+    published += insert_locked(pack(tets[i]));
   }
   return published;
 }
@@ -118,11 +126,10 @@ void SharedRim::forget_below(std::uint64_t label) {
   // zones to come.
   std::size_t capacity = kMinSlots;
   while (too_full(kept, capacity)) capacity *= 2;
-  const std::size_t max_slots = max_bytes_ / sizeof(Slot);
   if (kept == 0) {
     std::vector<Slot>().swap(slots_);
     size_ = 0;
-  } else if (4 * capacity <= slots_.size() && capacity + slots_.size() <= max_slots) {
+  } else if (4 * capacity <= slots_.size() && capacity + slots_.size() <= max_slots()) {
     rebuild_locked(capacity, label);
   } else {
     for (std::size_t i = 0; i < slots_.size(); ++i)

@@ -34,7 +34,8 @@ class SharedRim {
   // Whether a finished zone certified the tet with these labels.
   bool contains(const Labels& tet) const;
   // A finished zone's rim tets; returns how many were published (the others: already
-  // there, or no room; `no_room`, when given, counts the latter).
+  // there, or no room; `no_room`, when given, counts the latter: those not here when
+  // the table was full, and those whose labels a slot cannot hold).
   std::size_t publish(std::span<const Labels> tets, std::uint64_t* no_room = nullptr);
   // Calls visit(tet) for every tet here with a label in [begin, end) (with a zone's
   // labels: the finished neighbours of its points there), under the read lock.
@@ -79,7 +80,10 @@ class SharedRim {
   static std::size_t hash(const Slot& s);
   std::size_t home(const Slot& s) const;  // the first slot a tet's probe tries
   std::size_t next(std::size_t i) const { return i + 1 == slots_.size() ? 0 : i + 1; }
+  bool find_locked(const Slot& s) const;
   bool insert_locked(const Slot& s);  // false: already there
+  bool grow_locked();                 // false: the share holds no larger table
+  std::size_t max_slots() const { return max_bytes_ / sizeof(Slot); }
   void erase_locked(std::size_t slot);
   void rebuild_locked(std::size_t capacity, std::uint64_t keep_from);
 

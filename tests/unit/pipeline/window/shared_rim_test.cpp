@@ -95,6 +95,10 @@ TEST(SharedRim, StaysWithinItsShare) {
   std::size_t found = 0;
   for (const Labels& t : tets) found += rim.contains(t);
   EXPECT_EQ(found, published);  // what was not published is not found
+  // Offered again to the full table: only those not there are counted as without room.
+  std::uint64_t again = 0;
+  EXPECT_EQ(rim.publish(tets, &again), 0u);
+  EXPECT_EQ(again, tets.size() - published);
   // Forgetting makes room again.
   rim.forget_below(4 * 10000);
   EXPECT_EQ(rim.publish(tets), published);
