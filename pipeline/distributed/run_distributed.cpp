@@ -10,6 +10,7 @@
 #include "pipeline/util/memory_budget.hpp"
 #include "pipeline/distributed/point_sort_distributed.hpp"
 #include "pipeline/util/progress.hpp"
+#include "pipeline/util/resident_memory.hpp"
 #include "pipeline/distributed/rank_cost.hpp"
 #include "pipeline/distributed/rank_records.hpp"
 #include "pipeline/run/run_internal.hpp"
@@ -294,6 +295,7 @@ class RankJob {
       summary.seconds_total = seconds_since(start_);
       summary.memory_ceiling = budget_.ceiling();
       summary.memory_shares = budget_.shares();
+      summary.memory_peak_bytes = peak_resident_bytes();
     } else {
       summary.ranks.push_back(mine);
       summary.tets = mine.tets;

@@ -10,6 +10,7 @@
 #include "pipeline/util/communicator.hpp"
 #include "pipeline/util/memory_budget.hpp"
 #include "pipeline/util/progress.hpp"
+#include "pipeline/util/resident_memory.hpp"
 #include "pipeline/run/run_internal.hpp"
 #include "pipeline/run/stage.hpp"
 #include "pipeline/run/stage_index.hpp"
@@ -247,6 +248,7 @@ RunSummary Job::run() {
   summary.stages.emplace_back("total", job_meter.elapsed());
   summary.memory_ceiling = budget_.ceiling();
   summary.memory_shares = budget_.shares();
+  summary.memory_peak_bytes = peak_resident_bytes();
   return summary;
 }
 

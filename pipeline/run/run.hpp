@@ -136,6 +136,10 @@ struct RunSummary {
   // planned for this input (empty when a finished checkpoint was only collected).
   std::uint64_t memory_ceiling = 0;
   std::vector<MemoryBudget::Share> memory_shares;
+  // The process's resident peak when the job ended (pipeline/util/resident_memory.hpp,
+  // VmHWM: the sort, the triangulation and the writer alike); 0 where the kernel does
+  // not say.
+  std::uint64_t memory_peak_bytes = 0;
   // A job under MPI (pipeline/run_distributed.hpp): each rank's part, in rank order
   // (empty for one process). Memory figures above are rank 0's (--memory is per rank).
   struct Rank {

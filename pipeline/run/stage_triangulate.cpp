@@ -5,6 +5,7 @@
 #include "pipeline/util/fault.hpp"
 #include "pipeline/util/interrupt.hpp"
 #include "pipeline/util/progress.hpp"
+#include "pipeline/util/resident_memory.hpp"
 #include "pipeline/run/stage.hpp"
 
 #include <spdlog/spdlog.h>
@@ -196,6 +197,7 @@ void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentS
       plan.label_begin, plan.label_end, plan.zones.size(), segment_work_.window_points, segment_work_.repair_points,
       segment_work_.range_failures, segment_work_.queries, segment_work_.rounds, segment_work_.tets,
       segment_work_.seconds_build, segment_work_.seconds_check, human_bytes(double(segment_work_.kernel_bytes)));
+  warn_if_past_budget(plan);
   for (auto& part : parts_) output_pool_.give(std::move(part));
   parts_.clear();
   // Every zone of the segments so far has finished: a tet of labels all below this
@@ -205,6 +207,23 @@ void TriangulateStage::collect(const Unit& unit, ZoneTets&& tets, const SegmentS
                 human_bytes(double(shared_rim_.bytes())));
   segment_work_ = SegmentStats{};
   if (failure) std::rethrow_exception(failure);
+}
+
+// The plan sizes the windows by a sample of their points, before their repairs and
+// the neighbours' seeds, which on surfaces add up to 87% (docs/zoo.md, "What a window
+// takes past its sample"): a job the plan said would fit can pass its budget. Said
+// once, when a segment ends with the resident peak past the budget.
+void TriangulateStage::warn_if_past_budget(const SegmentPlan& plan) {
+  if (warned_past_budget_) return;
+  const std::uint64_t budget = options_.memory_stated != 0 ? options_.memory_stated : options_.memory_bytes;
+  const std::uint64_t peak = peak_resident_bytes();
+  if (budget == 0 || peak <= budget) return;
+  warned_past_budget_ = true;
+  spdlog::warn(
+      "memory: the resident set reached {}, past the budget of {} (seen after segment [{}, {}), whose windows "
+      "held {} points and {} repair points, which the plan does not foresee): a larger --memory holds this input",
+      human_bytes(double(peak)), human_bytes(double(budget)), plan.label_begin, plan.label_end,
+      segment_work_.window_points, segment_work_.repair_points);
 }
 
 }  // namespace tetstream::pipeline

@@ -101,6 +101,9 @@ class TriangulateStage {
     std::size_t zone;
   };
   void collect(const Unit& unit, ZoneTets&& tets, const SegmentStats& stats, SegmentSink& out);
+  // The warning, once, that the resident set passed the budget (after `plan`'s zones).
+  void warn_if_past_budget(const SegmentPlan& plan);
+  bool warned_past_budget_ = false;
 
   const RunOptions& options_;
   IndexStage& indexed_;

@@ -52,6 +52,7 @@ nlohmann::json run_summary_json(const RunOptions& o, const RunSummary& s) {
       {"output_bytes", s.output_bytes},
       {"disk_planned_bytes", s.disk_planned_bytes},
       {"disk_peak_bytes", s.disk_peak_bytes},
+      {"memory_peak_bytes", s.memory_peak_bytes},
       {"tet_bytes", s.tet_bytes},
       {"bytes_per_tet", s.tets ? double(s.tet_bytes) / double(s.tets) : 0.0},
       {"seconds",

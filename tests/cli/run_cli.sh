@@ -50,6 +50,8 @@ rm -f ix.f64 ix-*.tets ix.log
 # The ledger's shares in --json, each phase within the budget.
 [ "$(echo "$s" | json "all(sum(d['memory_planned'][p].values()) <= d['memory_planned']['ceiling'] for p in ('sort', 'triangulate'))")" = "True" ] \
   || fail "memory_planned over the ceiling or missing: $s"
+# The resident peak the kernel counted (VmHWM): present, and at least the process itself.
+[ "$(echo "$s" | json "d['memory_peak_bytes'] > 8 << 20")" = "True" ] || fail "memory_peak_bytes missing or small: $s"
 for f in points.ply points.npy points.txt; do
   "$T" -q gen --dist ellipsoid-shell --n 20000 --seed 7 -o "$f"
   "$T" -q run "$f" -o "out-${f#points.}.tets" --memory 64M --tmpdir tmp --zone-points 2000
