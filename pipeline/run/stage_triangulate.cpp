@@ -220,8 +220,8 @@ void TriangulateStage::warn_if_past_budget(const SegmentPlan& plan) {
   if (budget == 0 || peak <= budget) return;
   warned_past_budget_ = true;
   spdlog::warn(
-      "memory: the resident set reached {}, past the budget of {} (seen after segment [{}, {}), whose windows "
-      "held {} points and {} repair points, which the plan does not foresee): a larger --memory holds this input",
+      "memory: the resident set reached {}, past the budget of {}, by the end of segment [{}, {}) (its windows: "
+      "{} points, then {} repair points): a larger --memory holds this input",
       human_bytes(double(peak)), human_bytes(double(budget)), plan.label_begin, plan.label_end,
       segment_work_.window_points, segment_work_.repair_points);
 }

@@ -52,6 +52,15 @@ rm -f ix.f64 ix-*.tets ix.log
   || fail "memory_planned over the ceiling or missing: $s"
 # The resident peak the kernel counted (VmHWM): present, and at least the process itself.
 [ "$(echo "$s" | json "d['memory_peak_bytes'] > 8 << 20")" = "True" ] || fail "memory_peak_bytes missing or small: $s"
+# A plan the options fix past the budget passes it, and the job says so, once, after
+# the segment (docs/memory.md); one within it says nothing.
+"$T" -q gen --n 200000 --seed 2 -o big.f64
+"$T" -q --json run big.f64 -o big.tets --memory 32M --tmpdir tmp --segment-points 200000 >big.json 2>big.err
+[ "$(grep -c 'the resident set reached' big.err)" = 1 ] || fail "no warning of the resident set past 32M: $(cat big.err)"
+[ "$(json "d['memory_peak_bytes'] > 32 << 20" <big.json)" = "True" ] || fail "memory_peak_bytes: $(cat big.json)"
+"$T" -q run big.f64 -o big.tets --memory 256M --tmpdir tmp --force 2>big.err
+[ ! -s big.err ] || fail "a job within its budget warned: $(cat big.err)"
+rm -f big.f64 big.tets big.json big.err
 for f in points.ply points.npy points.txt; do
   "$T" -q gen --dist ellipsoid-shell --n 20000 --seed 7 -o "$f"
   "$T" -q run "$f" -o "out-${f#points.}.tets" --memory 64M --tmpdir tmp --zone-points 2000
