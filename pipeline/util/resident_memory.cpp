@@ -1,22 +1,13 @@
 #include "pipeline/util/resident_memory.hpp"
 
-#include <fstream>
-#include <string>
+#include <sys/resource.h>
 
 namespace tetstream::pipeline {
 
 std::uint64_t peak_resident_bytes() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  while (std::getline(status, line)) {
-    if (line.rfind("VmHWM:", 0) != 0) continue;
-    try {
-      return std::stoull(line.substr(6)) * 1024;  // "VmHWM:   123456 kB"
-    } catch (const std::exception&) {
-      return 0;
-    }
-  }
-  return 0;
+  rusage usage{};
+  if (getrusage(RUSAGE_SELF, &usage) != 0) return 0;
+  return std::uint64_t(usage.ru_maxrss) * 1024;  // Linux: kilobytes, the kernel's VmHWM
 }
 
 }  // namespace tetstream::pipeline

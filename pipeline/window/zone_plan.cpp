@@ -222,6 +222,9 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
   SegmentCut best;
   std::uint64_t best_points = segment_points;  // best's segment size
   const std::uint64_t todo = std::min(end_label, view.count) - std::min(first_label, view.count);
+  // The segments a cut of `size` labels each makes, and the size that makes `count`.
+  auto segments_of = [&](std::uint64_t size) { return (todo + size - 1) / std::max<std::uint64_t>(size, 1); };
+  auto size_for = [&](std::uint64_t count) { return (todo + count - 1) / std::max<std::uint64_t>(count, 1); };
   // A cut within the share, with one segment fewer while the measured windows still
   // fit. The shrinking below cuts a fifth at least, and the segment count is a
   // ceiling, so a fitting cut can be a whole segment smaller than it needs to be, and
@@ -248,9 +251,9 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
     }
     std::optional<SegmentCut> found;
     for (int more = 0; more < 4; ++more) {
-      const std::uint64_t segments = (todo + points - 1) / std::max<std::uint64_t>(points, 1);
+      const std::uint64_t segments = segments_of(points);
       if (segments <= 1) break;
-      const std::uint64_t larger = (todo + segments - 2) / (segments - 1);
+      const std::uint64_t larger = size_for(segments - 1);
       if (!fitting(larger, found)) break;
       cut = std::move(*found);
       points = larger;
@@ -272,8 +275,7 @@ SegmentCut cut_segments(const SortedView& view, const ZonePlan& plan, std::uint6
     // buffers made 201,763 queries, 10 with the plan's 175,017 (the same tets; 9 with
     // the plan's buffers, under a sparser sample's estimate, 167,508).
     if (attempt == 0 && best.window_bytes < 1.1 * plan.available) {
-      const std::uint64_t segments = (todo + segment_points - 1) / std::max<std::uint64_t>(segment_points, 1) + 1;
-      const std::uint64_t smaller = std::max<std::uint64_t>(1000, (todo + segments - 1) / segments);
+      const std::uint64_t smaller = std::max<std::uint64_t>(1000, size_for(segments_of(segment_points) + 1));
       SegmentCut plain = measure_cut(view, plan, smaller, false, first_label, t, end_label);
       if (plain.window_bytes <= plan.available) return grown(std::move(plain), smaller);
     }
