@@ -21,8 +21,13 @@ namespace tetstream::io {
 // ---- §3.1 preamble, §3.7 footer ----
 inline constexpr std::array<std::uint8_t, 8> kFileMagic = {0x89, 'T', 'E', 'T', 'S', '\r', '\n', 0x1A};
 inline constexpr std::array<std::uint8_t, 8> kFooterMagic = {'T', 'E', 'T', 'S', 'E', 'N', 'D', 0x1A};
+// Major versions: 1, labels in the sort's order along one axis; 2, the same layout with
+// the labels in bricks along a space-filling curve (format.md §1, §3.4). A reader reads
+// both; `run` writes 2, the periodic and the other writers 1.
 inline constexpr std::uint16_t kVersionMajor = 1;
+inline constexpr std::uint16_t kVersionMajorBricks = 2;
 inline constexpr std::uint16_t kVersionMinor = 0;
+inline bool version_readable(std::uint16_t major) { return major == kVersionMajor || major == kVersionMajorBricks; }
 inline constexpr std::size_t kPreambleSize = 16;
 inline constexpr std::size_t kFooterSize = 48;
 
@@ -59,6 +64,9 @@ struct TetFileHeader {
   std::array<double, 3> bbox_min{0, 0, 0}, bbox_max{0, 0, 0};
   std::string tool;     // e.g. "tetstream 0.1.0"
   std::string options;  // how the file was made, normally a JSON object
+  // The preamble's major version (not a HEAD field): kVersionMajor, or
+  // kVersionMajorBricks for labels in format 2's order.
+  std::uint16_t version_major = kVersionMajor;
 
   std::size_t point_record_bytes() const { return 3 * coord_bytes(coord_type) + id_width / 8; }
   // Fills label_width and id_width when 0 and checks everything; throws

@@ -82,9 +82,10 @@ TetReader::TetReader(std::string path, Periodic periodic) : path_(std::move(path
     }
     version_major_ = get_u16(data_ + 8);
     version_minor_ = get_u16(data_ + 10);
-    if (version_major_ != kVersionMajor) {
+    if (!version_readable(version_major_)) {
       fail(8, "unsupported container version " + std::to_string(version_major_) + "." + std::to_string(version_minor_) +
-                  " (this reader reads " + std::to_string(kVersionMajor) + ".x)");
+                  " (this reader reads " + std::to_string(kVersionMajor) + ".x and " +
+                  std::to_string(kVersionMajorBricks) + ".x)");
     }
     // §3.7 footer.
     if (size_ < kPreambleSize + kFooterSize) fail(size_, "truncated: no footer");
@@ -129,6 +130,7 @@ TetReader::TetReader(std::string path, Periodic periodic) : path_(std::move(path
     if (!head || !pnts) fail(ix + kSectionHeaderSize, "the directory lacks the header or the points");
     const auto hp = section_payload(head->offset, kTagHead, head->length, "header");
     if (const std::string p = parse_head(hp, header_); !p.empty()) fail(head->offset + kSectionHeaderSize, p);
+    header_.version_major = version_major_;
     const std::uint64_t n = header_.point_count;
     if (footer_.point_count != n) fail(footer_at, "footer and header disagree on the point count");
     const std::uint64_t rec = header_.point_record_bytes();
@@ -321,6 +323,15 @@ void TetReader::verify_points() const {
   if (crc != get_u32(p.data() + p.size())) {
     fail(points_offset_ - kSectionHeaderSize, "points: checksum mismatch (the file is damaged)");
   }
+}
+
+int perturbation_axis(const TetReader& reader) {
+  if (reader.version_major() == kVersionMajor) return -1;
+  const TetFileHeader& h = reader.header();
+  int axis = 0;
+  for (int k = 1; k < 3; ++k)
+    if (h.bbox_max[k] - h.bbox_min[k] > h.bbox_max[axis] - h.bbox_min[axis]) axis = k;
+  return axis;
 }
 
 }  // namespace tetstream::io

@@ -103,4 +103,10 @@ class TetReader {
   std::uint64_t tet_bytes_ = 0;
 };
 
+// The order of the symbolic perturbation the file's tets were computed under
+// (format.md §3.4): -1 when it is the labels' (version 1); for version 2, the axis the
+// points were sorted along, the first of largest extent in HEAD's bounding box: the
+// perturbation orders points by their coordinates compared from that axis on.
+int perturbation_axis(const TetReader& reader);
+
 }  // namespace tetstream::io

@@ -52,15 +52,16 @@ TetStreamReader::TetStreamReader(int fd, std::string name, bool keep_ids) : fd_(
   std::uint8_t pre[kPreambleSize];
   read_exactly(pre, sizeof pre, "the preamble");
   if (std::memcmp(pre, kFileMagic.data(), kFileMagic.size()) != 0) fail(0, "not a .tets container (bad magic)");
-  if (get_u16(pre + 8) != kVersionMajor)
+  if (!version_readable(get_u16(pre + 8)))
     fail(8, "unsupported container version " + std::to_string(get_u16(pre + 8)) + " (this reader reads " +
-                std::to_string(kVersionMajor) + ".x)");
+                std::to_string(kVersionMajor) + ".x and " + std::to_string(kVersionMajorBricks) + ".x)");
   std::uint32_t tag = 0;
   std::uint64_t at = offset_;
   std::uint64_t len = read_section_header(tag);
   if (tag != kTagHead) fail(at, "expected the header section, found " + tag_name(tag));
   read_payload(payload_, len, "header");
   if (const std::string p = parse_head(payload_, header_); !p.empty()) fail(at + kSectionHeaderSize, p);
+  header_.version_major = get_u16(pre + 8);
   sections_.push_back({kTagHead, kSectionCritical, at, len});
 
   at = offset_;

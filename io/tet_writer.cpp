@@ -18,10 +18,10 @@ namespace tetstream::io {
 
 namespace {
 
-std::array<std::uint8_t, kPreambleSize> preamble() {
+std::array<std::uint8_t, kPreambleSize> preamble(std::uint16_t major) {
   std::array<std::uint8_t, kPreambleSize> b{};
   std::copy(kFileMagic.begin(), kFileMagic.end(), b.begin());
-  put_u16(b.data() + 8, kVersionMajor);
+  put_u16(b.data() + 8, major);
   put_u16(b.data() + 10, kVersionMinor);
   put_u32(b.data() + 12, 0);
   return b;
@@ -30,7 +30,7 @@ std::array<std::uint8_t, kPreambleSize> preamble() {
 }  // namespace
 
 std::vector<std::uint8_t> leading_bytes(const TetFileHeader& h) {
-  const auto pre = preamble();
+  const auto pre = preamble(h.version_major);
   const std::vector<std::uint8_t> head = serialize_head(h);
   const auto hh = section_header(kTagHead, kSectionCritical, head.size());
   const auto ph = section_header(kTagPoints, kSectionCritical, h.point_count * h.point_record_bytes());

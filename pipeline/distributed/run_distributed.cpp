@@ -1,4 +1,6 @@
 #include "pipeline/distributed/run_distributed.hpp"
+#include "pipeline/write/brick_reorder.hpp"
+#include "pipeline/write/label_order.hpp"
 
 #include "core/error.hpp"
 #include "io/output_file.hpp"
@@ -102,7 +104,10 @@ class RankJob {
     // 0) or to its fragment ----
     // Whether rank 0 prints progress (the others are quiet, and share their counts).
     const bool job_progress = comm_.broadcast(options_.progress ? "yes" : "", 0) == "yes";
-    const std::uint64_t block = frame_block_labels(budget_.frame_tets());
+    // Whole frame blocks, and with --labels bricks whole bricks (both powers of two: the
+    // larger is a multiple of the smaller), so each rank's tets are those of its bricks.
+    const std::uint64_t block = std::max(frame_block_labels(budget_.frame_tets()),
+                                         options_.brick_labels ? brick_labels(sorted.count) : std::uint64_t(1));
     assign_labels(index, sorted.count, block, mine);
     // A rank whose fragment an earlier process finished (the job failed before it
     // succeeded) has nothing left to triangulate: its frames are checked as it places
@@ -111,6 +116,7 @@ class RankJob {
     const bool fragment_done = !root && state_.contains("output") && state_["output"].value("finishing", false) &&
                                std::filesystem::exists(fragment) && !std::filesystem::exists(fragment + ".partial");
     WriteStage write(context, sorted, index.view(), plan->shares, root ? claim_ : nullptr);
+    if (root) write.defer_points_order();  // the other ranks read the points until they are done
     std::optional<TriangulateStage> triangulate;
     const WrittenWork work =
         triangulate_step(sorted, index, *plan, write, triangulate, fragment, fragment_done, job_progress, mine);
@@ -261,6 +267,7 @@ class RankJob {
         frames.insert(frames.end(), theirs.begin(), theirs.end());
       }
       write.adopt_fragments(std::move(frames), bytes);
+      write.reorder_points_section();
       write.finish();
       summary.seconds_write = seconds_since(place_start);
       disk.sample();
@@ -418,6 +425,7 @@ class RankJob {
       index.attach_shared(path, total_nodes, size);
       mine.seconds_index = seconds_since(start);
       budget_.set_frame_tets(MemoryBudget::frame_tets_for(header_memory(state_, options_)));
+      if (options_.brick_labels) budget_.set_label_order_bytes(BrickReorder::job_bytes(index.view().count));
       plan = plan_triangulation(index, options_, budget_, threads_);
     });
   }

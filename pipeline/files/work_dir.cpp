@@ -103,7 +103,7 @@ void write_marker(const std::string& dir, const std::string& shown_path) {
 
 bool is_work_file_name(const std::string& name) {
   static const std::regex kNames(
-      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|rank-[0-9]+\.tets(\.partial)?|periodic-(points|images)\.f64(\.tmp)?|periodic-(padded|unwrapped)\.tets(\.partial)?|periodic-(deferred|offsets)\.tets|periodic-(pending|waiting)-[0-9]+\.tets(\.tmp)?)");
+      R"((state\.json|rank-[0-9]+\.json|rank-[0-9]+\.progress|neighbour-rows\.u32|sorted\.points|hull\.labels|stdin\.f64|rho-by-label\.f64|index\.shared|(rank-[0-9]+-)?[a-z]+(-[a-z]+)*-[0-9]+\.run(\.hull)?|(rank-[0-9]+-)?pending-[0-9]+\.tets)(\.tmp)?|(rank-[0-9]+-)?label-order\.u32|rank-[0-9]+\.tets(\.partial)?|periodic-(points|images)\.f64(\.tmp)?|periodic-(padded|unwrapped)\.tets(\.partial)?|periodic-(deferred|offsets)\.tets|periodic-(pending|waiting)-[0-9]+\.tets(\.tmp)?)");
   return std::regex_match(name, kNames);
 }
 

@@ -101,6 +101,7 @@ json job_identity(const RunOptions& o) {
           {"memory", o.memory_bytes},
           {"buffer_spacings", o.buffer_spacings},
           {"sort_run_points", o.sort_run_points},
+          {"labels", o.brick_labels ? "bricks" : "sorted"},
           {"read", o.read.identity()}};
 }
 
@@ -115,6 +116,9 @@ std::string identity_difference(const json& saved, const json& now) {
   for (const char* key : {"output", "buffer_spacings", "sort_run_points", "read"})
     if (saved.at(key) != now.at(key))
       return std::string("option '") + key + "' was " + saved.at(key).dump() + ", now " + now.at(key).dump();
+  // (A checkpoint made before --labels existed was of sorted labels.)
+  if (saved.value("labels", "sorted") != now.value("labels", "sorted"))
+    return "option '--labels' was " + saved.value("labels", "sorted") + ", now " + now.value("labels", "sorted");
   return "";
 }
 }  // namespace detail
@@ -207,6 +211,7 @@ RunSummary Job::run() {
   // frames of the budget the output was started with.
   budget_.set_frame_tets(options_.frame_tets != 0 ? options_.frame_tets
                                                   : MemoryBudget::frame_tets_for(header_memory(state_, options_)));
+  if (options_.brick_labels) budget_.set_label_order_bytes(BrickReorder::job_bytes(sorted.count));
   const TriangulatePlan plan = plan_triangulation(index, options_, budget_, threads_);
   stage_done("plan");
 

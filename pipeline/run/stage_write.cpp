@@ -6,7 +6,10 @@
 #include "pipeline/util/interrupt.hpp"
 #include "pipeline/util/progress.hpp"
 #include "pipeline/files/temp_files.hpp"
+#include "pipeline/write/label_order.hpp"
+#include "pipeline/write/points_reorder.hpp"
 
+#include <omp.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -59,18 +62,35 @@ constexpr Counter kCounters[] = {
 // The points section from the sorted file's records, in label order, in the header's
 // coord_type (the records' own: a float32 record goes out as the float it is), the
 // file's pages handed back behind.
+// The points section from the sorted file's records, in format 2's label order (a brick
+// at a time: pipeline/write/label_order.hpp), in the header's coord_type (the records'
+// own: a float32 record goes out as the float it is), the file's pages handed back
+// behind.
 template <class R>
-void write_points(io::TetWriter& w, const SortedView& view, const R* records) {
+void write_points(io::TetWriter& w, const SortedView& view, const R* records, bool bricks) {
   using Coord = typename R::Coord;
-  constexpr std::size_t kChunk = 1 << 16;
-  std::vector<Coord> xyz(3 * kChunk);
-  std::vector<std::uint64_t> ids(kChunk);
-  for (std::uint64_t first = 0; first < view.count; first += kChunk) {
-    const std::size_t n = std::size_t(std::min<std::uint64_t>(kChunk, view.count - first));
+  const std::uint64_t brick = bricks ? brick_labels(view.count) : std::uint64_t(1) << 16;
+  std::vector<double> coords;
+  std::vector<std::uint32_t> new_of_old;
+  std::vector<Coord> xyz;
+  std::vector<std::uint64_t> ids;
+  for (std::uint64_t first = 0; first < view.count; first += brick) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(brick, view.count - first));
+    coords.resize(3 * n);
+    for (std::size_t i = 0; i < n; ++i) records[first + i].xyz(coords.data() + 3 * i);
+    if (bricks) {
+      brick_permutation(coords.data(), n, view.axis, new_of_old);
+    } else {
+      new_of_old.resize(n);
+      for (std::size_t i = 0; i < n; ++i) new_of_old[i] = std::uint32_t(i);
+    }
+    xyz.resize(3 * n);
+    ids.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       const R& p = records[first + i];
-      for (int k = 0; k < 3; ++k) xyz[3 * i + std::size_t(k)] = p.c[k];
-      ids[i] = p.original();
+      const std::size_t to = new_of_old[i];
+      for (int k = 0; k < 3; ++k) xyz[3 * to + std::size_t(k)] = p.c[k];
+      ids[to] = p.original();
     }
     w.add_points(xyz.data(), ids.data(), n);
     release_mapped_pages(records + first, n * sizeof(R));
@@ -119,6 +139,8 @@ io::TetFileHeader container_header(const RunOptions& options, std::uint64_t memo
   header.coord_type = sorted.layout.float32 ? io::CoordType::kFloat32 : io::CoordType::kFloat64;
   for (int k = 0; k < 3; ++k) header.bbox_min[k] = sorted.bbox_min[k], header.bbox_max[k] = sorted.bbox_max[k];
   header.tool = "tetstream 0.1.0";
+  // --labels bricks: format 2's labels (pipeline/write/label_order.hpp).
+  header.version_major = options.brick_labels ? io::kVersionMajorBricks : io::kVersionMajor;
   json made = json{{"command", "run"},
                    {"input", options.input},
                    {"memory", memory},
@@ -193,10 +215,14 @@ void WriteStage::prepare() {
     throw DamagedCheckpoint(std::string(e.what()) + " (damaged checkpoint)");
   }
   first_label_ = out.at("next_label").get<std::uint64_t>();
-  pending_.resize(4 * out.at("pending_tets").get<std::size_t>());
-  if (!pending_.empty())
-    read_file_exactly(context_.checkpoint->path(out.at("pending_file").get<std::string>()), pending_.data(),
-                      pending_.size() * sizeof(std::uint64_t), out.at("pending_crc32c").get<std::uint32_t>());
+  // The pending file: the frame being filled, then the brick held.
+  const std::size_t frame_labels = 4 * out.at("pending_tets").get<std::size_t>();
+  std::vector<std::uint64_t> saved(frame_labels + 4 * out.value("held_tets", std::size_t(0)));
+  if (!saved.empty())
+    read_file_exactly(context_.checkpoint->path(out.at("pending_file").get<std::string>()), saved.data(),
+                      saved.size() * sizeof(std::uint64_t), out.at("pending_crc32c").get<std::uint32_t>());
+  pending_.assign(saved.begin(), saved.begin() + std::ptrdiff_t(frame_labels));
+  held_.assign(saved.begin() + std::ptrdiff_t(frame_labels), saved.end());
   work_ = counters_from(out.at("counters"));
   segments_resumed_ = segments_done_ = out.at("segments").get<std::uint64_t>();
   spdlog::info("resuming after {} segments: labels from {} of {}, {} tets written", segments_resumed_, first_label_,
@@ -210,12 +236,37 @@ void WriteStage::run() {
     // The points section, in label order, on the writer's thread while the first
     // zones are triangulated (a pass over the whole sorted file, which used to hold
     // the first segment back).
-    async_->add_task([&view = view_](io::TetWriter& w) {
-      view.points.visit([&](const auto* records) { write_points(w, view, records); });
+    async_->add_task([&view = view_, bricks = context_.options.brick_labels](io::TetWriter& w) {
+      view.points.visit([&](const auto* records) { write_points(w, view, records, bricks); });
     });
   }
   cutter_.emplace(*async_, MemoryBudget::frame_tets_for(header_memory(context_.state, context_.options)));
   cutter_->restore(std::move(pending_));
+  if (!context_.options.brick_labels) {
+    if (!held_.empty())
+      throw DamagedCheckpoint("the checkpoint holds a brick of tets, but the job writes sorted labels");
+    if (!resumed_) record(0, false);
+    return;
+  }
+  // Format 2's labels (pipeline/write/label_order.hpp): every brick's permutation in a
+  // work file, made again by a resumed job (it depends on the points alone).
+  // (A rank's files are named as its pending files, "rank-R-pending-": "rank-R-label-order.u32".)
+  const std::string rank_prefix = pending_prefix_.substr(0, pending_prefix_.rfind("pending-"));
+  order_path_ = context_.dir + "/" + rank_prefix + "label-order.u32";
+  const std::string& order_path = order_path_;
+  const int threads = context_.options.threads > 0 ? context_.options.threads : omp_get_num_procs();
+  write_label_order(
+      order_path, view_.count, view_.axis,
+      [&view = view_](std::uint64_t first, std::size_t n, double* xyz) {
+        view.points.visit([&](const auto* records) {
+          for (std::size_t i = 0; i < n; ++i) records[first + i].xyz(xyz + 3 * i);
+        });
+      },
+      threads);
+  order_.emplace(order_path, view_.count);
+  reorder_.emplace(*cutter_, *order_);
+  reorder_->restore(held_);
+  held_ = {};
   if (!resumed_) record(0, false);
 }
 
@@ -223,7 +274,13 @@ void WriteStage::add_segment(const std::vector<ZoneTets>& parts, const SegmentSt
                              std::uint64_t next_label) {
   const auto t0 = StageClock::now();
   maybe_inject_fault("write", segments_done_);
-  merge_by_min_label(parts, [this](const ZoneTets& part, std::size_t b, std::size_t e) { cutter_->add(part, b, e); });
+  if (reorder_) {
+    merge_by_min_label(parts,
+                       [this](const ZoneTets& part, std::size_t b, std::size_t e) { reorder_->add(part, b, e); });
+    reorder_->done_below(next_label);
+  } else {
+    merge_by_min_label(parts, [this](const ZoneTets& part, std::size_t b, std::size_t e) { cutter_->add(part, b, e); });
+  }
   work_.stats += work;
   work_.segment_labels += points;
   ++segments_done_;
@@ -243,13 +300,17 @@ void WriteStage::record(std::uint64_t next_label, bool wait) {
   if (!checkpoint) return;
   json& state = context_.state;
   const std::string pending_file = pending_prefix_ + std::to_string(segments_done_) + ".tets";
-  const auto& p = cutter_->pending();
+  std::vector<std::uint64_t> p = cutter_->pending();
+  const std::size_t frame_tets = p.size() / 4;
+  const std::vector<std::uint64_t> held = reorder_ ? reorder_->held() : std::vector<std::uint64_t>{};
+  p.insert(p.end(), held.begin(), held.end());
   if (!p.empty()) write_file_atomically(context_.dir, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
   const std::string old_pending = state.contains("output") ? state["output"].value("pending_file", "") : "";
   state["output"] = {{"committed", 0},
                      {"next_label", next_label},
                      {"pending_file", pending_file},
-                     {"pending_tets", p.size() / 4},
+                     {"pending_tets", frame_tets},
+                     {"held_tets", held.size() / 4},
                      {"pending_crc32c", io::crc32c(p.data(), p.size() * sizeof(std::uint64_t))},
                      {"segments", segments_done_},
                      {"counters", counters_json(work_)}};
@@ -270,16 +331,35 @@ void WriteStage::record(std::uint64_t next_label, bool wait) {
 
 void WriteStage::commit(std::uint64_t end_label) {
   const auto t0 = StageClock::now();
+  if (reorder_) {
+    reorder_->done_below(std::min(end_label, view_.count));
+    if (reorder_->held_tets() != 0)
+      throw std::logic_error("write: the tets of an unfinished brick at the end of labels [.., " +
+                             std::to_string(end_label) + ")");
+  }
   cutter_->flush();
   // Every tet is in the partial output; what is left is its index and footer and
   // the rename. A crash after the rename but before the checkpoint is removed
   // leaves this mark, and a resumed job then finds the output complete.
   record(std::min(end_label, view_.count), true);
+  if (reorder_) {
+    reorder_.reset();
+    order_.reset();
+    remove_file(order_path_);  // 4 bytes a point, not needed past the last tet
+    // Rank 0 of several: once every rank is done with the points (run_distributed).
+    if (points_in_output_ && !defer_points_order_) reorder_points_section();
+  }
   if (context_.checkpoint) {
     context_.state["output"]["finishing"] = true;
     context_.save();
   }
   seconds_ += seconds_since(t0);
+}
+
+void WriteStage::reorder_points_section() {
+  if (!context_.options.brick_labels || !points_in_output_) return;
+  if (!claim_) throw std::logic_error("write: the points section is rewritten through the output's claim");
+  reorder_points(claim_->fd(), sorted_.offset, sorted_.count, sorted_.layout, sorted_.axis);
 }
 
 std::uint64_t WriteStage::fragments_offset() {

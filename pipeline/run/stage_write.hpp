@@ -14,7 +14,9 @@
 #include "io/output_file.hpp"
 #include "io/tet_writer.hpp"
 #include "pipeline/write/async_tet_writer.hpp"
+#include "pipeline/write/brick_reorder.hpp"
 #include "pipeline/write/frame_cutter.hpp"
+#include "pipeline/write/label_order.hpp"
 #include "pipeline/sort/point_sort.hpp"
 #include "pipeline/window/zone_triangulator.hpp"
 #include "pipeline/run/output_stage.hpp"
@@ -89,6 +91,12 @@ class WriteStage final : public OutputStage {
   std::uint64_t fragments_offset();
   // The frames others placed after fragments_offset(), `bytes` of them, in order.
   void adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes);
+  // With --labels bricks, commit() puts the points section in format 2's order
+  // (pipeline/write/points_reorder.hpp), which no process may read in the sort's order
+  // after: rank 0 of several calls defer_points_order() first and
+  // reorder_points_section() once every rank is done.
+  void defer_points_order() { defer_points_order_ = true; }
+  void reorder_points_section();
   // The index, footer and rename (a fragment: its rename). Nothing may follow it.
   void finish() override;
 
@@ -110,13 +118,18 @@ class WriteStage final : public OutputStage {
   std::string pending_prefix_ = "pending-";
   bool resumed_ = false;                // the state held an "output" record
   bool points_in_output_ = false;       // the sort merged the points into the partial output
+  bool defer_points_order_ = false;     // defer_points_order()
   std::vector<std::uint64_t> pending_;  // the resumed frame, until the cutter takes it
+  std::vector<std::uint64_t> held_;     // the resumed brick, until the reorder takes it
   // In this order: the cutter feeds the queue, which feeds the writer, so on the way
   // out of a failure the queue is cancelled and its thread joined before the writer
   // goes.
   std::unique_ptr<io::TetWriter> writer_;
   std::optional<AsyncTetWriter> async_;
   std::optional<FrameCutter> cutter_;
+  std::string order_path_;  // the label order's work file (write_label_order)
+  std::optional<LabelOrder> order_;
+  std::optional<BrickReorder> reorder_;  // feeds the cutter
 };
 
 }  // namespace tetstream::pipeline

@@ -147,8 +147,8 @@ TriangulateShares MemoryBudget::plan_triangulate(std::uint64_t index_bytes, doub
   // nothing).
   t.file_buffer_bytes =
       std::size_t(std::clamp<std::uint64_t>(std::min(ceiling_ / 64, 64 * points_), 64 << 10, 8 * kMiB));
-  t.writer_bytes =
-      writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), frame_tets_) + t.file_buffer_bytes;
+  t.writer_bytes = writer_bytes_for(t.encoders, std::uint64_t(kTetsPerPoint * double(points_)), frame_tets_) +
+                   t.file_buffer_bytes + label_order_bytes_;
   t.index_bytes = index_bytes;
   // What the reserve and the writer leave: 75% for the windows (less the indexes),
   // 25% for the sorted file's pages that the queries map and the allocator's slack.

@@ -126,6 +126,10 @@ class MemoryBudget {
   // with another budget (a resumed job), whose frames it goes on with.
   std::size_t frame_tets() const { return frame_tets_; }
   void set_frame_tets(std::size_t tets) { frame_tets_ = tets; }
+  // What the writer holds besides its frames: with --labels bricks, a brick of tets and
+  // the label order's kept bricks (pipeline/write/brick_reorder.hpp). Part of the
+  // writer's share of the triangulation.
+  void set_label_order_bytes(std::uint64_t bytes) { label_order_bytes_ = bytes; }
   static std::uint64_t writer_bytes_for(int encoders, std::uint64_t tets, std::size_t frame_tets);
 
   // The keep step of a periodic job (pipeline/periodic/keep.hpp), recorded: its label
@@ -146,6 +150,7 @@ class MemoryBudget {
   int threads_, cores_;
   std::uint64_t runtime_;
   std::size_t frame_tets_;
+  std::uint64_t label_order_bytes_ = 0;
   std::vector<Share> shares_;
 };
 

@@ -283,6 +283,7 @@ class Engine {
 
   Engine(const VerifySource& src, const VerifyOptions& opt, VerifyReport& rep, Communicator& comm)
       : src_(src),
+        sort_axis_(src.sort_axis()),
         opt_(opt),
         rep_(rep),
         comm_(comm),
@@ -304,6 +305,47 @@ class Engine {
   };
 
   TS_FORCE_INLINE PointCoords::Point P(std::uint64_t l) const { return xyz_(l); }
+  // The labels as the perturbation orders them (VerifySource::sort_axis): themselves,
+  // or for format 2 their points' ranks 1..K among the K given, by coordinates compared
+  // from the sort axis on (the sort's order, which only the ranks' order matters to).
+  template <std::size_t K>
+  void perturbation_order(const std::uint64_t (&labels)[K], std::uint64_t (&order)[K]) const {
+    if (sort_axis_ < 0) {
+      for (std::size_t i = 0; i < K; ++i) order[i] = labels[i];
+      return;
+    }
+    PointCoords::Point p[K];
+    for (std::size_t i = 0; i < K; ++i) p[i] = P(labels[i]);
+    const auto before = [&](std::size_t i, std::size_t j) {
+      for (int k = 0; k < 3; ++k) {
+        const int c = (sort_axis_ + k) % 3;
+        if (p[i].c[c] != p[j].c[c]) return p[i].c[c] < p[j].c[c];
+      }
+      return labels[i] < labels[j];  // the same point twice: the caller's labels are distinct
+    };
+    for (std::size_t i = 0; i < K; ++i) {
+      order[i] = 1;
+      for (std::size_t j = 0; j < K; ++j) order[i] += before(j, i);
+    }
+  }
+  int insphere_sos(std::uint64_t a, std::uint64_t b, std::uint64_t c, std::uint64_t d, std::uint64_t e) const {
+    if (sort_axis_ >= 0) {
+      const int s = core::insphere(P(a), P(b), P(c), P(d), P(e));
+      if (s != 0) return s;
+    }
+    std::uint64_t o[5];
+    perturbation_order({a, b, c, d, e}, o);
+    return core::insphere_sos(P(a), P(b), P(c), P(d), P(e), o[0], o[1], o[2], o[3], o[4]);
+  }
+  int infinite_conflict_sos(std::uint64_t a, std::uint64_t b, std::uint64_t c, std::uint64_t e) const {
+    if (sort_axis_ >= 0) {
+      const int s = core::orient3d(P(a), P(b), P(c), P(e));
+      if (s != 0) return s;
+    }
+    std::uint64_t o[4];
+    perturbation_order({a, b, c, e}, o);
+    return core::infinite_conflict_sos(P(a), P(b), P(c), P(e), o[0], o[1], o[2], o[3]);
+  }
   bool tet_sampled(std::uint64_t ordinal) const {
     return !sampled_ || mix(opt_.seed * 0x9E3779B97F4A7C15ull + ordinal) < sample_cut_;
   }
@@ -398,6 +440,7 @@ class Engine {
   void totals_into_report();
 
   const VerifySource& src_;
+  const int sort_axis_;  // src_.sort_axis(): the perturbation's order
   const VerifyOptions& opt_;
   VerifyReport& rep_;
   Communicator& comm_;

@@ -15,8 +15,8 @@ void Engine<L>::finish_hull() {
     for (std::int64_t i = 0; i < n; ++i) {
       const Job& j = jobs[std::size_t(i)];
       const L u = j.first.u, v = j.first.v, w1 = j.first.w, w2 = j.second.w;
-      const int s1 = core::infinite_conflict_sos(P(u), P(v), P(w1), P(w2), u, v, w1, w2);
-      const int s2 = core::infinite_conflict_sos(P(v), P(u), P(w2), P(w1), v, u, w2, w1);
+      const int s1 = infinite_conflict_sos(u, v, w1, w2);
+      const int s2 = infinite_conflict_sos(v, u, w2, w1);
       if (s1 > 0 || s2 > 0) {
         const std::uint64_t t1 = j.first.x & kPayload, t2 = j.second.x & kPayload;
         log_.add(Violation::kHullConvex, std::min(t1, t2), [&] {

@@ -126,8 +126,7 @@ void Engine<L>::check_pairs(const std::vector<PairCheck>& checks) {
       xyz_.prefetch(a.dpos), xyz_.prefetch(a.dneg);
     }
     const PairCheck& c = checks[i];
-    const int s = core::insphere_sos(P(c.v[0]), P(c.v[1]), P(c.v[2]), P(c.dpos), P(c.dneg), c.v[0], c.v[1], c.v[2],
-                                     c.dpos, c.dneg);
+    const int s = insphere_sos(c.v[0], c.v[1], c.v[2], c.dpos, c.dneg);
     if (s > 0)
       log_.add(Violation::kDelaunay, std::min(c.tpos, c.tneg), [&] {
         return "facet " + labels_text({c.v[0], c.v[1], c.v[2]}) + " of tets #" + std::to_string(c.tpos) + " and #" +

@@ -73,6 +73,7 @@ VerifySource::PointRecords ContainerSource::points() const {
   const io::TetFileHeader& h = reader_.header();
   return {reader_.point_records().data(), h.point_record_bytes(), h.coord_type == io::CoordType::kFloat32};
 }
+int ContainerSource::sort_axis() const { return io::perturbation_axis(reader_); }
 void ContainerSource::release_points(std::uint64_t first, std::uint64_t n) const {
   reader_.release_point_pages(first, n);
 }

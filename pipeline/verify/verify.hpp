@@ -161,6 +161,11 @@ class VerifySource {
   virtual void read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const = 0;
   virtual std::string name() const = 0;                 // for messages
   virtual std::string directory() const { return {}; }  // default tmpdir
+  // The order of the symbolic perturbation (docs/format.md §3.4): -1 when it is the
+  // labels' (format 1, and memory); else the axis the points were sorted along, whose
+  // order (their coordinates compared from that axis on) the labels of format 2 no
+  // longer follow.
+  virtual int sort_axis() const { return -1; }
 };
 
 // Points and tets held in memory (tests, tools that triangulate in core).
@@ -198,6 +203,7 @@ class ContainerSource : public VerifySource {
   void read_batch(std::size_t k, std::vector<std::uint64_t>& labels) const override;
   std::string name() const override;
   std::string directory() const override;
+  int sort_axis() const override;
 
  private:
   const io::TetReader& reader_;

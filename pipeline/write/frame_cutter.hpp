@@ -37,13 +37,17 @@ class FrameCutter {
   void add(const ZoneTets& part, std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       const std::uint64_t q[4] = {part.label(i, 0), part.label(i, 1), part.label(i, 2), part.label(i, 3)};
-      const std::uint64_t m = tet_min_label(q);
-      if (m != last_min_ && !frame_.empty() &&
-          (frame_.size() >= 4 * frame_tets_ || m / block_labels_ != last_min_ / block_labels_))
-        write();
-      frame_.insert(frame_.end(), q, q + 4);
-      last_min_ = m;
+      add(q);
     }
+  }
+  // One tet, its smallest label not below the previous tet's.
+  void add(const std::uint64_t* q) {
+    const std::uint64_t m = tet_min_label(q);
+    if (m != last_min_ && !frame_.empty() &&
+        (frame_.size() >= 4 * frame_tets_ || m / block_labels_ != last_min_ / block_labels_))
+      write();
+    frame_.insert(frame_.end(), q, q + 4);
+    last_min_ = m;
   }
   void flush() {
     if (!frame_.empty()) write();

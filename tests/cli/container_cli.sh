@@ -134,8 +134,8 @@ python3 -c "
 f=bytearray(open('g.tets','rb').read()); f[$frame1+16+100]^=0x20; open('flip.tets','wb').write(f)"
 expect_bad flip.tets "flip.tets: byte $frame1:" "frame 1" "checksum mismatch"
 python3 -c "
-f=bytearray(open('g.tets','rb').read()); f[8]=2; open('v2.tets','wb').write(f)"
-expect_bad v2.tets "v2.tets: byte 8:" "unsupported container version 2.0"
+f=bytearray(open('g.tets','rb').read()); f[8]=3; open('v3.tets','wb').write(f)"
+expect_bad v3.tets "v3.tets: byte 8:" "unsupported container version 3.0"
 echo "not a container" >text.tets
 expect_bad text.tets "text.tets: byte 0:" "not a .tets container"
 set +e

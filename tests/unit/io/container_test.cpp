@@ -708,9 +708,9 @@ TEST_F(Damaged, CorruptFrameWithValidCrcNamesTheStream) {
 
 TEST_F(Damaged, WrongVersionAndMagic) {
   auto b = good;
-  b[8] = 2;  // version 2.0
+  b[8] = 3;  // version 3.0 (1 and 2 are read)
   spit(bad, b);
-  expect_input_error([&] { TetReader r(bad); }, {"byte 8", "unsupported container version 2.0"});
+  expect_input_error([&] { TetReader r(bad); }, {"byte 8", "unsupported container version 3.0"});
   b = good;
   b[0] = 'P';
   spit(bad, b);

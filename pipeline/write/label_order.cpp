@@ -1,0 +1,191 @@
+#include "pipeline/write/label_order.hpp"
+
+#include "core/error.hpp"
+#include "io/output_file.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <exception>
+#include <bit>
+#include <cmath>
+#include <limits>
+
+namespace tetstream::pipeline {
+
+std::uint64_t brick_labels(std::uint64_t point_count) {
+  const double want = 2.0 * std::cbrt(double(point_count) * double(point_count));
+  const std::uint64_t floor = std::uint64_t(1) << 10, ceiling = std::uint64_t(1) << 31;
+  if (!(want > double(floor))) return floor;
+  if (want >= double(ceiling)) return ceiling;
+  return std::bit_ceil(std::uint64_t(std::ceil(want)));
+}
+
+namespace {
+
+// The position of cell (x, y) along the Hilbert curve of a side x side grid (side a
+// power of two; x, y < side).
+std::uint64_t hilbert_index(std::uint64_t side, std::uint64_t x, std::uint64_t y) {
+  std::uint64_t d = 0;
+  for (std::uint64_t s = side / 2; s > 0; s /= 2) {
+    const std::uint64_t rx = (x & s) != 0, ry = (y & s) != 0;
+    d += s * s * ((3 * rx) ^ ry);
+    if (ry == 0) {
+      if (rx == 1) x = s - 1 - x, y = s - 1 - y;
+      std::swap(x, y);
+    }
+  }
+  return d;
+}
+
+// Bits 0..9 of v spread to every third bit.
+std::uint32_t spread3(std::uint32_t v) {
+  std::uint32_t r = 0;
+  for (int b = 0; b < 10; ++b) r |= ((v >> b) & 1u) << (3 * b);
+  return r;
+}
+
+struct Item {
+  std::uint64_t column;
+  std::uint32_t cell, old;
+};
+
+}  // namespace
+
+void brick_permutation(const double* xyz, std::size_t n, int axis, std::vector<std::uint32_t>& new_of_old) {
+  new_of_old.resize(n);
+  if (n == 0) return;
+  const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+  double lo[3], hi[3];
+  for (int k = 0; k < 3; ++k) lo[k] = hi[k] = xyz[k];
+  for (std::size_t i = 1; i < n; ++i)
+    for (int k = 0; k < 3; ++k)
+      lo[k] = std::min(lo[k], xyz[3 * i + std::size_t(k)]), hi[k] = std::max(hi[k], xyz[3 * i + std::size_t(k)]);
+  const double thickness = hi[axis] - lo[axis];
+  // Columns as wide as the brick is thick; no more than 2^20 an axis (a brick of one
+  // plane of points: columns of ~a point each, which the curve then orders).
+  const double across = std::max(hi[u] - lo[u], hi[v] - lo[v]);
+  double cell = std::max(thickness, across * 0x1p-20);
+  if (!(cell > 0)) cell = 1;
+  const auto column_of = [&](double x, double origin) {
+    const double c = std::floor((x - origin) / cell);
+    return std::uint64_t(std::clamp(c, 0.0, double((1 << 21) - 1)));
+  };
+  const std::uint64_t side = std::bit_ceil(std::max(column_of(hi[u], lo[u]), column_of(hi[v], lo[v])) + 1);
+  std::vector<Item> items(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double* p = xyz + 3 * i;
+    items[i] = {hilbert_index(side, column_of(p[u], lo[u]), column_of(p[v], lo[v])), 0, std::uint32_t(i)};
+  }
+  std::sort(items.begin(), items.end(),
+            [](const Item& a, const Item& b) { return a.column != b.column ? a.column < b.column : a.old < b.old; });
+  std::size_t columns = 1;
+  for (std::size_t i = 1; i < n; ++i) columns += items[i].column != items[i - 1].column;
+  const double per_column = double(n) / double(columns);
+  int levels = 0;
+  while (levels < 10 && 2.0 * std::pow(8.0, levels) < per_column) ++levels;
+  const double s = double(1 << levels);
+  const auto cell_of = [&](double f) { return std::uint32_t(std::clamp(std::floor(f * s), 0.0, s - 1)); };
+  for (std::size_t begin = 0; begin < n;) {
+    std::size_t end = begin + 1;
+    while (end < n && items[end].column == items[begin].column) ++end;
+    if (levels > 0) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const double* p = xyz + 3 * std::size_t(items[i].old);
+        const double fa = thickness > 0 ? (p[axis] - lo[axis]) / thickness : 0.0;
+        const double fu = (p[u] - lo[u]) / cell - std::floor((p[u] - lo[u]) / cell);
+        const double fv = (p[v] - lo[v]) / cell - std::floor((p[v] - lo[v]) / cell);
+        items[i].cell = spread3(cell_of(fa)) | spread3(cell_of(fu)) << 1 | spread3(cell_of(fv)) << 2;
+      }
+      std::sort(items.begin() + std::ptrdiff_t(begin), items.begin() + std::ptrdiff_t(end),
+                [](const Item& a, const Item& b) { return a.cell != b.cell ? a.cell < b.cell : a.old < b.old; });
+    }
+    begin = end;
+  }
+  for (std::size_t k = 0; k < n; ++k) new_of_old[items[k].old] = std::uint32_t(k);
+}
+
+void write_label_order(const std::string& path, std::uint64_t point_count, int axis, const ReadPoints& read,
+                       int threads) {
+  const int fd = io::create_work_file(path);
+  const std::uint64_t brick = brick_labels(point_count);
+  const std::int64_t bricks = std::int64_t((point_count + brick - 1) / brick);
+  std::exception_ptr failed;
+#pragma omp parallel num_threads(std::max(1, threads))
+  {
+    std::vector<double> xyz;
+    std::vector<std::uint32_t> new_of_old;
+#pragma omp for schedule(dynamic, 1)
+    for (std::int64_t b = 0; b < bricks; ++b) {
+      try {
+        const std::uint64_t first = std::uint64_t(b) * brick;
+        const std::size_t n = std::size_t(std::min(brick, point_count - first));
+        xyz.resize(3 * n);
+        read(first, n, xyz.data());
+        brick_permutation(xyz.data(), n, axis, new_of_old);
+        if (!io::pwrite_exactly(fd, new_of_old.data(), n * sizeof(std::uint32_t), first * sizeof(std::uint32_t)))
+          throw IoError(path + ": write failed: " + std::strerror(errno));
+      } catch (...) {
+#pragma omp critical(label_order_failure)
+        if (!failed) failed = std::current_exception();
+      }
+    }
+  }
+  ::close(fd);
+  if (failed) std::rethrow_exception(failed);
+}
+
+LabelOrder::LabelOrder(const std::string& path, std::uint64_t point_count, std::size_t kept_bricks)
+    : path_(path),
+      count_(point_count),
+      brick_(brick_labels(point_count)),
+      shift_(std::countr_zero(brick_)),
+      kept_(std::max<std::size_t>(1, kept_bricks)),
+      last_(&kept_[0]) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
+  if (fd_ < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
+}
+
+LabelOrder::~LabelOrder() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+std::uint64_t LabelOrder::bytes() const { return kept_.size() * std::min(brick_, count_) * sizeof(std::uint32_t); }
+
+void LabelOrder::keep(std::uint64_t b) {
+  Brick* slot = &kept_[0];
+  for (Brick& k : kept_) {
+    if (k.index == b) {
+      k.used = ++clock_;
+      last_ = &k;
+      return;
+    }
+    if (k.used < slot->used) slot = &k;
+  }
+  const std::uint64_t first = b << shift_;
+  const std::size_t n = std::size_t(std::min(brick_, count_ - first));
+  slot->new_of_old.resize(n);
+  if (!io::pread_exactly(fd_, slot->new_of_old.data(), n * sizeof(std::uint32_t), first * sizeof(std::uint32_t)))
+    throw IoError(path_ + ": read failed: " + std::strerror(errno));
+  slot->index = b;
+  slot->used = ++clock_;
+  last_ = slot;
+}
+
+std::uint64_t LabelOrder::far(std::uint64_t l) {
+  const std::uint64_t b = l >> shift_;
+  for (Brick& k : kept_)
+    if (k.index == b) {
+      last_ = &k;
+      return (b << shift_) + k.new_of_old[std::size_t(l & (brick_ - 1))];
+    }
+  std::uint32_t at = 0;
+  if (!io::pread_exactly(fd_, &at, sizeof at, l * sizeof(std::uint32_t)))
+    throw IoError(path_ + ": read failed: " + std::strerror(errno));
+  return (b << shift_) + at;
+}
+
+}  // namespace tetstream::pipeline

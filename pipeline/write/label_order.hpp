@@ -1,0 +1,94 @@
+#pragma once
+// The labels of a container of format 2 (docs/format.md §3.4): the sort's order cut into
+// bricks, each brick reordered along a space-filling curve.
+//
+// Why: the pipeline works on labels sorted along one axis, where a tet's upper vertices
+// lie about N^(2/3) labels above its smallest one. The frame codec remembers neighbours
+// within 65535 labels and within its frame (2^18 tets, ~39,000 labels), so past 10^7
+// points nearly every upper vertex is new to it: 3.51 bytes a tet at 10^8, 3.975 at
+// 10^9. Inside a brick of ~2 slabs of points (2 N^(2/3) labels, a power of two) the
+// curve keeps a frame's labels in a compact block of space, and the tet's vertices
+// among them: 1.5-1.8 bytes a tet from 10^6 to 10^9 (docs/benchmarks.md).
+//
+// The order, for the points of a brick (given in the sort's order):
+//   - columns: the cross-section (the two axes other than the sort axis) cut into
+//     squares as wide as the brick is thick along the sort axis (its last point's key
+//     less its first's), ordered along a Hilbert curve;
+//   - inside a column: a Morton order of 2^k cells an axis, k the least with 2 * 8^k at
+//     least the brick's mean points per non-empty column (at most 10);
+//   - ties: the sort's order.
+// It depends only on the brick's points and their sort order, so on the input alone:
+// not on --memory, the threads, the segments or the ranks, and every writer of a job
+// (the frames, the points section, standard output, each rank) computes the same one.
+//
+// A brick maps its label range onto itself, so a tet's smallest label stays in the brick
+// of its smallest sorted label: the tets of a brick are those of its sorted labels.
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace tetstream::pipeline {
+
+// Labels a brick: 2 N^(2/3) rounded up to a power of two (at least 2^10, at most 2^31).
+// A power of two, so either it divides a frame block (frame_block_labels, a power of
+// two) or a block divides it: ranges aligned to the larger of the two are aligned to both.
+std::uint64_t brick_labels(std::uint64_t point_count);
+
+// The permutation of one brick: new_of_old[i] is the position in the brick, in format
+// 2's order, of its i-th point in the sort's order. `xyz`: 3 doubles a point, in the
+// sort's order along `axis`.
+void brick_permutation(const double* xyz, std::size_t n, int axis, std::vector<std::uint32_t>& new_of_old);
+
+// Writes every brick's permutation (brick_permutation) to `path`, 4 bytes a label in
+// the sort's order (new_of_old, brick after brick), the bricks on `threads` threads;
+// read(first, n, xyz) gives the coordinates of the sorted labels [first, first + n)
+// and is called from those threads. A work file of the job (4 bytes a point): the
+// tets' labels are mapped through it (LabelOrder), far ones included.
+using ReadPoints = std::function<void(std::uint64_t first, std::size_t n, double* xyz)>;
+void write_label_order(const std::string& path, std::uint64_t point_count, int axis, const ReadPoints& read,
+                       int threads);
+
+// Sorted labels to format 2's labels through the file write_label_order made: the few
+// bricks used last kept whole, any other label read on its own (the far vertex of a
+// long tet: the convex hull's, a surface's sky edges). One caller at a time.
+class LabelOrder {
+ public:
+  LabelOrder(const std::string& path, std::uint64_t point_count, std::size_t kept_bricks = 4);
+  ~LabelOrder();
+  LabelOrder(const LabelOrder&) = delete;
+  LabelOrder& operator=(const LabelOrder&) = delete;
+
+  std::uint64_t brick() const { return brick_; }
+  std::uint64_t point_count() const { return count_; }
+  // The format 2 label of sorted label `l` (< point_count()).
+  std::uint64_t operator()(std::uint64_t l) {
+    const std::uint64_t b = l >> shift_;
+    if (b == last_->index) return (b << shift_) + last_->new_of_old[std::size_t(l & (brick_ - 1))];
+    return far(l);
+  }
+  // Keeps brick b from now on (evicting the one used longest ago): the bricks the
+  // coming tets are in.
+  void keep(std::uint64_t b);
+  // The bytes it holds at most: the kept bricks.
+  std::uint64_t bytes() const;
+
+ private:
+  struct Brick {
+    std::uint64_t index = ~std::uint64_t(0);
+    std::uint64_t used = 0;
+    std::vector<std::uint32_t> new_of_old;
+  };
+  std::uint64_t far(std::uint64_t l);
+
+  std::string path_;
+  int fd_ = -1;
+  std::uint64_t count_, brick_;
+  int shift_;
+  std::vector<Brick> kept_;
+  Brick* last_;
+  std::uint64_t clock_ = 0;
+};
+
+}  // namespace tetstream::pipeline
