@@ -59,36 +59,25 @@ constexpr Counter kCounters[] = {
     {"rim_from_neighbours", &SegmentStats::rim_from_neighbours, &RunSummary::rim_from_neighbours, true},
 };
 
-// The points section from the sorted file's records, in label order, in the header's
-// coord_type (the records' own: a float32 record goes out as the float it is), the
-// file's pages handed back behind.
-// The points section from the sorted file's records, in format 2's label order (a brick
-// at a time: pipeline/write/label_order.hpp), in the header's coord_type (the records'
-// own: a float32 record goes out as the float it is), the file's pages handed back
-// behind.
+// The points section from the sorted file's records, in label order (with --labels
+// bricks, each brick where the job's label order puts it: `order`, else null), in the
+// header's coord_type (the records' own: a float32 record goes out as the float it is),
+// the file's pages handed back behind.
 template <class R>
-void write_points(io::TetWriter& w, const SortedView& view, const R* records, bool bricks) {
+void write_points(io::TetWriter& w, const SortedView& view, const R* records, const LabelOrder* order) {
   using Coord = typename R::Coord;
-  const std::uint64_t brick = bricks ? brick_labels(view.count) : std::uint64_t(1) << 16;
-  std::vector<double> coords;
+  const std::uint64_t chunk = order ? order->brick() : std::uint64_t(1) << 16;
   std::vector<std::uint32_t> new_of_old;
   std::vector<Coord> xyz;
   std::vector<std::uint64_t> ids;
-  for (std::uint64_t first = 0; first < view.count; first += brick) {
-    const std::size_t n = std::size_t(std::min<std::uint64_t>(brick, view.count - first));
-    coords.resize(3 * n);
-    for (std::size_t i = 0; i < n; ++i) records[first + i].xyz(coords.data() + 3 * i);
-    if (bricks) {
-      brick_permutation(coords.data(), n, view.axis, new_of_old);
-    } else {
-      new_of_old.resize(n);
-      for (std::size_t i = 0; i < n; ++i) new_of_old[i] = std::uint32_t(i);
-    }
+  for (std::uint64_t first = 0; first < view.count; first += chunk) {
+    const std::size_t n = std::size_t(std::min<std::uint64_t>(chunk, view.count - first));
+    if (order) order->read_brick(first / chunk, new_of_old);
     xyz.resize(3 * n);
     ids.resize(n);
     for (std::size_t i = 0; i < n; ++i) {
       const R& p = records[first + i];
-      const std::size_t to = new_of_old[i];
+      const std::size_t to = order ? new_of_old[i] : i;
       for (int k = 0; k < 3; ++k) xyz[3 * to + std::size_t(k)] = p.c[k];
       ids[to] = p.original();
     }
@@ -232,41 +221,39 @@ void WriteStage::prepare() {
 void WriteStage::run() {
   const std::size_t encoders = std::size_t(encoders_);
   async_.emplace(*writer_, encoders, encoders);
+  if (context_.options.brick_labels) {
+    // Format 2's labels (pipeline/write/label_order.hpp): every brick's permutation in
+    // a work file, made again by a resumed job (it depends on the points alone); a
+    // rank's is named as its pending files ("rank-R-pending-": "rank-R-label-order.u32").
+    order_path_ = context_.dir + "/" + pending_prefix_.substr(0, pending_prefix_.rfind("pending-")) + "label-order.u32";
+    const int threads = context_.options.threads > 0 ? context_.options.threads : omp_get_num_procs();
+    write_label_order(
+        order_path_, view_.count, view_.axis,
+        [&view = view_](std::uint64_t first, std::size_t n, double* xyz) {
+          view.points.visit([&](const auto* records) {
+            for (std::size_t i = 0; i < n; ++i) records[first + i].xyz(xyz + 3 * i);
+          });
+        },
+        threads);
+    order_.emplace(order_path_, view_.count);
+  } else if (!held_.empty()) {
+    throw DamagedCheckpoint("the checkpoint holds a brick of tets, but the job writes sorted labels");
+  }
   if (!resumed_ && !points_in_output_ && fragment_path_.empty()) {
     // The points section, in label order, on the writer's thread while the first
     // zones are triangulated (a pass over the whole sorted file, which used to hold
     // the first segment back).
-    async_->add_task([&view = view_, bricks = context_.options.brick_labels](io::TetWriter& w) {
-      view.points.visit([&](const auto* records) { write_points(w, view, records, bricks); });
+    async_->add_task([&view = view_, order = order_ ? &*order_ : nullptr](io::TetWriter& w) {
+      view.points.visit([&](const auto* records) { write_points(w, view, records, order); });
     });
   }
   cutter_.emplace(*async_, MemoryBudget::frame_tets_for(header_memory(context_.state, context_.options)));
   cutter_->restore(std::move(pending_));
-  if (!context_.options.brick_labels) {
-    if (!held_.empty())
-      throw DamagedCheckpoint("the checkpoint holds a brick of tets, but the job writes sorted labels");
-    if (!resumed_) record(0, false);
-    return;
+  if (order_) {
+    reorder_.emplace(*cutter_, *order_);
+    reorder_->restore(held_);
+    held_ = {};
   }
-  // Format 2's labels (pipeline/write/label_order.hpp): every brick's permutation in a
-  // work file, made again by a resumed job (it depends on the points alone).
-  // (A rank's files are named as its pending files, "rank-R-pending-": "rank-R-label-order.u32".)
-  const std::string rank_prefix = pending_prefix_.substr(0, pending_prefix_.rfind("pending-"));
-  order_path_ = context_.dir + "/" + rank_prefix + "label-order.u32";
-  const std::string& order_path = order_path_;
-  const int threads = context_.options.threads > 0 ? context_.options.threads : omp_get_num_procs();
-  write_label_order(
-      order_path, view_.count, view_.axis,
-      [&view = view_](std::uint64_t first, std::size_t n, double* xyz) {
-        view.points.visit([&](const auto* records) {
-          for (std::size_t i = 0; i < n; ++i) records[first + i].xyz(xyz + 3 * i);
-        });
-      },
-      threads);
-  order_.emplace(order_path, view_.count);
-  reorder_.emplace(*cutter_, *order_);
-  reorder_->restore(held_);
-  held_ = {};
   if (!resumed_) record(0, false);
 }
 
@@ -300,10 +287,15 @@ void WriteStage::record(std::uint64_t next_label, bool wait) {
   if (!checkpoint) return;
   json& state = context_.state;
   const std::string pending_file = pending_prefix_ + std::to_string(segments_done_) + ".tets";
-  std::vector<std::uint64_t> p = cutter_->pending();
-  const std::size_t frame_tets = p.size() / 4;
+  // The frame being filled, then (with --labels bricks) the brick held.
   const std::vector<std::uint64_t> held = reorder_ ? reorder_->held() : std::vector<std::uint64_t>{};
-  p.insert(p.end(), held.begin(), held.end());
+  std::vector<std::uint64_t> both;
+  if (!held.empty()) {
+    both = cutter_->pending();
+    both.insert(both.end(), held.begin(), held.end());
+  }
+  const std::vector<std::uint64_t>& p = held.empty() ? cutter_->pending() : both;
+  const std::size_t frame_tets = cutter_->pending().size() / 4;
   if (!p.empty()) write_file_atomically(context_.dir, pending_file, p.data(), p.size() * sizeof(std::uint64_t));
   const std::string old_pending = state.contains("output") ? state["output"].value("pending_file", "") : "";
   state["output"] = {{"committed", 0},
@@ -342,13 +334,9 @@ void WriteStage::commit(std::uint64_t end_label) {
   // the rename. A crash after the rename but before the checkpoint is removed
   // leaves this mark, and a resumed job then finds the output complete.
   record(std::min(end_label, view_.count), true);
-  if (reorder_) {
-    reorder_.reset();
-    order_.reset();
-    remove_file(order_path_);  // 4 bytes a point, not needed past the last tet
-    // Rank 0 of several: once every rank is done with the points (run_distributed).
-    if (points_in_output_ && !defer_points_order_) reorder_points_section();
-  }
+  reorder_.reset();
+  // Rank 0 of several: once every rank is done with the points (run_distributed).
+  if (!defer_points_order_) reorder_points_section();
   if (context_.checkpoint) {
     context_.state["output"]["finishing"] = true;
     context_.save();
@@ -357,9 +345,13 @@ void WriteStage::commit(std::uint64_t end_label) {
 }
 
 void WriteStage::reorder_points_section() {
-  if (!context_.options.brick_labels || !points_in_output_) return;
-  if (!claim_) throw std::logic_error("write: the points section is rewritten through the output's claim");
-  reorder_points(claim_->fd(), sorted_.offset, sorted_.count, sorted_.layout, sorted_.axis);
+  if (!order_) return;
+  if (points_in_output_) {
+    if (!claim_) throw std::logic_error("write: the points section is rewritten through the output's claim");
+    reorder_points(claim_->fd(), sorted_.offset, sorted_.layout, *order_);
+  }
+  order_.reset();
+  remove_file(order_path_);  // 4 bytes a point, not needed past the points
 }
 
 std::uint64_t WriteStage::fragments_offset() {

@@ -93,8 +93,8 @@ class WriteStage final : public OutputStage {
   void adopt_fragments(std::vector<io::FrameEntry> frames, std::uint64_t bytes);
   // With --labels bricks, commit() puts the points section in format 2's order
   // (pipeline/write/points_reorder.hpp), which no process may read in the sort's order
-  // after: rank 0 of several calls defer_points_order() first and
-  // reorder_points_section() once every rank is done.
+  // after, and removes the label order's file: rank 0 of several calls
+  // defer_points_order() first and reorder_points_section() once every rank is done.
   void defer_points_order() { defer_points_order_ = true; }
   void reorder_points_section();
   // The index, footer and rename (a fragment: its rename). Nothing may follow it.

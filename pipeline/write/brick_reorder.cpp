@@ -18,7 +18,7 @@ std::uint64_t BrickReorder::bytes_for(std::uint64_t brick, bool wide) {
 
 std::uint64_t BrickReorder::job_bytes(std::uint64_t points) {
   const std::uint64_t brick = std::min(brick_labels(points), points);
-  return bytes_for(brick, points > (std::uint64_t(1) << 32)) + 4 * brick * sizeof(std::uint32_t);
+  return bytes_for(brick, points > (std::uint64_t(1) << 32)) + LabelOrder::kKeptBricks * brick * sizeof(std::uint32_t);
 }
 
 void BrickReorder::add(const ZoneTets& part, std::size_t begin, std::size_t end) {

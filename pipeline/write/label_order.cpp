@@ -138,12 +138,12 @@ void write_label_order(const std::string& path, std::uint64_t point_count, int a
   if (failed) std::rethrow_exception(failed);
 }
 
-LabelOrder::LabelOrder(const std::string& path, std::uint64_t point_count, std::size_t kept_bricks)
+LabelOrder::LabelOrder(const std::string& path, std::uint64_t point_count)
     : path_(path),
       count_(point_count),
       brick_(brick_labels(point_count)),
       shift_(std::countr_zero(brick_)),
-      kept_(std::max<std::size_t>(1, kept_bricks)),
+      kept_(kKeptBricks),
       last_(&kept_[0]) {
   fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NOFOLLOW);
   if (fd_ < 0) throw IoError(path + ": cannot open: " + std::strerror(errno));
@@ -153,7 +153,13 @@ LabelOrder::~LabelOrder() {
   if (fd_ >= 0) ::close(fd_);
 }
 
-std::uint64_t LabelOrder::bytes() const { return kept_.size() * std::min(brick_, count_) * sizeof(std::uint32_t); }
+void LabelOrder::read_brick(std::uint64_t b, std::vector<std::uint32_t>& new_of_old) const {
+  const std::uint64_t first = b << shift_;
+  new_of_old.resize(std::size_t(std::min(brick_, count_ - first)));
+  if (!io::pread_exactly(fd_, new_of_old.data(), new_of_old.size() * sizeof(std::uint32_t),
+                         first * sizeof(std::uint32_t)))
+    throw IoError(path_ + ": read failed: " + std::strerror(errno));
+}
 
 void LabelOrder::keep(std::uint64_t b) {
   Brick* slot = &kept_[0];
@@ -165,11 +171,7 @@ void LabelOrder::keep(std::uint64_t b) {
     }
     if (k.used < slot->used) slot = &k;
   }
-  const std::uint64_t first = b << shift_;
-  const std::size_t n = std::size_t(std::min(brick_, count_ - first));
-  slot->new_of_old.resize(n);
-  if (!io::pread_exactly(fd_, slot->new_of_old.data(), n * sizeof(std::uint32_t), first * sizeof(std::uint32_t)))
-    throw IoError(path_ + ": read failed: " + std::strerror(errno));
+  read_brick(b, slot->new_of_old);
   slot->index = b;
   slot->used = ++clock_;
   last_ = slot;

@@ -8,7 +8,8 @@
 // points nearly every upper vertex is new to it: 3.51 bytes a tet at 10^8, 3.975 at
 // 10^9. Inside a brick of ~2 slabs of points (2 N^(2/3) labels, a power of two) the
 // curve keeps a frame's labels in a compact block of space, and the tet's vertices
-// among them: 1.5-1.8 bytes a tet from 10^6 to 10^9 (docs/benchmarks.md).
+// among them: 1.634 -> 1.543 bytes a tet at 10^6 and 2.212 -> 1.731 at 10^7 uniform
+// (docs/benchmarks.md); 10^8 and 10^9 are not measured with `run` yet.
 //
 // The order, for the points of a brick (given in the sort's order):
 //   - columns: the cross-section (the two axes other than the sort axis) cut into
@@ -55,7 +56,10 @@ void write_label_order(const std::string& path, std::uint64_t point_count, int a
 // long tet: the convex hull's, a surface's sky edges). One caller at a time.
 class LabelOrder {
  public:
-  LabelOrder(const std::string& path, std::uint64_t point_count, std::size_t kept_bricks = 4);
+  // The bricks kept whole: the one a tet's smallest label is in and the next two, and
+  // the one a far label was last found in.
+  static constexpr std::size_t kKeptBricks = 4;
+  LabelOrder(const std::string& path, std::uint64_t point_count);
   ~LabelOrder();
   LabelOrder(const LabelOrder&) = delete;
   LabelOrder& operator=(const LabelOrder&) = delete;
@@ -71,8 +75,9 @@ class LabelOrder {
   // Keeps brick b from now on (evicting the one used longest ago): the bricks the
   // coming tets are in.
   void keep(std::uint64_t b);
-  // The bytes it holds at most: the kept bricks.
-  std::uint64_t bytes() const;
+  // Brick b's permutation (brick_permutation's new_of_old), read from the file; safe
+  // beside another thread's lookups (the points section's writers read it).
+  void read_brick(std::uint64_t b, std::vector<std::uint32_t>& new_of_old) const;
 
  private:
   struct Brick {

@@ -27,13 +27,12 @@ void write_at(int fd, const void* data, std::size_t n, std::uint64_t at) {
 
 }  // namespace
 
-std::uint32_t reorder_points(int fd, std::uint64_t payload_offset, std::uint64_t count, RecordLayout layout, int axis) {
-  const std::uint64_t brick = brick_labels(count);
+std::uint32_t reorder_points(int fd, std::uint64_t payload_offset, RecordLayout layout, const LabelOrder& order) {
+  const std::uint64_t count = order.point_count(), brick = order.brick();
   const std::size_t rec = layout.bytes();
   // A batch of bricks of ~64 MiB at a time: one read and one write each.
   const std::uint64_t batch = brick * std::max<std::uint64_t>(1, (std::uint64_t(64) << 20) / (brick * rec));
   std::vector<std::uint8_t> sorted, reordered;
-  std::vector<double> xyz;
   std::vector<std::uint32_t> new_of_old;
   std::uint32_t crc = 0;
   for (std::uint64_t first = 0; first < count; first += batch) {
@@ -45,20 +44,11 @@ std::uint32_t reorder_points(int fd, std::uint64_t payload_offset, std::uint64_t
     reordered.resize(bytes);
     read_at(fd, sorted.data(), bytes, at);
     for (std::uint64_t f = first; f < end; f += brick) {
-      const std::size_t n = std::size_t(std::min(brick, end - f));
+      order.read_brick(f / brick, new_of_old);
       const std::uint8_t* in = sorted.data() + (f - first) * rec;
       std::uint8_t* out = reordered.data() + (f - first) * rec;
-      xyz.resize(3 * n);
-      with_record(layout, [&](auto r) {
-        using R = decltype(r);
-        for (std::size_t i = 0; i < n; ++i) {
-          R p;
-          std::memcpy(&p, in + i * rec, sizeof(R));
-          p.xyz(xyz.data() + 3 * i);
-        }
-      });
-      brick_permutation(xyz.data(), n, axis, new_of_old);
-      for (std::size_t i = 0; i < n; ++i) std::memcpy(out + std::size_t(new_of_old[i]) * rec, in + i * rec, rec);
+      for (std::size_t i = 0; i < new_of_old.size(); ++i)
+        std::memcpy(out + std::size_t(new_of_old[i]) * rec, in + i * rec, rec);
     }
     write_at(fd, reordered.data(), bytes, at);
     crc = io::crc32c(reordered.data(), bytes, crc);
