@@ -11,6 +11,14 @@
 
 namespace tetstream::io {
 
+std::uint64_t brick_labels(std::uint64_t point_count) {
+  const double want = 2.0 * std::cbrt(double(point_count) * double(point_count));
+  const std::uint64_t floor = std::uint64_t(1) << 10, ceiling = std::uint64_t(1) << 31;
+  if (!(want > double(floor))) return floor;
+  if (want >= double(ceiling)) return ceiling;
+  return std::bit_ceil(std::uint64_t(std::ceil(want)));
+}
+
 // The bulk paths (PNTS records, decoded labels) copy host memory to disk as is.
 static_assert(std::endian::native == std::endian::little, "the .tets writer and reader assume a little-endian host");
 

@@ -28,6 +28,11 @@ inline constexpr std::uint16_t kVersionMajor = 1;
 inline constexpr std::uint16_t kVersionMajorBricks = 2;
 inline constexpr std::uint16_t kVersionMinor = 0;
 inline bool version_readable(std::uint16_t major) { return major == kVersionMajor || major == kVersionMajorBricks; }
+// §3.4: the labels a brick of version 2 holds, 2 N^(2/3) rounded up to a power of two (at
+// least 2^10, at most 2^31; the last brick may be shorter). A power of two, so either it
+// divides a frame block (frame_block_labels, a power of two) or a block divides it:
+// ranges aligned to the larger of the two are aligned to both.
+std::uint64_t brick_labels(std::uint64_t point_count);
 inline constexpr std::size_t kPreambleSize = 16;
 inline constexpr std::size_t kFooterSize = 48;
 

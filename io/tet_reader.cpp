@@ -334,4 +334,8 @@ int perturbation_axis(const TetReader& reader) {
   return axis;
 }
 
+std::uint64_t label_brick(const TetReader& reader) {
+  return reader.version_major() == kVersionMajor ? 1 : brick_labels(reader.point_count());
+}
+
 }  // namespace tetstream::io

@@ -109,4 +109,9 @@ class TetReader {
 // perturbation orders points by their coordinates compared from that axis on.
 int perturbation_axis(const TetReader& reader);
 
+// The labels a brick of the file holds (format.md §3.4): 1 for version 1, whose labels
+// are in the sort's order; for version 2, brick_labels(N). A point of a later brick
+// lies at or above every point of an earlier one along the sort axis.
+std::uint64_t label_brick(const TetReader& reader);
+
 }  // namespace tetstream::io

@@ -25,9 +25,9 @@ struct RunArgs {
   std::string memory = "1G";
   std::string periodic;  // --periodic: L, Lx,Ly,Lz or auto; empty: not periodic
   std::string outside = "wrap";
-  double margin = 0;              // 0: the default first margin (PeriodicOptions)
-  std::string index = "auto";     // --index
-  std::string labels = "sorted";  // --labels
+  double margin = 0;           // 0: the default first margin (PeriodicOptions)
+  std::string index = "auto";  // --index
+  std::string labels;          // --labels; empty: bricks, sorted with --periodic
 };
 
 // `run --periodic`: the triangulation of the flat torus (docs/periodic.md).
@@ -80,7 +80,7 @@ void run_run(RunArgs& args, Context& ctx) {
                        o.output + " and convert it)");
   }
   o.memory_bytes = pipeline::parse_memory_size(args.memory);
-  o.brick_labels = args.labels == "bricks";
+  o.brick_labels = args.labels.empty() ? args.periodic.empty() : args.labels == "bricks";
   o.threads = ctx.global.threads;
   o.progress = !ctx.global.quiet;
   ctx.stdout_is_data = io::is_std_stream(o.output);
@@ -149,11 +149,10 @@ void setup_run(CLI::App& app, Context& ctx) {
                   "Points per segment (default: from --memory; small values force many segments). "
                   "--zone-points is the old name, kept as an alias for one release");
   cmd->add_option("--labels", args->labels,
-                  "Label order of the output: sorted (the sort's order along the longest axis, container "
-                  "version 1) or bricks (version 2: bricks along a space-filling curve, about half the bytes a "
-                  "tet past 10^7 points)")
-      ->check(CLI::IsMember({"sorted", "bricks"}))
-      ->capture_default_str();
+                  "Label order of the output: bricks (the default: container version 2, bricks along a "
+                  "space-filling curve, about half the bytes a tet past 10^7 points) or sorted (version 1, the "
+                  "sort's order along the longest axis; the only one --periodic writes)")
+      ->check(CLI::IsMember({"sorted", "bricks"}));
   cmd->add_option("--zones", args->options.zones,
                   "Zones per segment (strips across the sort axis, triangulated --threads at a time); "
                   "0: the number that wastes the least on buffers for --memory")

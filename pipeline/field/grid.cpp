@@ -51,7 +51,7 @@ class GridSampler {
         rho_path_(rho_path) {
     plane_size_ = g_.n[std::size_t(u_)] * g_.n[std::size_t(w_)];
     max_planes_ = std::max<std::uint64_t>(1, budget / (plane_size_ * sizeof(double)));
-    points_.check_sorted_along(axis);
+    points_.check_sorted_along(axis, io::label_brick(reader));
     // The centres' coordinates once (the same expression as GridSpec::centre, so the
     // same bits): computing them per candidate cost a division each.
     for (int k = 0; k < 3; ++k)
@@ -87,11 +87,7 @@ class GridSampler {
       grow_to(std::min<std::uint64_t>(na, plane_at_or_below(dense_reach()) + 2));
       sample_batch();
       for (std::size_t k = b.first_frame; k < b.end_frame; ++k) reader_.release_frame_pages(k);
-      if (b.retire_below < reader_.point_count()) {
-        double next[3];
-        reader_.read_points(b.retire_below, 1, next, nullptr);
-        retire_below(next[axis_]);
-      }
+      if (b.retire_below < reader_.point_count()) retire_below(floor_from(b.retire_below));
       if (progress) progress->add(b.tets);
     }
     retire_below(std::numeric_limits<double>::infinity());
@@ -216,6 +212,17 @@ class GridSampler {
       }
   }
   double rho(std::uint64_t l) const { return points_.dense(l) ? rho_[l] : far_rho_.find(l)->second; }
+
+  // A coordinate along the axis below which no tet of smallest label `label` or above
+  // reaches: their vertices are of that label or above. In version 1 the label's own
+  // point; in version 2 the top of the bricks before its brick (a brick's labels are in
+  // no order along the axis), so the planes retire a brick later.
+  double floor_from(std::uint64_t label) const {
+    if (io::label_brick(reader_) > 1) return points_.axis_floor(label);
+    double next[3];
+    reader_.read_points(label, 1, next, nullptr);
+    return next[axis_];
+  }
 
   // Planes whose centre lies below x are final.
   void retire_below(double x) {

@@ -8,12 +8,13 @@
 // shared faces and edges the same way in every tet), so a value is written exactly
 // once, whatever the threads; points outside the hull stay NaN.
 //
-// Slab by slab: the points are sorted along `axis` (the container's sort axis), so a
-// tet's vertices lie at or beyond the axis coordinate of its smallest label. After a
-// batch, the planes of grid points (perpendicular to the axis) whose coordinate lies
-// below the next batch's first point are final and leave memory: the planes held are
-// those the window's tets span. Along x (axis 0) a final plane is the next piece of the
-// file; along y or z, its values go through an external sort by C-order index.
+// Slab by slab: the points are sorted along `axis` (the container's sort axis; in
+// version 2 brick by brick, format.md §3.4), so a tet's vertices lie at or beyond the
+// axis coordinate of its smallest label (version 2: of the top of the bricks before
+// that label's). After a batch, the planes of grid points (perpendicular to the axis)
+// below that floor for the next batch's first label are final and leave memory: the
+// planes held are those the window's tets span, and in version 2 a brick more. Along x (axis 0) a final plane is the
+// next piece of the file; along y or z, its values go through an external sort by C-order index.
 #include "io/tet_reader.hpp"
 #include "pipeline/field/field.hpp"
 #include "pipeline/field/window.hpp"

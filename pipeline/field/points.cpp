@@ -2,6 +2,8 @@
 
 #include "core/error.hpp"
 
+#include <algorithm>
+#include <limits>
 #include <vector>
 
 namespace tetstream::pipeline {
@@ -20,14 +22,24 @@ void WindowPoints::load(std::uint64_t first, std::uint64_t n) {
       ids_[at + i] = ids[i];
       if (axis_ >= 0) {
         const double c = slots[i][std::size_t(axis_)];
-        if (at + i > 0 && c < last_)
+        const std::uint64_t k = (at + i) / brick_;
+        const double below = k == 0 ? -std::numeric_limits<double>::infinity() : brick_top_[std::size_t(k - 1)];
+        if (c < below)
           throw InputError(reader_.path() + ": point " + std::to_string(at + i) + " is not sorted along axis " +
                            std::to_string(axis_) + " (the grid needs the order `run` writes)");
-        last_ = c;
+        if (brick_top_.size() == k) brick_top_.push_back(below);
+        brick_top_.back() = std::max(brick_top_.back(), c);
       }
     }
   });
   next_ = first + n;
+}
+
+double WindowPoints::axis_floor(std::uint64_t label) const {
+  // Bricks before the label's, as far as loaded: a partly loaded brick's top is still
+  // a floor for the bricks after it.
+  const std::uint64_t before = std::min<std::uint64_t>(label / brick_, brick_top_.size());
+  return before == 0 ? -std::numeric_limits<double>::infinity() : brick_top_[std::size_t(before - 1)];
 }
 
 void WindowPoints::fetch_far(const DecodedBatch& batch) {

@@ -41,9 +41,15 @@ class WindowPoints {
   }
   // Reads the far labels of the batch's tets not read yet (one thread).
   void fetch_far(const DecodedBatch& batch);
-  // With check_axis in 0..2, the dense loads throw InputError unless that coordinate
-  // is non-decreasing in label order (the grid retires planes by it).
-  void check_sorted_along(int axis) { axis_ = axis; }
+  // The dense loads throw InputError unless the points are in the order `run` writes
+  // along `axis` (0..2): every point of a brick of `brick` labels (io::label_brick: 1
+  // in version 1) at or above every point of the bricks before it. The grid retires
+  // planes by it (axis_floor).
+  void check_sorted_along(int axis, std::uint64_t brick) { axis_ = axis, brick_ = brick; }
+  // With check_sorted_along: a coordinate along its axis that no point of label
+  // `label` or above lies below, from the labels loaded so far (the largest coordinate
+  // of the bricks before the label's; -infinity when none is loaded).
+  double axis_floor(std::uint64_t label) const;
 
   bool dense(std::uint64_t label) const { return label < next_; }
   std::uint64_t dense_end() const { return next_; }
@@ -73,7 +79,10 @@ class WindowPoints {
   std::unordered_map<std::uint64_t, Far> far_;
   std::uint64_t next_ = 0;  // labels below were loaded into the rings
   int axis_ = -1;
-  double last_ = 0.0;  // the previous label's coordinate on axis_
+  std::uint64_t brick_ = 1;
+  // The largest coordinate on axis_ of bricks 0..k, for each brick k begun (the last
+  // one may be partly loaded).
+  std::vector<double> brick_top_;
 };
 
 }  // namespace tetstream::pipeline

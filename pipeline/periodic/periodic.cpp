@@ -52,6 +52,9 @@ RunOptions padded_job(const RunOptions& o, const std::string& dir, bool input_as
   inner.tmpdir = dir;
   inner.checkpoint_dir = dir;
   inner.resume = inner.force = false;
+  // The keep stage walks the padded tets by the sort's order (a tet's box part by its
+  // smallest label's slab): version 1's labels, whatever the caller's default.
+  inner.brick_labels = false;
   return inner;
 }
 

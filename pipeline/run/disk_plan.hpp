@@ -29,7 +29,8 @@
 // whole triangulation: the shared point index (8 bytes a point) and the fragments of
 // ranks 1..K-1 (their tets, 28 (K - 1) / K bytes a point) until they are placed;
 // `more_work` is that, per point; for one process with its point index on disk (`run
-// --index`), the index's file, 8 bytes a point.
+// --index`), the index's file, 8 bytes a point; and for container version 2 (`run
+// --labels bricks`, the default) the label order's file, 4 bytes a point.
 #include <cstdint>
 #include <string>
 #include <vector>

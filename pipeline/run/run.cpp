@@ -296,11 +296,14 @@ std::uint64_t plan_and_check_disk(const RunOptions& o, const std::string& work_p
   if (!points) return 0;
   std::string out_dir = io::is_std_stream(o.output) ? "" : std::filesystem::path(o.output).parent_path().string();
   if (out_dir.empty()) out_dir = ".";
+  // Version 2's label order file (pipeline/write/label_order.hpp), 4 bytes a point, is
+  // held from the write stage's start to the points' rewrite at its end.
+  const std::uint64_t label_order = o.brick_labels ? 4 : 0;
   const std::vector<DiskNeed> plan =
       plan_disk(*points, reader->float32_input(), work_parent, out_dir, io::is_std_stream(o.output), checkpointed,
-                ranks > 1                  ? distributed_work_bytes_per_point(ranks)
-                : o.index_on_disk(*points) ? 8
-                                           : 0);
+                label_order + (ranks > 1                  ? distributed_work_bytes_per_point(ranks)
+                               : o.index_on_disk(*points) ? 8
+                                                          : 0));
   std::uint64_t need = 0;
   for (const DiskNeed& d : plan) {
     need += d.need;

@@ -47,12 +47,12 @@ struct RunOptions {
   // and leave more tets to the emptiness queries; 1.5 is where the two costs meet on
   // uniform points (scripts/bench-pipeline --buffer compares others).
   double buffer_spacings = 1.5;
-  // The output's labels (docs/format.md §1): false, the sort's order (version 1);
-  // true, format 2's bricks along a space-filling curve (version 2,
-  // pipeline/write/label_order.hpp: 1.5-1.8 bytes a tet at any size, against 3.5 at
-  // 10^8 in the sort's order). The tets are the same; their labels and the points'
+  // The output's labels (docs/format.md §1): true (the default), format 2's bricks
+  // along a space-filling curve (version 2, pipeline/write/label_order.hpp: 1.5-1.8
+  // bytes a tet at any size, against 3.5 at 10^8 in the sort's order); false, the
+  // sort's order (version 1). The tets are the same; their labels and the points'
   // order are not.
-  bool brick_labels = false;
+  bool brick_labels = true;
   std::uint64_t segment_points = 0;   // labels a segment owns; 0: from the memory budget (tests force many segments)
   std::uint64_t sort_run_points = 0;  // 0: from the memory budget (tests force many runs)
   // Zones per segment (strips across the sort axis, zone_plan.hpp plan_for_budget): 0 picks

@@ -16,14 +16,6 @@
 
 namespace tetstream::pipeline {
 
-std::uint64_t brick_labels(std::uint64_t point_count) {
-  const double want = 2.0 * std::cbrt(double(point_count) * double(point_count));
-  const std::uint64_t floor = std::uint64_t(1) << 10, ceiling = std::uint64_t(1) << 31;
-  if (!(want > double(floor))) return floor;
-  if (want >= double(ceiling)) return ceiling;
-  return std::bit_ceil(std::uint64_t(std::ceil(want)));
-}
-
 namespace {
 
 // The position of cell (x, y) along the Hilbert curve of a side x side grid (side a

@@ -24,6 +24,8 @@
 //
 // A brick maps its label range onto itself, so a tet's smallest label stays in the brick
 // of its smallest sorted label: the tets of a brick are those of its sorted labels.
+#include "io/tet_container.hpp"
+
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -32,10 +34,8 @@
 
 namespace tetstream::pipeline {
 
-// Labels a brick: 2 N^(2/3) rounded up to a power of two (at least 2^10, at most 2^31).
-// A power of two, so either it divides a frame block (frame_block_labels, a power of
-// two) or a block divides it: ranges aligned to the larger of the two are aligned to both.
-std::uint64_t brick_labels(std::uint64_t point_count);
+// Labels a brick: io::brick_labels (format.md §3.4).
+using io::brick_labels;
 
 // The permutation of one brick: new_of_old[i] is the position in the brick, in format
 // 2's order, of its i-th point in the sort's order. `xyz`: 3 doubles a point, in the

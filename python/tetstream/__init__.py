@@ -515,7 +515,8 @@ def run(source: Union[PathLike, Sequence[PathLike], ArrayLike], output: PathLike
     **options
         The CLI's other ``run`` options, ``-`` spelled ``_``: ``tmpdir``, ``buffer``,
         ``zone_points``, ``zones``, ``checkpoint`` (True, False or a directory),
-        ``force``, and the point-input options ``format``, ``type``, ``stride``,
+        ``force``, ``labels`` (``"bricks"``, the default, or ``"sorted"``: the
+        container's label order, docs/format.md §3.4), and the point-input options ``format``, ``type``, ``stride``,
         ``offset``, ``byte_order``, ``columns`` (1-based, a list), ``properties``,
         ``datasets``; ``periodic`` (L, (Lx, Ly, Lz) or ``"auto"``: the triangulation of
         the flat torus, docs/periodic.md) and ``periodic_outside`` (``"wrap"`` or

@@ -451,7 +451,11 @@ void apply_run_options(pipeline::RunOptions& o, const py::dict& options) {
         o.checkpoint = true, o.checkpoint_dir = get_string(value);
     } else if (k == "force")
       o.force = value.cast<bool>();
-    else if (k == "format")
+    else if (k == "labels") {
+      const std::string l = get_string(value);
+      if (l != "bricks" && l != "sorted") throw UsageError("labels: expected bricks or sorted, got '" + l + "'");
+      o.brick_labels = l == "bricks";
+    } else if (k == "format")
       io::parse_format_name(get_string(value), o.read.format, o.read.type);
     else if (k == "type") {
       const std::string t = get_string(value);

@@ -15,6 +15,13 @@ fail() { echo "FAIL: $*" >&2; exit 1; }
 json() { python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
 cp "$data/golden_v1_f64_u32.golden" g.tets   # 64 points, 162 tets in 3 frames of 54
 cp "$data/golden_v1_f32_u64.golden" w.tets   # 24 points, 36 tets, 64-bit labels
+cp "$data/golden_v2_f64_u32.golden" b.tets   # version 2: 80 points, 216 tets in 4 frames
+
+# Version 2 reads as version 1 does: info names it, cat gives every tet.
+"$T" info b.tets | grep -q "container 2.0" || fail "info b.tets: $("$T" info b.tets)"
+[ "$("$T" -q --json info b.tets | json "d['tets'], d['frames'], d['points']")" = "216 4 80" ] || fail "info b.tets --json"
+[ "$("$T" -q cat b.tets | wc -l)" = 216 ] || fail "cat b.tets"
+[ "$("$T" -q cat b.tets --original-ids | sort -u | wc -l)" = 216 ] || fail "cat b.tets --original-ids"
 
 # info, text and --json.
 "$T" info g.tets >info.txt 2>/dev/null

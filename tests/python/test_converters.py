@@ -188,8 +188,8 @@ def main():
     if len(sys.argv) != 2:
         sys.exit("usage: test_converters.py /path/to/tetstream")
     tool = sys.argv[1]
-    goldens = sorted(os.path.join(DATA, f) for f in os.listdir(DATA) if f.startswith("golden_v1_"))
-    check(len(goldens) >= 2, "golden containers present")
+    goldens = sorted(os.path.join(DATA, f) for f in os.listdir(DATA) if f.startswith("golden_v"))
+    check(len(goldens) >= 3, "golden containers present")
     if shutil.which("gmsh") is None:
         FAILURES.append("gmsh is not installed (scripts/setup.sh installs it)")
     with tempfile.TemporaryDirectory(prefix="tetstream_convert_") as tmp:

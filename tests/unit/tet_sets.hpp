@@ -35,18 +35,34 @@ inline std::vector<Quad> container_quads(const std::string& path) {
   return out;
 }
 
-// The in-core kernel's tets of a container's own points (labels = positions in the
-// container's point order): what the out-of-core output must equal.
+// The in-core kernel's tets of a container's own points, as container labels: what the
+// out-of-core output must equal. The kernel perturbs by the points' positions in its
+// input, so it is given them in the container's perturbation order (format.md §3.4):
+// the labels' for version 1, the sort order from the sort axis for version 2.
 inline std::vector<Quad> incore_quads(const std::string& path) {
   io::TetReader reader(path);
   const std::size_t n = std::size_t(reader.point_count());
   std::vector<double> xyz(3 * n);
   std::vector<std::uint64_t> ids(n);
   reader.read_points(0, n, xyz.data(), ids.data());
+  std::vector<std::uint64_t> label(n);  // label[i]: the label of the kernel's point i
+  for (std::size_t i = 0; i < n; ++i) label[i] = i;
+  if (const int a = io::perturbation_axis(reader); a >= 0) {
+    const auto key = [&](std::uint64_t l) {
+      return std::array<double, 3>{xyz[3 * l + std::size_t(a)], xyz[3 * l + std::size_t((a + 1) % 3)],
+                                   xyz[3 * l + std::size_t((a + 2) % 3)]};
+    };
+    std::sort(label.begin(), label.end(), [&](std::uint64_t p, std::uint64_t q) { return key(p) < key(q); });
+    std::vector<double> ordered(3 * n);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t k = 0; k < 3; ++k) ordered[3 * i + k] = xyz[3 * label[i] + k];
+    xyz.swap(ordered);
+  }
   core::Delaunay dt;
   std::vector<Quad> out;
   if (dt.build(xyz.data(), nullptr, n) != core::BuildStatus::kOk) return out;  // empty: never equal to a real output
-  dt.for_each_finite_tet([&](const core::VertexId* v) { add_quad(out, v[0], v[1], v[2], v[3]); });
+  dt.for_each_finite_tet(
+      [&](const core::VertexId* v) { add_quad(out, label[v[0]], label[v[1]], label[v[2]], label[v[3]]); });
   std::sort(out.begin(), out.end());
   return out;
 }

@@ -1,5 +1,5 @@
 // The .tets container: CRC, frame codec, writer, reader, damaged files, resume, and the
-// golden files that pin the format (tests/data/golden_v1_*.golden, docs/format.md).
+// golden files that pin the format (tests/data/golden_v*.golden, docs/format.md).
 //
 // Tets are synthetic (the kernel is tested elsewhere): a lattice of cubes, each split
 // into the 6 tets of the Kuhn triangulation along its main diagonal, oriented
@@ -15,6 +15,7 @@
 #include "io/tet_container.hpp"
 #include "io/tet_reader.hpp"
 #include "io/tet_writer.hpp"
+#include "pipeline/write/label_order.hpp"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
@@ -786,6 +787,22 @@ struct Golden {
   TetWriterOptions options;
 };
 
+// A mesh whose points are in the sort's order along `axis`, relabelled in version 2's
+// order (one brick: fewer than 2^10 points), its tets in the stored order.
+Mesh relabelled(const Mesh& sorted, int axis) {
+  std::vector<std::uint32_t> new_of_old;
+  pipeline::brick_permutation(sorted.xyz.data(), sorted.ids.size(), axis, new_of_old);
+  Mesh m = sorted;
+  for (std::size_t i = 0; i < new_of_old.size(); ++i) {
+    for (int k = 0; k < 3; ++k) m.xyz[3 * new_of_old[i] + std::size_t(k)] = sorted.xyz[3 * i + std::size_t(k)];
+    m.ids[new_of_old[i]] = sorted.ids[i];
+  }
+  for (Tet& t : m.tets)
+    for (auto& v : t) v = new_of_old[v];
+  m.tets = canonical_sorted(m.tets);
+  return m;
+}
+
 // The recipes of the golden files; docs/format.md points here.
 std::vector<Golden> goldens() {
   std::vector<Golden> g;
@@ -809,6 +826,19 @@ std::vector<Golden> goldens() {
     h.tool = "tetstream golden";
     h.options = R"({"recipe":"lattice 2x1x3, float32, 64-bit labels"})";
     g.push_back({"golden_v1_f32_u64.golden", std::move(m), h, {}});
+  }
+  {
+    // Version 2 (format.md §3.4): 5x4x4 points (4x3x3 cubes, 216 tets), float64, x the
+    // longest axis, so the lattice's order is the sort's; one brick, relabelled by
+    // brick_permutation, the tets in the stored order of their new labels; 4 frames.
+    Mesh m = relabelled(lattice(4, 3, 3, 1.0, 0.5, 0.25, 23, 5), 0);
+    TetFileHeader h = header_for(m);
+    h.version_major = kVersionMajorBricks;
+    h.tool = "tetstream golden";
+    h.options = R"({"recipe":"lattice 4x3x3, ids 23*label+5 mod 80, brick labels","frame_tets":60})";
+    TetWriterOptions o;
+    o.frame_tets = 60;
+    g.push_back({"golden_v2_f64_u32.golden", std::move(m), h, o});
   }
   return g;
 }
@@ -836,7 +866,7 @@ TEST(Golden, ReaderReadsTheGoldenFiles) {
   for (const auto& g : goldens()) {
     SCOPED_TRACE(g.name);
     TetReader r(std::string(TETSTREAM_TEST_DATA_DIR) + "/" + g.name);
-    EXPECT_EQ(r.version_major(), 1);
+    EXPECT_EQ(r.version_major(), g.header.version_major);
     EXPECT_EQ(r.version_minor(), 0);
     EXPECT_EQ(r.header().tool, g.header.tool);
     EXPECT_EQ(r.header().options, g.header.options);

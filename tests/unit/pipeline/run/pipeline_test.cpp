@@ -51,8 +51,8 @@ class PipelineTest : public testing_util::ScratchDirTest {
     return pipeline::run_job(o);
   }
 
-  // The container's tets as sorted quadruples, and, from its own sorted points, the
-  // in-core kernel's tets (labels = positions in the container's point order).
+  // The container's tets as sorted quadruples, and, from its own points, the in-core
+  // kernel's tets as its labels (testing_util::incore_quads).
   static std::vector<Quad> container_tets(const std::string& path) { return testing_util::container_quads(path); }
   static std::vector<Quad> incore_tets(const std::string& path) { return testing_util::incore_quads(path); }
 

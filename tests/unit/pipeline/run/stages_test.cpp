@@ -23,6 +23,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <optional>
 #include <set>
 #include <string>
@@ -103,6 +104,7 @@ class CollectSegments final : public SegmentSink {
 class StagesTest : public testing_util::ScratchDirTest {
  protected:
   StagesTest() : ScratchDirTest("stages-test") {}
+  void expect_write_stage_writes_what_it_is_handed();
   void SetUp() override {
     ScratchDirTest::SetUp();
     xyz_ = testing_util::generated_points(io::Distribution::kBall, kPoints, 21);
@@ -223,6 +225,14 @@ TEST_F(StagesTest, TriangulateStageEqualsTheInCoreKernel) {
 // Its points come from the sorted file, or (a claimed output) the sort merged them
 // into the output's points section itself: the same bytes either way.
 TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
+  for (const bool bricks : {false, true}) {
+    SCOPED_TRACE(bricks ? "version 2 (bricks)" : "version 1 (sorted)");
+    options_.brick_labels = bricks;
+    expect_write_stage_writes_what_it_is_handed();
+  }
+}
+
+void StagesTest::expect_write_stage_writes_what_it_is_handed() {
   std::string bytes[2];
   for (const bool in_output : {false, true}) {
     SCOPED_TRACE(in_output ? "points merged into the output" : "points from the sorted file");
@@ -237,6 +247,14 @@ TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
     index.prepare();
     index.run();
     std::vector<std::array<std::uint64_t, 4>> tets = incore_tets(index.view());
+    // Read now: with the points in the output, the view maps the points section that
+    // version 2's commit rewrites in place.
+    std::map<std::array<double, 3>, std::uint64_t> sorted_label;
+    for (std::uint64_t i = 0; i < kPoints; ++i) {
+      std::array<double, 3> p;
+      index.view().points.xyz(i, p.data());
+      sorted_label[p] = i;
+    }
     auto min_label = [](const std::array<std::uint64_t, 4>& t) { return *std::min_element(t.begin(), t.end()); };
     std::stable_sort(tets.begin(), tets.end(),
                      [&](const auto& a, const auto& b) { return min_label(a) < min_label(b); });
@@ -267,7 +285,25 @@ TEST_F(StagesTest, WriteStageWritesTheTetsItIsHanded) {
     }
     const io::TetReader reader(options_.output);
     EXPECT_EQ(reader.point_count(), kPoints);
-    EXPECT_EQ(testing_util::container_quads(options_.output), sorted_quads(tets));
+    EXPECT_EQ(reader.version_major(), options_.brick_labels ? io::kVersionMajorBricks : io::kVersionMajor);
+    // The container's labels as sorted ones, through the points' coordinates (version
+    // 2 permutes each brick's labels: the same set of points, another order).
+    std::vector<double> xyz(3 * kPoints);
+    reader.read_points(0, kPoints, xyz.data(), nullptr);
+    std::vector<std::uint64_t> as_sorted(kPoints);
+    std::uint64_t moved = 0;
+    for (std::uint64_t l = 0; l < kPoints; ++l) {
+      const auto it = sorted_label.find({xyz[3 * l], xyz[3 * l + 1], xyz[3 * l + 2]});
+      ASSERT_NE(it, sorted_label.end()) << "label " << l << ": a point the job did not have";
+      as_sorted[l] = it->second;
+      moved += it->second != l;
+    }
+    EXPECT_EQ(moved > 0, options_.brick_labels) << moved << " labels moved";
+    std::vector<Quad> written;
+    for (const Quad& q : testing_util::container_quads(options_.output))
+      testing_util::add_quad(written, as_sorted[q[0]], as_sorted[q[1]], as_sorted[q[2]], as_sorted[q[3]]);
+    std::sort(written.begin(), written.end());
+    EXPECT_EQ(written, sorted_quads(tets));
     std::ifstream in(options_.output, std::ios::binary);
     bytes[in_output] = std::string(std::istreambuf_iterator<char>(in), {});
     std::filesystem::remove(options_.output);
