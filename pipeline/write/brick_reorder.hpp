@@ -6,8 +6,9 @@
 // The segments' tets come in increasing smallest *sorted* label, and a brick maps its
 // labels onto themselves, so they come brick by brick: the tets of a brick are complete
 // once a tet of a later brick arrives, or once the segments have passed its end
-// (done_below). Then they are put in order of their smallest new label (a counting sort
-// over the brick's labels: linear) and handed to the frame cutter. What is held is the
+// (done_below). Then they are put in order of their smallest new label (a stable radix
+// sort of the tets themselves, a pass or two: gathering them one by one in that order
+// missed the cache at every tet) and handed to the frame cutter. What is held is the
 // brick being filled: about 7 tets a label of one brick, 4-byte labels when the job's
 // fit in 32 bits (bytes_for).
 #include "pipeline/window/zone_triangulator.hpp"
@@ -44,23 +45,27 @@ class BrickReorder {
   static std::uint64_t job_bytes(std::uint64_t points);
 
  private:
-  void emit();  // the brick held, in order, to the cutter
-  std::size_t tets() const { return wide_ ? held64_.size() / 4 : held32_.size() / 4; }
-  std::uint64_t label(std::size_t i) const { return wide_ ? held64_[i] : held32_[i]; }
-  void push(std::uint64_t l) {
-    if (wide_)
-      held64_.push_back(l);
-    else
-      held32_.push_back(std::uint32_t(l));
-  }
+  // A tet held: its format 2 labels and its smallest one less the brick's first.
+  template <class L>
+  struct Held {
+    L label[4];
+    std::uint32_t min;
+  };
+  template <class L>
+  void emit(std::vector<Held<L>>& held, std::vector<Held<L>>& scratch);
+  void start_brick(std::uint64_t b);  // the brick held from now on (the one before emitted)
+  void emit();                        // the brick held, in order, to the cutter
+  std::size_t tets() const { return wide_ ? held64_.size() : held32_.size(); }
+  void push(const std::uint64_t* q, std::uint64_t m);
 
   FrameCutter& cutter_;
   LabelOrder& order_;
   const bool wide_;                          // labels past 2^32
   std::uint64_t brick_ = ~std::uint64_t(0);  // the brick held, by index
-  std::vector<std::uint32_t> held32_;
-  std::vector<std::uint64_t> held64_;
-  std::vector<std::uint32_t> count_, order_of_;  // the counting sort's scratch
+  std::uint64_t base_ = 0, span_ = 0;        // its first label and its labels
+  std::vector<Held<std::uint32_t>> held32_, scratch32_;
+  std::vector<Held<std::uint64_t>> held64_, scratch64_;
+  std::vector<std::size_t> count_;  // the radix sort's buckets
 };
 
 }  // namespace tetstream::pipeline

@@ -41,12 +41,16 @@ class FrameCutter {
     }
   }
   // One tet, its smallest label not below the previous tet's.
-  void add(const std::uint64_t* q) {
-    const std::uint64_t m = tet_min_label(q);
+  void add(const std::uint64_t* q) { add(q, tet_min_label(q)); }
+  // The same, with its smallest label `m` known.
+  void add(const std::uint64_t* q, std::uint64_t m) {
     if (m != last_min_ && !frame_.empty() &&
         (frame_.size() >= 4 * frame_tets_ || m / block_labels_ != last_min_ / block_labels_))
       write();
-    frame_.insert(frame_.end(), q, q + 4);
+    // Four stores, not insert(): that was a call to memmove a tet.
+    const std::size_t at = frame_.size();
+    frame_.resize(at + 4);
+    for (std::size_t k = 0; k < 4; ++k) frame_[at + k] = q[k];
     last_min_ = m;
   }
   void flush() {

@@ -9,7 +9,7 @@
 // 10^9. Inside a brick of ~2 slabs of points (2 N^(2/3) labels, a power of two) the
 // curve keeps a frame's labels in a compact block of space, and the tet's vertices
 // among them: 1.634 -> 1.543 bytes a tet at 10^6 and 2.212 -> 1.731 at 10^7 uniform
-// (docs/benchmarks.md); 10^8 and 10^9 are not measured with `run` yet.
+// (docs/benchmarks.md, with 10^8).
 //
 // The order, for the points of a brick (given in the sort's order):
 //   - columns: the cross-section (the two axes other than the sort axis) cut into
@@ -51,14 +51,15 @@ using ReadPoints = std::function<void(std::uint64_t first, std::size_t n, double
 void write_label_order(const std::string& path, std::uint64_t point_count, int axis, const ReadPoints& read,
                        int threads);
 
-// Sorted labels to format 2's labels through the file write_label_order made: the few
-// bricks used last kept whole, any other label read on its own (the far vertex of a
-// long tet: the convex hull's, a surface's sky edges). One caller at a time.
+// Sorted labels to format 2's labels through the file write_label_order made: a window
+// of the bricks the coming tets are in, kept whole and contiguous (one comparison a
+// label), any other label read on its own (the far vertex of a long tet: the convex
+// hull's, a surface's sky edges). One caller at a time.
 class LabelOrder {
  public:
-  // The bricks kept whole: the one a tet's smallest label is in and the next two, and
-  // the one a far label was last found in.
-  static constexpr std::size_t kKeptBricks = 4;
+  // The bricks of the window: the one a tet's smallest label is in and the next two (a
+  // brick is two slabs of points thick; a tet reaches about 2.5 slabs).
+  static constexpr std::size_t kKeptBricks = 3;
   LabelOrder(const std::string& path, std::uint64_t point_count);
   ~LabelOrder();
   LabelOrder(const LabelOrder&) = delete;
@@ -68,32 +69,28 @@ class LabelOrder {
   std::uint64_t point_count() const { return count_; }
   // The format 2 label of sorted label `l` (< point_count()).
   std::uint64_t operator()(std::uint64_t l) {
-    const std::uint64_t b = l >> shift_;
-    if (b == last_->index) return (b << shift_) + last_->new_of_old[std::size_t(l & (brick_ - 1))];
+    const std::uint64_t d = l - window_first_;  // below the window: wraps past its size
+    if (d < window_.size()) return (l & ~(brick_ - 1)) + window_[std::size_t(d)];
     return far(l);
   }
-  // Keeps brick b from now on (evicting the one used longest ago): the bricks the
-  // coming tets are in.
-  void keep(std::uint64_t b);
+  // Moves the window to bricks [b, b + kKeptBricks) (b never decreasing): the bricks
+  // the coming tets are in.
+  void keep_from(std::uint64_t b);
   // Brick b's permutation (brick_permutation's new_of_old), read from the file; safe
   // beside another thread's lookups (the points section's writers read it).
   void read_brick(std::uint64_t b, std::vector<std::uint32_t>& new_of_old) const;
 
  private:
-  struct Brick {
-    std::uint64_t index = ~std::uint64_t(0);
-    std::uint64_t used = 0;
-    std::vector<std::uint32_t> new_of_old;
-  };
-  std::uint64_t far(std::uint64_t l);
+  std::uint64_t far(std::uint64_t l) const;
 
   std::string path_;
   int fd_ = -1;
   std::uint64_t count_, brick_;
   int shift_;
-  std::vector<Brick> kept_;
-  Brick* last_;
-  std::uint64_t clock_ = 0;
+  // new_of_old of the window's bricks, one after the other, from label window_first_.
+  std::vector<std::uint32_t> window_;
+  std::uint64_t window_first_ = 0;
+  std::vector<std::uint32_t> scratch_;
 };
 
 }  // namespace tetstream::pipeline
