@@ -7,7 +7,12 @@
 // from: the labels below it are in the output.
 #include "pipeline/run/stage_triangulate.hpp"
 
+#include "pipeline/util/stage_time.hpp"
+
 #include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
 
 namespace tetstream::pipeline {
 
@@ -44,8 +49,12 @@ class OutputStage : public SegmentSink {
   virtual double producer_wait_seconds() const = 0;
   virtual std::uint64_t bytes_written() const = 0;
   virtual std::uint64_t tet_bytes() const = 0;
+  // Phases of its own, timed, for the summary's stages (the write stage's
+  // "write.label_order" and "write.points_order" with version 2's labels).
+  const std::vector<std::pair<std::string, StageTime>>& phases() const { return phases_; }
 
  protected:
+  std::vector<std::pair<std::string, StageTime>> phases_;
   std::uint64_t first_label_ = 0, segments_resumed_ = 0, segments_done_ = 0;
   WrittenWork work_;
   double seconds_ = 0;

@@ -236,6 +236,7 @@ RunSummary Job::run() {
   disk.sample();
   write.finish();
   summary.disk_peak_bytes = std::max(disk.peak(), disk.sample());
+  for (const auto& phase : write.phases()) summary.stages.push_back(phase);
 
   record_work(write.work(), summary);
   summary.segments_resumed = write.segments_resumed();

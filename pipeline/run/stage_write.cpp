@@ -227,6 +227,7 @@ void WriteStage::run() {
     // rank's is named as its pending files ("rank-R-pending-": "rank-R-label-order.u32").
     order_path_ = context_.dir + "/" + pending_prefix_.substr(0, pending_prefix_.rfind("pending-")) + "label-order.u32";
     const int threads = context_.options.threads > 0 ? context_.options.threads : omp_get_num_procs();
+    const StageMeter meter;
     write_label_order(
         order_path_, view_.count, view_.axis,
         [&view = view_](std::uint64_t first, std::size_t n, double* xyz) {
@@ -235,6 +236,7 @@ void WriteStage::run() {
           });
         },
         threads);
+    phases_.emplace_back("write.label_order", meter.elapsed());
     order_.emplace(order_path_, view_.count);
   } else if (!held_.empty()) {
     throw DamagedCheckpoint("the checkpoint holds a brick of tets, but the job writes sorted labels");
@@ -348,7 +350,9 @@ void WriteStage::reorder_points_section() {
   if (!order_) return;
   if (points_in_output_) {
     if (!claim_) throw std::logic_error("write: the points section is rewritten through the output's claim");
+    const StageMeter meter;
     reorder_points(claim_->fd(), sorted_.offset, sorted_.layout, *order_);
+    phases_.emplace_back("write.points_order", meter.elapsed());
   }
   order_.reset();
   remove_file(order_path_);  // 4 bytes a point, not needed past the points
