@@ -103,7 +103,9 @@ cmp reference.tets out.tets || fail "--force output differs"
 rm out.tets
 
 # A damaged checkpoint is refused (exit 1) and left in place; undamaged, it resumes.
-kill_at write:7 2
+# Killed late enough that frames are committed past the points section: version 2 holds
+# a brick of tets (8,192 labels here) and frames of 2^18 tets (~40,000 labels) are cut after it.
+kill_at write:36 2
 cp out.tets.ckpt/state.json saved.json
 sed -i 's/"committed": \([0-9]\)/"committed": 9\1/' out.tets.ckpt/state.json
 expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
@@ -112,6 +114,9 @@ cp saved.json out.tets.ckpt/state.json
 # past the committed ones are the frames in flight at the kill, which --resume drops:
 # cutting only those would not be damage, so the cut goes below the committed end.)
 committed=$(python3 -c "import json; print(json.load(open('out.tets.ckpt/state.json'))['output']['committed'])")
+# The cut must fall among the frames: below, it damages the points, which a resume sorts
+# again (not a refusal). 100,000 points of 28 bytes and a header of a few KiB.
+((committed - 100 > 100000 * 28 + 65536)) || fail "no frame committed at write:36 ($committed bytes)"
 cp out.tets.partial saved.partial
 truncate -s $((committed - 100)) out.tets.partial
 expect_refusal 1 "damaged checkpoint" "$T" "${opts[@]}" --resume
