@@ -13,8 +13,9 @@
 // axis coordinate of its smallest label (version 2: of the top of the bricks before
 // that label's). After a batch, the planes of grid points (perpendicular to the axis)
 // below that floor for the next batch's first label are final and leave memory: the
-// planes held are those the window's tets span, and in version 2 a brick more. Along x (axis 0) a final plane is the
-// next piece of the file; along y or z, its values go through an external sort by C-order index.
+// planes held are those the window's tets span, and in version 2 a brick more. Along
+// x (axis 0) a final plane is the next piece of the file; along y or z, its values go
+// through an external sort by C-order index.
 #include "io/tet_reader.hpp"
 #include "pipeline/field/field.hpp"
 #include "pipeline/field/window.hpp"
